@@ -1,0 +1,227 @@
+"""``viewdb`` commands. Each opens the database, calls one library method and prints.
+
+Exit codes (public contract): 0 success; 1 a reported error (bad input, failed check);
+2 usage error; 130 interrupted. Errors are one line on stderr, ``viewdb: <file>: <problem>``;
+``viewdb --debug ...`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    Task,
+    TextColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+from rich.text import Text
+
+import viewdb
+
+app = typer.Typer(
+    name="viewdb",
+    help="An embedded view database: recognise which known 3-D object a photo shows, and from where.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+out = Console(highlight=False, soft_wrap=True)
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+_STATE = {"debug": False}
+
+SAMPLE_MODELS = Path(__file__).resolve().parent.parent / "sample_models"
+
+
+@app.callback()
+def _main(
+    debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks for errors.")] = False,
+) -> None:
+    _STATE["debug"] = debug
+
+
+class _ViewsPerSecond(ProgressColumn):
+    def render(self, task: Task) -> Text:
+        speed = task.finished_speed or task.speed
+        return Text("" if speed is None else f"{speed:5.1f} views/s")
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+        _ViewsPerSecond(), TimeRemainingColumn(), console=err,
+        disable=not err.is_terminal, transient=False,
+    )
+
+
+def _echo_json(data: Any) -> None:
+    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+
+
+DbOption = Annotated[Path, typer.Option("--db", help="Database file.", dir_okay=False)]
+
+
+@app.command()
+def ingest(
+    paths: Annotated[
+        list[Path], typer.Argument(help="Mesh files (OBJ, PLY, STL, OFF, GLB, glTF) or folders.")
+    ],
+    db: DbOption,
+    gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).")] = None,
+    image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).")] = None,
+    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
+) -> None:
+    """Add meshes; an object is named after its file's stem. Re-running is a no-op."""
+    files = viewdb.describe_paths(paths)
+    with viewdb.open(db, gap=gap, image_size=image_size) as vdb, _progress() as bar:
+        task = bar.add_task("ingest", total=None)
+
+        def on_progress(p: viewdb.IngestProgress) -> None:
+            bar.update(task, total=p.views_total, completed=p.views_done,
+                       description=f"ingest {p.files_done}/{p.files_total} files")
+            if p.outcome is not None and p.outcome.status == "failed":
+                err.print(f"viewdb: {p.outcome.error}", markup=False)
+
+        report = vdb.ingest(files, jobs=jobs, progress=on_progress)
+    counts = report.counts()
+    if as_json:
+        _echo_json({
+            **counts, "views": report.views_rendered, "seconds": round(report.seconds, 3),
+            "views_per_second": round(report.views_per_second, 2),
+            "files": [o.__dict__ for o in report.outcomes],
+        })
+    else:
+        out.print(
+            f"{counts['added']} added, {counts['replaced']} replaced, "
+            f"{counts['unchanged']} unchanged, {counts['failed']} failed; "
+            f"{report.views_rendered} views in {report.seconds:.1f} s "
+            f"({report.views_per_second:.1f} views/s)"
+        )
+    if report.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+def info(
+    db: DbOption,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Objects, views, file size and schema version of a database."""
+    with viewdb.open(db, create=False) as vdb:
+        data = vdb.info()
+    if as_json:
+        _echo_json(data.to_dict())
+        return
+    out.print(
+        f"{data.path}: {len(data.objects)} objects, {data.rows['views']} views, "
+        f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
+        f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
+    )
+    table = Table("object", "faces", "views", "grid", "SIFT-less views", "ingest s")
+    for o in data.objects:
+        table.add_row(o.name, str(o.n_faces), str(o.views_stored), str(o.views_grid),
+                      str(o.empty_views), f"{o.ingest_seconds:.1f}")
+    if data.objects:
+        out.print(table)
+
+
+@app.command()
+def render(
+    model_or_object: Annotated[str, typer.Argument(help="A mesh file, or an object name with --db.")],
+    azimuth: Annotated[float, typer.Option(help="Azimuth h in degrees.")],
+    elevation: Annotated[float, typer.Option(help="Elevation v in degrees.")],
+    out_path: Annotated[Path, typer.Option("--out", help="PNG to write.", dir_okay=False)],
+    db: Annotated[Path | None, typer.Option("--db", help="Render a stored object.")] = None,
+    image_size: Annotated[int, typer.Option(help="Size in pixels (mesh files only).")] = 256,
+    what: Annotated[str, typer.Option(help="color, mask or depth.")] = "color",
+) -> None:
+    """Render one view in the documented camera convention."""
+    import cv2
+    import numpy as np
+
+    if what not in ("color", "mask", "depth"):
+        raise typer.BadParameter("must be color, mask or depth", param_hint="--what")
+    if db is not None:
+        with viewdb.open(db, create=False) as vdb:
+            view = vdb.render(model_or_object, azimuth, elevation)
+    else:
+        view = viewdb.render_model(model_or_object, azimuth, elevation, image_size=image_size)
+    if what == "color":
+        image = cv2.cvtColor(view.color, cv2.COLOR_RGB2BGR)
+    elif what == "mask":
+        image = view.mask.astype(np.uint8) * 255
+    else:
+        d = view.depth
+        image = np.zeros(d.shape, np.uint16)
+        if view.mask.any():
+            lo, hi = d[view.mask].min(), d[view.mask].max()
+            image[view.mask] = (65535 - (d[view.mask] - lo) / max(hi - lo, 1e-9) * 60000).astype(np.uint16)
+    if not cv2.imwrite(str(out_path), image):
+        raise viewdb.ViewDBError("cannot write the image", out_path)
+    out.print(f"wrote {out_path}")
+
+
+@app.command()
+def demo(
+    out_dir: Annotated[
+        Path | None, typer.Option("--out", help="Folder for the demo db (default: a temp folder).")
+    ] = None,
+    gap: Annotated[float, typer.Option(help="Grid gap in degrees.")] = 30.0,
+    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 2,
+) -> None:
+    """Build a database from the bundled sample models and show what is in it."""
+    models = sorted(p for p in SAMPLE_MODELS.iterdir() if p.suffix.lower() in
+                    (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")) if SAMPLE_MODELS.is_dir() else []
+    if not models:
+        raise viewdb.ViewDBError("no sample models found; run python sample_models/make_samples.py",
+                                 SAMPLE_MODELS)
+    folder = out_dir or Path(tempfile.mkdtemp(prefix="viewdb-demo-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    db_path = folder / "demo.db"
+    out.print(f"viewdb demo: ingesting {len(models)} sample models into {db_path} (gap {gap:g}°)")
+    ingest(models, db_path, gap=gap, image_size=None, jobs=jobs, as_json=False)
+    info(db_path, as_json=False)
+    first = models[0].stem
+    png = folder / f"{first}_30_20.png"
+    render(first, 30.0, 20.0, png, db=db_path, image_size=256, what="color")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI and return its exit code (the console script calls this)."""
+    command = typer.main.get_command(app)
+    try:
+        # without standalone mode click returns typer.Exit's code instead of raising it
+        code = command.main(args=argv, prog_name="viewdb", standalone_mode=False)
+    except typer.Exit as exc:
+        return exc.exit_code
+    except typer.TyperException as exc:  # usage errors
+        exc.show()
+        return exc.exit_code
+    except (KeyboardInterrupt, typer.Abort):
+        err.print("viewdb: interrupted", markup=False)
+        return 130
+    except viewdb.ViewDBError as exc:
+        if _STATE["debug"]:
+            raise
+        err.print(f"viewdb: {exc}", markup=False)
+        return 1
+    return code if isinstance(code, int) else 0
+
+
+def run() -> None:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    run()

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Install viewdb and everything it needs on a fresh Debian/Python 3.11 machine:
+# the system libraries for headless rendering (Mesa's EGL, software rasteriser), then the
+# package itself in editable mode with its dev extras. Safe to run again.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+need_apt=()
+for lib in libEGL.so.1 libEGL_mesa.so.0 libGL.so.1; do
+  if ! ldconfig -p 2>/dev/null | grep -q "$lib"; then need_apt=(libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libglib2.0-0); break; fi
+done
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "install.sh: installing rendering libraries: ${need_apt[*]}"
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}"
+fi
+
+PYTHON="${PYTHON:-python3}"
+"$PYTHON" -m pip install --quiet --disable-pip-version-check -e ".[dev]"
+command -v pyenv >/dev/null 2>&1 && pyenv rehash || true
+
+# Fail here, not at a user's desk, if headless rendering does not work.
+"$PYTHON" - <<'PY'
+import viewdb.gl
+viewdb.gl.pyrender_module()
+from viewdb.render import get_renderer
+get_renderer()
+print("install.sh: viewdb installed; headless rendering works")
+PY

@@ -1,0 +1,52 @@
+"""Shared fixtures: sample models, small databases built once per session."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "sample_models"
+SHARED_MODELS = ROOT.parent / "shared" / "models"
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def sample(stem: str) -> Path:
+    """The sample model file called ``stem`` (any supported format)."""
+    for p in sorted(SAMPLES.iterdir()):
+        if p.stem == stem and p.suffix.lower() in MESH_SUFFIXES:
+            return p
+    raise FileNotFoundError(f"no sample model {stem!r} in {SAMPLES}")
+
+
+def sample_files() -> list[Path]:
+    return sorted(p for p in SAMPLES.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+
+
+def pytest_report_header(config: pytest.Config) -> list[str]:
+    import cv2
+    import numpy
+    import sqlalchemy
+    import trimesh
+
+    return [
+        f"viewdb deps: numpy {numpy.__version__}, opencv {cv2.__version__}, "
+        f"trimesh {trimesh.__version__}, sqlalchemy {sqlalchemy.__version__}, "
+        f"PYOPENGL_PLATFORM={os.environ.get('PYOPENGL_PLATFORM')}"
+    ]
+
+
+@pytest.fixture(scope="session")
+def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Four sample models ingested on a 60° grid (36 views each), built once."""
+    import viewdb
+
+    path = tmp_path_factory.mktemp("db") / "small.db"
+    with viewdb.open(path, gap=60, image_size=128) as db:
+        report = db.ingest([sample(n) for n in ("marked_cube", "car", "mug", "l_bracket")])
+    assert not report.failed, report.failed
+    return path

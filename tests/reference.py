@@ -1,0 +1,192 @@
+"""Slow, obvious oracles for :mod:`viewdb.features` (used only by the tests).
+
+Nothing here shares code with the fast implementation: the contour is found by a
+pure-Python marching squares pass over every 2x2 cell with the segments linked into
+loops by hand (no OpenCV), the centroid and the start point are computed in exact
+rational arithmetic (:class:`fractions.Fraction`), the curve is sampled by walking the
+polygon edge by edge, and the DFT is the textbook double sum.  Only the *conventions*
+(documented in :mod:`viewdb.features`) are shared.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from fractions import Fraction
+
+import numpy as np
+
+__all__ = [
+    "largest_area",
+    "largest_is_unique",
+    "naive_contour",
+    "naive_distance_curve",
+    "naive_dft",
+]
+
+# Corner order of a cell whose top-left pixel centre is (x, y): TL, TR, BR, BL.
+_CORNERS = ((0, 0), (1, 0), (1, 1), (0, 1))
+# Side k of a cell joins corner k and corner k+1 (top, right, bottom, left).
+_SIDES = ((0, 1), (1, 2), (2, 3), (3, 0))
+
+
+def _loops(mask: np.ndarray) -> list[list[tuple[int, int]]]:
+    """Every level-1/2 iso-line loop of ``mask``, in doubled coordinates (2x, 2y).
+
+    A vertex is the midpoint of a side joining an object and a background pixel.  In a
+    cell with two diagonal object pixels (a saddle) the object pixels are joined, i.e.
+    each background corner is cut off on its own, so regions are 8-connected.
+    """
+    fg = np.pad(np.asarray(mask) != 0, 1)
+    h, w = fg.shape
+    neighbours: dict[tuple[int, int], list[tuple[int, int]]] = {}
+
+    def link(a: tuple[int, int], b: tuple[int, int]) -> None:
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+
+    for y in range(h - 1):
+        for x in range(w - 1):
+            corners = [(x + dx, y + dy) for dx, dy in _CORNERS]
+            inside = [bool(fg[cy, cx]) for cx, cy in corners]
+            if all(inside) or not any(inside):
+                continue
+            mids = []
+            for a, b in _SIDES:
+                (ax, ay), (bx, by) = corners[a], corners[b]
+                mids.append((ax + bx, ay + by))  # doubled midpoint
+            crossing = [k for k, (a, b) in enumerate(_SIDES) if inside[a] != inside[b]]
+            if len(crossing) == 2:
+                link(mids[crossing[0]], mids[crossing[1]])
+            else:  # saddle: cut off each background corner (corner k touches sides k-1, k)
+                for k in range(4):
+                    if not inside[k]:
+                        link(mids[(k - 1) % 4], mids[k])
+    loops = []
+    seen: set[tuple[int, int]] = set()
+    for start in sorted(neighbours):
+        if start in seen:
+            continue
+        assert len(neighbours[start]) == 2, "iso-line vertices have degree 2"
+        loop = [start]
+        seen.add(start)
+        prev, cur = start, neighbours[start][0]
+        while cur != start:
+            loop.append(cur)
+            seen.add(cur)
+            a, b = neighbours[cur]
+            prev, cur = cur, (b if a == prev else a)
+        loops.append(loop)
+    # shift back: doubled coordinates of the padded grid -> doubled original coordinates
+    return [[(u - 2, v - 2) for u, v in loop] for loop in loops]
+
+
+def _twice_area(loop: list[tuple[int, int]]) -> int:
+    n = len(loop)
+    return sum(
+        loop[i][0] * loop[(i + 1) % n][1] - loop[(i + 1) % n][0] * loop[i][1] for i in range(n)
+    )
+
+
+def largest_area(mask: np.ndarray) -> float:
+    """Area in square pixels enclosed by the largest iso-line loop (0.0 for a blank mask)."""
+    loops = _loops(mask)
+    return max((abs(_twice_area(lp)) for lp in loops), default=0) / 8.0  # doubled coords
+
+
+def largest_is_unique(mask: np.ndarray) -> bool:
+    """True if exactly one iso-line loop encloses the largest area (no tie to break)."""
+    areas = [abs(_twice_area(lp)) for lp in _loops(mask)]
+    return bool(areas) and areas.count(max(areas)) == 1
+
+
+def naive_contour(mask: np.ndarray) -> np.ndarray | None:
+    """The largest iso-line loop, clockwise on screen, as (P, 2) float (x, y); None if none.
+
+    The loop of largest |area| is always an outer boundary (a hole is enclosed by its
+    region's outer loop, which is larger).
+    """
+    loops = _loops(mask)
+    if not loops:
+        return None
+    loop = max(loops, key=lambda lp: abs(_twice_area(lp)))
+    if _twice_area(loop) < 0:  # make the shoelace area positive = clockwise with y down
+        loop = loop[::-1]
+    return np.array(loop, dtype=np.float64) / 2.0
+
+
+def naive_distance_curve(mask: np.ndarray, n_samples: int, start: str = "top") -> np.ndarray:
+    """Centroid distance curve by the documented convention, computed the slow way.
+
+    ``start="bottom"`` starts instead at the *lowest* point of the contour on the
+    vertical line through the centroid (what a 180-degree rotation turns into the top).
+    """
+    contour = naive_contour(mask)
+    assert contour is not None
+    pts = [(Fraction(int(round(2 * x))), Fraction(int(round(2 * y)))) for x, y in contour]
+    n = len(pts)
+    # area centroid of the polygon (Green's theorem), exactly
+    a2 = Fraction(0)
+    sx = Fraction(0)
+    sy = Fraction(0)
+    for i in range(n):
+        (x0, y0), (x1, y1) = pts[i], pts[(i + 1) % n]
+        cross = x0 * y1 - x1 * y0
+        a2 += cross
+        sx += (x0 + x1) * cross
+        sy += (y0 + y1) * cross
+    cx, cy = sx / (3 * a2), sy / (3 * a2)
+    # start: the topmost (or lowest) point of the contour on the vertical line x = cx
+    best = None  # (y, edge index, fraction along the edge)
+    for i in range(n):
+        (x0, y0), (x1, y1) = pts[i], pts[(i + 1) % n]
+        if x0 == x1:
+            if x0 == cx:
+                upper = (y0, i, Fraction(0)) if y0 <= y1 else (y1, i, Fraction(1))
+                lower = (y1, i, Fraction(1)) if y0 <= y1 else (y0, i, Fraction(0))
+                cand = upper if start == "top" else lower
+            else:
+                continue
+        else:
+            t = (cx - x0) / (x1 - x0)
+            if not 0 <= t <= 1:
+                continue
+            cand = (y0 + t * (y1 - y0), i, t)
+        if best is None or (cand[0] < best[0] if start == "top" else cand[0] > best[0]):
+            best = cand
+    assert best is not None
+    lengths = [
+        math.hypot(float(pts[(i + 1) % n][0] - pts[i][0]), float(pts[(i + 1) % n][1] - pts[i][1]))
+        for i in range(n)
+    ]
+    total = sum(lengths)
+    _, k, t = best
+    # walk clockwise from the start point, one sample every total / n_samples
+    step = total / n_samples
+    curve = []
+    edge, offset = k, float(t) * lengths[k]  # offset: distance already walked along `edge`
+    for i in range(n_samples):
+        target = step if i else 0.0
+        offset += target
+        while offset > lengths[edge]:
+            offset -= lengths[edge]
+            edge = (edge + 1) % n
+        f = offset / lengths[edge]
+        (x0, y0), (x1, y1) = pts[edge], pts[(edge + 1) % n]
+        x = float(x0) + f * float(x1 - x0)
+        y = float(y0) + f * float(y1 - y0)
+        curve.append(math.hypot(x - float(cx), y - float(cy)))
+    mean = sum(curve) / n_samples
+    return np.array([c / mean for c in curve])
+
+
+def naive_dft(x: np.ndarray, m: int) -> np.ndarray:
+    """First ``m`` orthonormal DFT coefficients, X_k = sum_t x_t exp(-2 pi i k t / N) / sqrt(N)."""
+    n = len(x)
+    return np.array(
+        [
+            sum(complex(x[t]) * cmath.exp(-2j * math.pi * k * t / n) for t in range(n))
+            / math.sqrt(n)
+            for k in range(m)
+        ]
+    )

@@ -1,0 +1,130 @@
+"""Ingest through the library API: counts, idempotence, failures, transactions, read-back."""
+
+import shutil
+import sqlite3
+
+import numpy as np
+import pytest
+
+import viewdb
+from tests.conftest import sample
+from viewdb.camera import grid_views
+from viewdb.describe import describe_view
+from viewdb.features import distance_curve
+from viewdb.storage import store as store_module
+
+
+def test_small_db_has_every_grid_view(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        objects = db.objects()
+        assert [o.name for o in objects] == ["car", "l_bracket", "marked_cube", "mug"]
+        for o in objects:
+            assert o.views_grid == 36
+            assert o.views_stored + o.empty_views == 36
+            assert set(db.views(o.name)) <= set(grid_views(60))
+        rows = db.info().rows
+    assert rows["views"] == rows["curves"] == rows["fourier_points"] == rows["sift_features"]
+
+
+def test_stored_features_match_a_fresh_render_from_the_stored_mesh(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        stored = db.view("mug", 60, 300)
+        fresh = describe_view(db.render("mug", 60, 300), db.config)
+    np.testing.assert_array_equal(stored.curve, fresh.curve)
+    np.testing.assert_array_equal(stored.fourier, fresh.fourier)
+    np.testing.assert_array_equal(stored.descriptors, fresh.sift.descriptors)
+    np.testing.assert_array_equal(stored.points3d, fresh.sift.points3d)
+    assert stored.keypoints.shape[0] > 10  # the mug is textured
+
+
+def test_render_from_db_equals_render_from_file(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        from_db = db.render("car", 75, 15)
+    from_file = viewdb.render_model(sample("car"), 75, 15, image_size=128)
+    assert (from_db.mask != from_file.mask).sum() <= 2
+    assert np.abs(from_db.color.astype(int) - from_file.color.astype(int)).mean() < 1.0
+
+
+def test_reingest_is_a_noop_and_a_changed_file_replaces(tmp_path):
+    src = tmp_path / "cone.off"
+    shutil.copy(sample("cone"), src)
+    path = tmp_path / "db.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        assert db.ingest([src]).counts()["added"] == 1
+        first = db.objects()[0]
+        again = db.ingest([src])
+        assert again.counts() == {"added": 0, "replaced": 0, "unchanged": 1, "failed": 0}
+        assert db.objects()[0].created_at == first.created_at
+        src.write_text(src.read_text().replace("OFF", "OFF\n# changed", 1))
+        assert db.ingest([src]).counts()["replaced"] == 1
+        assert len(db.objects()) == 1
+        assert db.objects()[0].content_hash != first.content_hash
+
+
+def test_a_bad_file_fails_alone_and_the_rest_go_in(tmp_path):
+    bad = tmp_path / "broken.obj"
+    bad.write_text("this is not an obj file\nf 1 2 3\n")
+    path = tmp_path / "db.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        report = db.ingest([sample("cone"), bad, tmp_path / "missing.stl", sample("pyramid")])
+        assert report.counts() == {"added": 2, "replaced": 0, "unchanged": 0, "failed": 2}
+        errors = [o.error for o in report.failed]
+        assert any(str(bad) in e for e in errors) and any("missing.stl" in e for e in errors)
+        assert [o.name for o in db.objects()] == ["cone", "pyramid"]
+
+
+def test_a_failed_write_leaves_no_half_object(tmp_path, monkeypatch):
+    path = tmp_path / "db.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        db.ingest([sample("cone")])
+        real = store_module.encode_array
+        calls = {"n": 0}
+
+        def failing(arr):
+            calls["n"] += 1
+            if calls["n"] > 5:  # after the object and its views rows are inserted
+                raise viewdb.StorageError("disk on fire")
+            return real(arr)
+
+        monkeypatch.setattr(store_module, "encode_array", failing)
+        report = db.ingest([sample("pyramid")])
+        assert report.counts()["failed"] == 1
+    with sqlite3.connect(path) as conn:
+        assert [r[0] for r in conn.execute("SELECT name FROM objects")] == ["cone"]
+        n_views = conn.execute("SELECT count(*) FROM views").fetchone()[0]
+        assert n_views == conn.execute("SELECT count(*) FROM curves").fetchone()[0] == 16
+
+
+def test_parallel_ingest_stores_the_same_as_serial(tmp_path):
+    files = [sample(n) for n in ("cone", "pyramid", "chair")]
+    a, b = tmp_path / "a.db", tmp_path / "b.db"
+    with viewdb.open(a, gap=90, image_size=64) as db:
+        db.ingest(files, jobs=1)
+    ticks = []
+    with viewdb.open(b, gap=90, image_size=64) as db:
+        report = db.ingest(files, jobs=2, progress=ticks.append)
+        assert report.counts()["added"] == 3
+    assert ticks[-1].views_done == ticks[-1].views_total == 48
+    with viewdb.open(a) as da, viewdb.open(b) as dbb:
+        for name in ("cone", "pyramid", "chair"):
+            for h, v in da.views(name):
+                x, y = da.view(name, h, v), dbb.view(name, h, v)
+                np.testing.assert_array_equal(x.curve, y.curve)
+                np.testing.assert_array_equal(x.descriptors, y.descriptors)
+
+
+def test_unknown_object_and_view_raise_not_found(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        with pytest.raises(viewdb.NotFound, match="no object named 'nope'"):
+            db.views("nope")
+        with pytest.raises(viewdb.NotFound):
+            db.view("car", 7, 7)
+
+
+def test_curve_of_stored_view_is_the_curve_of_its_silhouette(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        view = db.render("l_bracket", 120, 60)
+        stored = db.view("l_bracket", 120, 60)
+    np.testing.assert_allclose(
+        stored.curve, distance_curve(view.mask, db.config.features.curve_samples), atol=1e-6
+    )

@@ -1,0 +1,90 @@
+"""The CLI as users meet it: exit codes, one-line errors, JSON shape, docs."""
+
+import json
+import re
+import subprocess
+
+import cv2
+import pytest
+from typer.testing import CliRunner
+from viewdb_cli.main import app, main
+
+from tests.conftest import ROOT, sample
+
+COMMANDS = ["ingest", "info", "render", "demo"]
+
+
+def run(capsys, *args):
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_ingest_info_render_round_trip(tmp_path, capsys):
+    db = tmp_path / "cli.db"
+    code, out, err = run(capsys, "ingest", sample("cone"), sample("pyramid"), "--db", db,
+                         "--gap", 90, "--image-size", 64)
+    assert code == 0, err
+    assert "2 added" in out
+    code, out, _ = run(capsys, "ingest", sample("cone"), "--db", db, "--json")
+    assert code == 0 and json.loads(out)["unchanged"] == 1
+    code, out, _ = run(capsys, "info", "--db", db, "--json")
+    data = json.loads(out)
+    assert code == 0
+    assert {o["name"] for o in data["objects"]} == {"cone", "pyramid"}
+    for o in data["objects"]:
+        assert o["views_grid"] == 16 and o["views_stored"] == 16
+    assert data["schema_version"] and data["file_bytes"] > 0
+    png = tmp_path / "cone.png"
+    code, _, err = run(capsys, "render", "cone", "--azimuth", 30, "--elevation", 10, "--db", db, "--out", png)
+    assert code == 0, err
+    assert cv2.imread(str(png)).shape == (64, 64, 3)
+
+
+def test_render_a_mesh_file_without_db(tmp_path, capsys):
+    png = tmp_path / "m.png"
+    code, _, err = run(capsys, "render", sample("mug"), "--azimuth", 0, "--elevation", 0, "--out", png,
+                       "--image-size", 96, "--what", "mask")
+    assert code == 0, err
+    assert cv2.imread(str(png), cv2.IMREAD_GRAYSCALE).max() == 255
+
+
+def test_a_failed_file_exits_1_with_one_line_naming_it(tmp_path, capsys):
+    bad = tmp_path / "bad.stl"
+    bad.write_bytes(b"nonsense")
+    code, out, err = run(capsys, "ingest", bad, sample("cone"), "--db", tmp_path / "x.db", "--gap", 90,
+                         "--image-size", 64)
+    assert code == 1
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and str(bad) in lines[0] and lines[0].startswith("viewdb: ")
+    assert "1 added" in out
+
+
+@pytest.mark.parametrize("content", [b"", b"random bytes " * 50])
+def test_corrupt_db_exits_1_with_one_line(tmp_path, capsys, content):
+    db = tmp_path / "corrupt.db"
+    db.write_bytes(content)
+    code, out, err = run(capsys, "info", "--db", db)
+    assert code == 1
+    assert len(err.strip().splitlines()) == 1 and str(db) in err and "Traceback" not in err
+
+
+def test_usage_errors_exit_2(capsys):
+    assert run(capsys, "ingest")[0] == 2
+    assert run(capsys, "no-such-command")[0] == 2
+    assert run(capsys, "render", "x", "--azimuth", "north", "--elevation", 0, "--out", "a.png")[0] == 2
+
+
+def test_console_script_is_installed_and_reports_errors(tmp_path):
+    db = tmp_path / "nope.db"
+    proc = subprocess.run(["viewdb", "info", "--db", str(db)], capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.strip() == f"viewdb: {db}: no such database"
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_has_help_and_is_in_the_readme(command):
+    result = CliRunner().invoke(app, [command, "--help"])
+    assert result.exit_code == 0 and "Usage" in result.output
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(rf"viewdb {command}\b", readme), f"README does not document `viewdb {command}`"

@@ -1,0 +1,91 @@
+"""Loading and normalising meshes in every supported format, and bad mesh files."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from tests.conftest import sample, sample_files
+from viewdb.errors import MeshError
+from viewdb.mesh import load_mesh, mesh_from_glb
+
+
+def test_every_format_is_present_among_the_samples():
+    suffixes = {p.suffix.lower() for p in sample_files()}
+    assert {".obj", ".ply", ".stl", ".off", ".glb"} <= suffixes
+
+
+@pytest.mark.parametrize("path", sample_files(), ids=lambda p: p.name)
+def test_normalised_bbox_centre_at_origin_and_radius_one(path):
+    mesh = load_mesh(path)
+    v = mesh.geometry.vertices
+    np.testing.assert_allclose((v.min(0) + v.max(0)) / 2, 0, atol=1e-9)
+    assert np.linalg.norm(v, axis=1).max() == pytest.approx(1.0, abs=1e-9)
+    # the original placement is recoverable: original = centre + scale * normalised
+    raw = trimesh.load(str(path), force="mesh", process=False)
+    np.testing.assert_allclose(
+        np.sort((mesh.centre + mesh.scale * v).ravel()), np.sort(np.asarray(raw.vertices).ravel()), atol=1e-6
+    )
+
+
+@pytest.mark.parametrize("stem", ["car", "mug", "bottle", "cube_dice"])
+def test_textures_survive_the_glb_round_trip(stem):
+    mesh = load_mesh(sample(stem))
+    back = mesh_from_glb(mesh.to_glb(), stem)
+    kinds = {g.visual.kind for g in back.scene.geometry.values()}
+    assert kinds & {"texture"}, kinds
+    materials = [g.visual.material for g in back.scene.geometry.values()]
+    assert any(getattr(m, "baseColorTexture", None) is not None for m in materials)
+    np.testing.assert_allclose(back.geometry.bounds, mesh.geometry.bounds, atol=1e-6)
+
+
+@pytest.mark.parametrize("stem", ["torus", "marked_cube"])
+def test_vertex_and_face_colours_survive_the_glb_round_trip(stem):
+    mesh = load_mesh(sample(stem))
+    back = mesh_from_glb(mesh.to_glb(), stem)
+    colours = np.vstack([g.visual.vertex_colors for g in back.scene.geometry.values()])
+    assert len(np.unique(colours[:, :3], axis=0)) >= 6
+
+
+def test_scene_node_transforms_are_baked(tmp_path):
+    a = trimesh.creation.box((1, 1, 1))
+    scene = trimesh.Scene()
+    scene.add_geometry(a, node_name="left", transform=trimesh.transformations.translation_matrix([-5, 0, 0]))
+    scene.add_geometry(a, node_name="right", transform=trimesh.transformations.translation_matrix([5, 0, 0]))
+    path = tmp_path / "two.glb"
+    scene.export(path)
+    mesh = load_mesh(path)
+    assert mesh.scale == pytest.approx(np.linalg.norm([5.5, 0.5, 0.5]))
+    xs = mesh.geometry.vertices[:, 0]
+    assert xs.min() == pytest.approx(-5.5 / mesh.scale) and xs.max() == pytest.approx(5.5 / mesh.scale)
+
+
+def write(tmp_path, name, content):
+    p = tmp_path / name
+    p.write_bytes(content if isinstance(content, bytes) else content.encode())
+    return p
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("empty.obj", "", "no triangles|cannot be read"),
+        ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangle|cannot be read"),
+        ("flat.obj", "v 0 0 0\nv 1 1 1\nv 2 2 2\nf 1 2 3\n", "no surface area"),
+        ("dot.obj", "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n", "no extent"),
+        ("garbage.stl", b"\x00\x01garbage" * 10, "cannot be read|no triangles"),
+        ("garbage.glb", b"glTF" + b"\xff" * 40, "cannot be read"),
+        ("nan.off", "OFF\n3 1 0\nnan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "non-finite|cannot be read"),
+        ("model.xyz", "1 2 3\n", "unsupported file type"),
+    ],
+)
+def test_bad_meshes_get_a_one_line_error_naming_the_file(tmp_path, name, content, message):
+    path = write(tmp_path, name, content)
+    with pytest.raises(MeshError, match=message) as info:
+        load_mesh(path)
+    text = str(info.value)
+    assert str(path) in text and "\n" not in text
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(MeshError, match="no such file"):
+        load_mesh(tmp_path / "nope.obj")

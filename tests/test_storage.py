@@ -1,0 +1,97 @@
+"""The database file: schema via migrations, versioning, corrupt and foreign files."""
+
+import sqlite3
+
+import pytest
+import sqlalchemy as sa
+
+import viewdb
+from viewdb.errors import SchemaMismatch, StorageError
+from viewdb.storage import schema
+from viewdb.storage.store import Store
+
+
+def test_new_file_is_wal_with_the_migrated_schema(tmp_path):
+    path = tmp_path / "new.db"
+    store = Store(path)
+    try:
+        with store.read() as conn:
+            assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
+            assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+            inspector = sa.inspect(conn)
+            tables = set(inspector.get_table_names()) - {"alembic_version"}
+            assert tables == set(schema.metadata.tables)
+            for name, table in schema.metadata.tables.items():
+                migrated = {c["name"] for c in inspector.get_columns(name)}
+                assert migrated == {c.name for c in table.columns}, name
+        assert store.revision() == schema.SCHEMA_REVISION
+    finally:
+        store.close()
+
+
+def test_file_from_a_newer_viewdb_is_refused(tmp_path):
+    path = tmp_path / "future.db"
+    Store(path).close()
+    with sqlite3.connect(path) as conn:
+        conn.execute("UPDATE alembic_version SET version_num = '9999'")
+    with pytest.raises(SchemaMismatch, match="newer viewdb") as info:
+        viewdb.open(path)
+    assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"definitely not a database" * 100, bytes(range(256)) * 64, b"SQLite format 3\x00" + b"\xff" * 5000],
+)
+def test_foreign_or_random_files_get_a_clear_error(tmp_path, content):
+    path = tmp_path / "junk.db"
+    path.write_bytes(content)
+    with pytest.raises(StorageError) as info:
+        viewdb.open(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+    assert path.read_bytes() == content  # nothing was written to it
+
+
+def test_other_sqlite_databases_are_not_taken_over(tmp_path):
+    path = tmp_path / "other.db"
+    with sqlite3.connect(path) as conn:
+        conn.execute("CREATE TABLE customers (id INTEGER)")
+    with pytest.raises(StorageError, match="not a viewdb database"):
+        viewdb.open(path)
+    with sqlite3.connect(path) as conn:
+        names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+    assert names == ["customers"]
+
+
+def test_truncated_database_gets_a_clear_error(tmp_path, small_db):
+    data = small_db.read_bytes()
+    path = tmp_path / "truncated.db"
+    # checkpointed copy: read via sqlite backup so the WAL content is inside
+    src = sqlite3.connect(small_db)
+    dst = sqlite3.connect(path)
+    src.backup(dst)
+    src.close()
+    dst.close()
+    full = path.read_bytes()
+    assert len(full) >= len(data) // 2
+    path.write_bytes(full[: len(full) // 3])
+    with pytest.raises(StorageError):
+        with viewdb.open(path, create=False) as db:
+            db.objects()
+            for o in db.objects():
+                db.views(o.name)
+
+
+def test_missing_file_without_create(tmp_path):
+    with pytest.raises(StorageError, match="no such database"):
+        viewdb.open(tmp_path / "absent.db", create=False)
+    assert not (tmp_path / "absent.db").exists()
+
+
+def test_existing_db_keeps_its_build_config(tmp_path):
+    path = tmp_path / "a.db"
+    viewdb.open(path, gap=45, image_size=128).close()
+    with viewdb.open(path) as db:
+        assert db.config.gap == 45 and db.config.render.image_size == 128
+    with pytest.raises(viewdb.ViewDBError, match="gap 45"):
+        viewdb.open(path, gap=10)

@@ -1,0 +1,57 @@
+"""viewdb: an embedded, SQLite-backed view database that recognises which known 3-D object
+a photo shows and from which viewpoint (after Tak & Hwang, "3D Object Retrieval and Pose
+Estimation for a Single-view Query Image in a Mobile Environment").
+
+>>> import viewdb
+>>> with viewdb.open("catalogue.db", gap=30) as db:          # doctest: +SKIP
+...     db.ingest(["mug.glb", "chair.obj"])
+...     db.objects()
+"""
+
+from .api import DatabaseInfo, ObjectInfo, StoredView, ViewDB, describe_paths, open, render_model
+from .config import BuildConfig, FeatureConfig, RenderConfig, SiftConfig
+from .errors import (
+    FeatureError,
+    ImageError,
+    MeshError,
+    NotFound,
+    PoseError,
+    QueryError,
+    RenderError,
+    SchemaMismatch,
+    StorageError,
+    ViewDBError,
+)
+from .ingest import FileOutcome, IngestProgress, IngestReport
+from .render import RenderedView
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BuildConfig",
+    "DatabaseInfo",
+    "FeatureConfig",
+    "FeatureError",
+    "FileOutcome",
+    "ImageError",
+    "IngestProgress",
+    "IngestReport",
+    "MeshError",
+    "NotFound",
+    "ObjectInfo",
+    "PoseError",
+    "QueryError",
+    "RenderConfig",
+    "RenderError",
+    "RenderedView",
+    "SchemaMismatch",
+    "SiftConfig",
+    "StorageError",
+    "StoredView",
+    "ViewDB",
+    "ViewDBError",
+    "__version__",
+    "describe_paths",
+    "open",
+    "render_model",
+]

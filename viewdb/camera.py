@@ -1,0 +1,101 @@
+"""The camera convention and the view grid (part of the public contract, see README).
+
+Model space is the normalised mesh: bounding-box centre at the origin, farthest vertex at
+distance 1, +Y up, +Z the model's front.
+
+A view is ``(azimuth h, elevation v)`` in degrees, each in [0, 360). Its camera-to-world
+pose is ``R_y(h) · R_x(−v) · translate(0, 0, d)`` with ``d = 3``; the camera looks down its
+own −Z axis with +Y up (OpenGL/pyrender). ``R_y`` and ``R_x`` are right-handed rotations
+about +Y and +X. Hence:
+
+* (0, 0) looks at the front; growing ``h`` orbits towards +X; (0, 90) looks straight down;
+* the camera sits at ``d · (sin h·cos v, sin v, cos h·cos v)``;
+* (h + 180, −v) is the opposite direction with the same up vector: its silhouette is the
+  left–right mirror of the silhouette of (h, v), i.e. the reversed distance curve;
+* (h + 180, 180 − v) is the same direction as (h, v) with the image turned by 180°.
+
+The projection is orthographic with ``xmag = ymag = 1``: pixel ``(u, w)`` (column, row) of
+an ``S × S`` image sees the camera-frame point ``x = (u + ½)·2/S − 1``, ``y = 1 − (w + ½)·2/S``.
+
+A grid of gap ``g`` holds the ``(360/g)²`` views with ``h, v ∈ {0, g, 2g, …}``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "camera_direction",
+    "camera_pose",
+    "grid_views",
+    "normalise_angle",
+    "pixel_rays_to_camera",
+    "rotation_x",
+    "rotation_y",
+]
+
+
+def normalise_angle(angle: float) -> float:
+    """Map an angle in degrees into [0, 360), snapping values within 1e-9 of 360 to 0."""
+    a = float(angle) % 360.0
+    return 0.0 if abs(a - 360.0) < 1e-9 or abs(a) < 1e-9 else a
+
+
+def rotation_y(degrees: float) -> NDArray[np.float64]:
+    """Right-handed 3×3 rotation about +Y."""
+    t = np.radians(degrees)
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rotation_x(degrees: float) -> NDArray[np.float64]:
+    """Right-handed 3×3 rotation about +X."""
+    t = np.radians(degrees)
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def camera_pose(azimuth: float, elevation: float, distance: float = 3.0) -> NDArray[np.float64]:
+    """Camera-to-world 4×4 pose ``R_y(h) · R_x(−v) · translate(0, 0, distance)``."""
+    pose = np.eye(4)
+    rot = rotation_y(azimuth) @ rotation_x(-elevation)
+    pose[:3, :3] = rot
+    pose[:3, 3] = rot @ np.array([0.0, 0.0, distance])
+    return pose
+
+
+def camera_direction(azimuth: float, elevation: float) -> NDArray[np.float64]:
+    """Unit vector from the origin to the camera: ``(sin h·cos v, sin v, cos h·cos v)``."""
+    h, v = np.radians(azimuth), np.radians(elevation)
+    return np.array([np.sin(h) * np.cos(v), np.sin(v), np.cos(h) * np.cos(v)])
+
+
+def grid_views(gap: float) -> list[tuple[float, float]]:
+    """All ``(azimuth, elevation)`` pairs of the grid of ``gap`` degrees, azimuth-major.
+
+    Raises
+    ------
+    ValueError
+        If ``gap`` does not divide 360.
+    """
+    steps = 360.0 / gap
+    if gap <= 0 or abs(steps - round(steps)) > 1e-9:
+        raise ValueError(f"gap must divide 360 evenly, got {gap}")
+    angles = [i * gap for i in range(round(steps))]
+    return [(h, v) for h in angles for v in angles]
+
+
+def pixel_rays_to_camera(
+    u: NDArray[np.floating], w: NDArray[np.floating], depth: NDArray[np.floating],
+    image_size: int, xmag: float = 1.0,
+) -> NDArray[np.float64]:
+    """Camera-frame 3-D points of pixels ``(u, w)`` (column, row; may be sub-pixel) at ``depth``.
+
+    ``depth`` is the distance along the viewing axis (positive, as pyrender returns it), so
+    the point is ``(x, y, −depth)`` in the camera frame.
+    """
+    half = image_size / 2.0
+    x = ((np.asarray(u, dtype=np.float64) + 0.5) / half - 1.0) * xmag
+    y = (1.0 - (np.asarray(w, dtype=np.float64) + 0.5) / half) * xmag
+    return np.stack([x, y, -np.asarray(depth, dtype=np.float64)], axis=-1)

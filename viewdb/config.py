@@ -1,0 +1,89 @@
+"""Every tunable and tolerance of viewdb, as frozen dataclasses with documented defaults.
+
+A database records the :class:`BuildConfig` it was built with (``settings`` table), so a
+later ingest into the same file renders and describes views exactly the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+__all__ = ["BuildConfig", "FeatureConfig", "RenderConfig", "SiftConfig"]
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How a view is rendered (see the camera convention in :mod:`viewdb.camera`)."""
+
+    #: Width and height of every rendered view, in pixels.
+    image_size: int = 256
+    #: Half-extent of the orthographic view volume; the normalised model has radius 1.
+    xmag: float = 1.0
+    #: Distance of the camera from the origin along its viewing axis.
+    camera_distance: float = 3.0
+    #: Near and far clip planes (the unit-radius model lies between 2 and 4).
+    znear: float = 0.5
+    zfar: float = 5.5
+    #: Share of ambient light in the shaded image; the rest is a head-light (Lambert).
+    ambient: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not 16 <= self.image_size <= 4096:
+            raise ValueError(f"image_size must be in [16, 4096], got {self.image_size}")
+        if not 0.0 <= self.ambient <= 1.0:
+            raise ValueError(f"ambient must be in [0, 1], got {self.ambient}")
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Shape features of a silhouette (paper section II.A)."""
+
+    #: Samples of the centroid distance curve, equally spaced by arc length.
+    curve_samples: int = 128
+    #: Complex coefficients kept of the orthonormal DFT of the curve (the Fourier point).
+    fourier_coefficients: int = 8
+
+    def __post_init__(self) -> None:
+        if self.curve_samples < 8:
+            raise ValueError(f"curve_samples must be at least 8, got {self.curve_samples}")
+        if not 1 <= self.fourier_coefficients <= self.curve_samples // 2:
+            raise ValueError(
+                "fourier_coefficients must be in [1, curve_samples/2], "
+                f"got {self.fourier_coefficients}"
+            )
+
+
+@dataclass(frozen=True)
+class SiftConfig:
+    """SIFT features of the shaded view (paper section III.E)."""
+
+    #: At most this many keypoints per view (the strongest are kept).
+    max_keypoints: int = 128
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Everything that decides what an ingest stores; fixed per database file."""
+
+    #: Server grid gap in degrees: the grid has (360/gap)**2 views per object.
+    gap: float = 10.0
+    render: RenderConfig = field(default_factory=RenderConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    sift: SiftConfig = field(default_factory=SiftConfig)
+
+    def __post_init__(self) -> None:
+        if self.gap <= 0 or abs(360.0 / self.gap - round(360.0 / self.gap)) > 1e-9:
+            raise ValueError(f"gap must divide 360 evenly, got {self.gap}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> BuildConfig:
+        return cls(
+            gap=float(data["gap"]),
+            render=RenderConfig(**data["render"]),
+            features=FeatureConfig(**data["features"]),
+            sift=SiftConfig(**data["sift"]),
+        )

@@ -1,0 +1,105 @@
+"""Describing an object: render its views and compute every stored feature.
+
+This is the compute half of an ingest and touches no database: it turns a
+:class:`~viewdb.mesh.NormalisedMesh` into an :class:`ObjectDescription` (picklable, so a
+worker process can hand it back to the writer).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .config import BuildConfig
+from .errors import FeatureError
+from .features import distance_curve, fourier_point
+from .mesh import NormalisedMesh
+from .render import RenderedView, get_renderer
+from .sift import SiftFeatures, extract_sift, lift_points
+
+__all__ = ["ObjectDescription", "ViewDescription", "describe_object", "describe_view"]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewDescription:
+    """Everything stored for one view."""
+
+    azimuth: float
+    elevation: float
+    #: Centroid distance curve, float32 (N,), mean 1.
+    curve: NDArray[np.float32] = field(repr=False)
+    #: First m orthonormal DFT coefficients of ``curve`` (as stored, float32), complex128.
+    fourier: NDArray[np.complex128] = field(repr=False)
+    sift: SiftFeatures = field(repr=False)
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectDescription:
+    """An object ready to be written: its normalised mesh and its described views."""
+
+    name: str
+    source: str
+    content_hash: str
+    centre: NDArray[np.float64] = field(repr=False)
+    scale: float
+    n_faces: int
+    n_vertices: int
+    glb: bytes = field(repr=False)
+    views: list[ViewDescription] = field(repr=False)
+    #: Grid views that gave no usable silhouette (e.g. a flat part seen edge-on).
+    empty_views: list[tuple[float, float]]
+    seconds: float
+
+
+def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
+    """Shape and SIFT features of one rendered view.
+
+    Raises
+    ------
+    FeatureError
+        The silhouette is empty or degenerate.
+    """
+    curve = distance_curve(view.mask, config.features.curve_samples).astype(np.float32)
+    fourier = fourier_point(curve.astype(np.float64), config.features.fourier_coefficients)
+    keypoints, descriptors = extract_sift(view.color, view.mask, config.sift.max_keypoints)
+    points, valid = lift_points(keypoints[:, :2], view.depth, view.pose, config.render.xmag)
+    sift = SiftFeatures(keypoints[valid], descriptors[valid], points[valid])
+    return ViewDescription(view.azimuth, view.elevation, curve, fourier, sift)
+
+
+def describe_object(
+    mesh: NormalisedMesh,
+    config: BuildConfig,
+    views: Sequence[tuple[float, float]],
+    on_view: Callable[[], None] | None = None,
+) -> ObjectDescription:
+    """Render ``views`` of ``mesh`` and describe each one."""
+    start = time.perf_counter()
+    renderer = get_renderer(config.render)
+    described: list[ViewDescription] = []
+    empty: list[tuple[float, float]] = []
+    for azimuth, elevation in views:
+        rendered = renderer.render(mesh, azimuth, elevation)
+        try:
+            described.append(describe_view(rendered, config))
+        except FeatureError:
+            empty.append((azimuth, elevation))
+        if on_view is not None:
+            on_view()
+    return ObjectDescription(
+        name=mesh.name,
+        source=mesh.source,
+        content_hash=mesh.content_hash,
+        centre=np.asarray(mesh.centre, dtype=np.float64),
+        scale=float(mesh.scale),
+        n_faces=mesh.n_faces,
+        n_vertices=mesh.n_vertices,
+        glb=mesh.to_glb(),
+        views=described,
+        empty_views=empty,
+        seconds=time.perf_counter() - start,
+    )

@@ -1,0 +1,234 @@
+"""Running an ingest: which files to describe, in how many processes, and reporting.
+
+Workers (``jobs > 1``) are spawned processes: each imports pyrender itself and keeps one
+renderer for its life. They only compute (:func:`~viewdb.describe.describe_object`); the
+calling process writes each object in one transaction, so an interrupted ingest leaves
+every object either complete or absent.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue as queue_module
+import signal
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .camera import grid_views
+from .config import BuildConfig
+from .describe import ObjectDescription, describe_object
+from .errors import MeshError, ViewDBError
+from .mesh import file_hash, load_mesh
+
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "run_ingest"]
+
+
+@dataclass(frozen=True)
+class IngestProgress:
+    """What a progress callback is told, after every rendered view and finished file."""
+
+    views_done: int
+    views_total: int
+    files_done: int
+    files_total: int
+    #: The file just finished (None for a per-view tick).
+    outcome: FileOutcome | None = None
+
+
+@dataclass(frozen=True)
+class FileOutcome:
+    """What happened to one input file."""
+
+    path: str
+    name: str
+    #: "added", "replaced", "unchanged" or "failed".
+    status: str
+    views: int = 0
+    seconds: float = 0.0
+    error: str | None = None
+
+
+@dataclass
+class IngestReport:
+    """The outcome of :meth:`viewdb.ViewDB.ingest`."""
+
+    outcomes: list[FileOutcome] = field(default_factory=list)
+    seconds: float = 0.0
+
+    def _with(self, status: str) -> list[FileOutcome]:
+        return [o for o in self.outcomes if o.status == status]
+
+    @property
+    def failed(self) -> list[FileOutcome]:
+        return self._with("failed")
+
+    @property
+    def views_rendered(self) -> int:
+        return sum(o.views for o in self.outcomes if o.status in ("added", "replaced"))
+
+    @property
+    def views_per_second(self) -> float:
+        return self.views_rendered / self.seconds if self.seconds > 0 else 0.0
+
+    def counts(self) -> dict[str, int]:
+        out = {k: 0 for k in ("added", "replaced", "unchanged", "failed")}
+        for o in self.outcomes:
+            out[o.status] += 1
+        return out
+
+
+_TICKS: Any = None
+
+
+def _init_worker(ticks: Any) -> None:
+    global _TICKS
+    _TICKS = ticks
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+
+
+def _tick() -> None:
+    if _TICKS is not None:
+        _TICKS.put(1)
+
+
+def _describe_file(
+    path: str, name: str, config: BuildConfig, views: Sequence[tuple[float, float]]
+) -> ObjectDescription:
+    mesh = load_mesh(path, name)
+    return describe_object(mesh, config, views, on_view=_tick)
+
+
+@dataclass
+class _Job:
+    path: str
+    name: str
+    replaces: bool
+
+
+def run_ingest(
+    paths: Sequence[str | Path],
+    config: BuildConfig,
+    existing_hashes: dict[str, str],
+    write: Callable[[ObjectDescription], None],
+    *,
+    jobs: int = 1,
+    progress: Callable[[IngestProgress], None] | None = None,
+) -> IngestReport:
+    """Describe every new or changed file and hand each result to ``write``.
+
+    A file that fails (unreadable, no area, …) is reported as ``failed`` and the others
+    still go in. ``KeyboardInterrupt`` stops the workers and propagates; objects already
+    written stay, the one being written is rolled back by ``write``'s transaction.
+    """
+    start = time.perf_counter()
+    report = IngestReport()
+    views = grid_views(config.gap)
+    todo: list[_Job] = []
+    seen: dict[str, str] = {}
+    for raw in paths:
+        path = Path(raw)
+        name = path.stem
+        if name in seen:
+            report.outcomes.append(FileOutcome(
+                str(path), name, "failed",
+                error=f"object name {name!r} is already taken by {seen[name]} in this batch",
+            ))
+            continue
+        seen[name] = str(path)
+        try:
+            if not path.is_file():
+                raise MeshError("no such file", path)
+            digest = file_hash(path)
+        except (OSError, ViewDBError) as exc:
+            report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
+            continue
+        if existing_hashes.get(name) == digest:
+            report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
+            continue
+        todo.append(_Job(str(path), name, name in existing_hashes))
+
+    total_views = len(todo) * len(views)
+    done_views = 0
+    files_total = len(report.outcomes) + len(todo)
+
+    def notify(outcome: FileOutcome | None = None) -> None:
+        if progress is not None:
+            progress(IngestProgress(
+                done_views, total_views, len(report.outcomes), files_total, outcome
+            ))
+
+    def finish(job: _Job, result: ObjectDescription | BaseException) -> None:
+        if isinstance(result, ViewDBError):
+            outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
+        elif isinstance(result, BaseException):
+            outcome = FileOutcome(
+                job.path, job.name, "failed",
+                error=f"{job.path}: unexpected {type(result).__name__}: {result}",
+            )
+        else:
+            try:
+                write(result)
+            except ViewDBError as exc:
+                outcome = FileOutcome(job.path, job.name, "failed", error=str(exc))
+            else:
+                outcome = FileOutcome(
+                    job.path, job.name, "replaced" if job.replaces else "added",
+                    views=len(result.views), seconds=result.seconds,
+                )
+        report.outcomes.append(outcome)
+        notify(outcome)
+
+    if jobs <= 1 or len(todo) <= 1:
+        for job in todo:
+            def tick() -> None:
+                nonlocal done_views
+                done_views += 1
+                notify()
+
+            try:
+                mesh = load_mesh(job.path, job.name)
+                result: ObjectDescription | BaseException = describe_object(
+                    mesh, config, views, on_view=tick
+                )
+            except ViewDBError as exc:
+                result = exc
+            done_views = min(done_views, total_views)
+            finish(job, result)
+    else:
+        ctx = mp.get_context("spawn")
+        ticks = ctx.Queue()
+        pool = ProcessPoolExecutor(
+            max_workers=min(jobs, len(todo)), mp_context=ctx,
+            initializer=_init_worker, initargs=(ticks,),
+        )
+        futures: dict[Future[ObjectDescription], _Job] = {}
+        try:
+            for job in todo:
+                futures[pool.submit(_describe_file, job.path, job.name, config, views)] = job
+            pending = set(futures)
+            while pending:
+                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                drained = 0
+                while True:
+                    try:
+                        drained += ticks.get_nowait()
+                    except queue_module.Empty:
+                        break
+                if drained:
+                    done_views += drained
+                    notify()
+                for fut in finished:
+                    exc = fut.exception()
+                    finish(futures[fut], exc if exc is not None else fut.result())
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            raise
+        pool.shutdown(wait=True)
+    report.seconds = time.perf_counter() - start
+    return report

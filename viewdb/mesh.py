@@ -1,0 +1,186 @@
+"""Loading and normalising meshes: the only module that reads mesh files.
+
+OBJ, PLY, STL, OFF and GLB/glTF are read through trimesh. A file becomes a
+:class:`NormalisedMesh`: a ``trimesh.Scene`` whose node transforms are baked into its
+geometry (textures and vertex colours kept for the shaded render), moved so the bounding
+box centre is at the origin and scaled so the farthest vertex is at distance 1. The
+original centre and scale are kept, so a pose can be reported in the mesh's own units.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import logging
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from .errors import MeshError
+
+__all__ = ["MESH_SUFFIXES", "NormalisedMesh", "load_mesh", "mesh_from_glb"]
+
+#: File endings ingest accepts (case-insensitive).
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+#: A mesh whose total area is below this (in squared normalised units) has "no area".
+MIN_AREA = 1e-10
+
+logging.getLogger("trimesh").setLevel(logging.ERROR)
+
+
+@dataclass(frozen=True, eq=False)
+class NormalisedMesh:
+    """A mesh in model space (centre at origin, radius 1), with its original placement.
+
+    ``original = centre + scale · normalised`` maps model space back to the file's units.
+    """
+
+    name: str
+    scene: trimesh.Scene
+    centre: NDArray[np.float64] = field(repr=False)
+    scale: float
+    source: str = ""
+    content_hash: str = ""
+
+    @cached_property
+    def geometry(self) -> trimesh.Trimesh:
+        """All triangles as one mesh (no textures): for geometry, not for shading."""
+        return _concatenate(self.scene)
+
+    @property
+    def n_faces(self) -> int:
+        return int(len(self.geometry.faces))
+
+    @property
+    def n_vertices(self) -> int:
+        return int(len(self.geometry.vertices))
+
+    def to_glb(self) -> bytes:
+        """The normalised scene as binary glTF (textures and vertex colours included)."""
+        data = self.scene.export(file_type="glb")
+        return bytes(data)
+
+
+def file_hash(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (the content hash that makes re-ingest a no-op)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def load_mesh(path: str | Path, name: str | None = None) -> NormalisedMesh:
+    """Load a mesh file and normalise it.
+
+    Parameters
+    ----------
+    path
+        An OBJ, PLY, STL, OFF, GLB or glTF file.
+    name
+        Object name; defaults to the file's stem.
+
+    Raises
+    ------
+    MeshError
+        The file is missing, not a supported mesh, holds no triangles or has no area.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError("no such file", path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(
+            f"unsupported file type {path.suffix or '(none)'!r}; "
+            f"use one of {', '.join(MESH_SUFFIXES)}",
+            path,
+        )
+    try:
+        loaded = trimesh.load(str(path), process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
+    content_hash = file_hash(path)
+    return _normalise(loaded, name or path.stem, str(path), content_hash, path)
+
+
+def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
+    """Rebuild an already normalised mesh from the GLB blob a database stores."""
+    try:
+        loaded = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
+    except Exception as exc:
+        raise MeshError(f"stored mesh of object {name!r} cannot be decoded: {_short(exc)}") from exc
+    scene = _as_scene(loaded, name)
+    return NormalisedMesh(name=name, scene=scene, centre=np.zeros(3), scale=1.0)
+
+
+def _short(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:200]
+
+
+def _as_scene(loaded: object, where: str | Path) -> trimesh.Scene:
+    if isinstance(loaded, trimesh.Scene):
+        return loaded
+    if isinstance(loaded, trimesh.Trimesh):
+        return trimesh.Scene(loaded)
+    raise MeshError(f"holds no triangle mesh (got {type(loaded).__name__})", where)
+
+
+def _baked_meshes(scene: trimesh.Scene) -> list[trimesh.Trimesh]:
+    """Each triangle geometry of the scene with its node transform applied (visuals kept)."""
+    meshes = []
+    for node in scene.graph.nodes_geometry:
+        transform, geometry_name = scene.graph[node]
+        geometry = scene.geometry.get(geometry_name)
+        if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
+            continue
+        baked = geometry.copy()
+        baked.apply_transform(transform)
+        meshes.append(baked)
+    return meshes
+
+
+def _concatenate(scene: trimesh.Scene) -> trimesh.Trimesh:
+    meshes = _baked_meshes(scene)
+    vertices, faces, offset = [], [], 0
+    for m in meshes:
+        vertices.append(np.asarray(m.vertices, dtype=np.float64))
+        faces.append(np.asarray(m.faces, dtype=np.int64) + offset)
+        offset += len(m.vertices)
+    if not meshes:
+        return trimesh.Trimesh()
+    return trimesh.Trimesh(np.vstack(vertices), np.vstack(faces), process=False)
+
+
+def _normalise(
+    loaded: object, name: str, source: str, content_hash: str, where: str | Path
+) -> NormalisedMesh:
+    scene = _as_scene(loaded, where)
+    meshes = _baked_meshes(scene)
+    if not meshes:
+        raise MeshError("holds no triangles", where)
+    vertices = np.vstack([np.asarray(m.vertices, dtype=np.float64) for m in meshes])
+    if not np.all(np.isfinite(vertices)):
+        raise MeshError("has non-finite vertex coordinates", where)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    centre = (lo + hi) / 2.0
+    scale = float(np.linalg.norm(vertices - centre, axis=1).max())
+    if not scale > 0:
+        raise MeshError("has no extent (all vertices coincide)", where)
+    transform = np.diag([1.0 / scale] * 3 + [1.0])
+    transform[:3, 3] = -centre / scale
+    out = trimesh.Scene()
+    area = 0.0
+    for i, mesh in enumerate(meshes):
+        mesh.apply_transform(transform)
+        area += float(mesh.area)
+        out.add_geometry(mesh, geom_name=f"part_{i:03d}")
+    if not area > MIN_AREA:
+        raise MeshError("has no surface area (degenerate triangles only)", where)
+    return NormalisedMesh(
+        name=name, scene=out, centre=centre, scale=scale, source=source, content_hash=content_hash
+    )

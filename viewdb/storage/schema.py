@@ -1,0 +1,106 @@
+"""The database schema (SQLAlchemy 2.x Core), mirrored by the Alembic migrations.
+
+``migrations/`` creates and upgrades files; this module is how code names the tables.
+``tests/test_storage.py`` checks that a migrated file has exactly these tables and columns.
+
+Tables
+------
+settings        key/value (JSON) of the build configuration
+objects         one row per object: name, source, content hash, the normalised mesh (GLB)
+views           one row per stored view: object, azimuth, elevation, grid gap
+curves          the view's centroid distance curve (float32 blob)
+fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob)
+sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import (
+    Column,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Table,
+    Text,
+    UniqueConstraint,
+)
+
+__all__ = [
+    "SCHEMA_REVISION",
+    "curves",
+    "fourier_points",
+    "metadata",
+    "objects",
+    "settings",
+    "sift_features",
+    "views",
+]
+
+#: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
+SCHEMA_REVISION = "0001"
+
+metadata = MetaData()
+
+settings = Table(
+    "settings",
+    metadata,
+    Column("key", String, primary_key=True),
+    Column("value", Text, nullable=False),
+)
+
+objects = Table(
+    "objects",
+    metadata,
+    Column("id", Integer, primary_key=True),
+    Column("name", String, nullable=False, unique=True),
+    Column("source", Text, nullable=False),
+    Column("content_hash", String(64), nullable=False),
+    Column("n_faces", Integer, nullable=False),
+    Column("n_vertices", Integer, nullable=False),
+    Column("centre", LargeBinary, nullable=False),
+    Column("scale", Float, nullable=False),
+    Column("mesh_glb", LargeBinary, nullable=False),
+    Column("empty_views", Integer, nullable=False),
+    Column("ingest_seconds", Float, nullable=False),
+    Column("created_at", String, nullable=False),
+)
+
+views = Table(
+    "views",
+    metadata,
+    Column("id", Integer, primary_key=True),
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
+    Column("azimuth", Float, nullable=False),
+    Column("elevation", Float, nullable=False),
+    Column("grid_gap", Float, nullable=False),
+    UniqueConstraint("object_id", "azimuth", "elevation", name="uq_views_object_angles"),
+)
+Index("ix_views_object", views.c.object_id)
+
+curves = Table(
+    "curves",
+    metadata,
+    Column("view_id", Integer, ForeignKey("views.id", ondelete="CASCADE"), primary_key=True),
+    Column("samples", LargeBinary, nullable=False),
+)
+
+fourier_points = Table(
+    "fourier_points",
+    metadata,
+    Column("view_id", Integer, ForeignKey("views.id", ondelete="CASCADE"), primary_key=True),
+    Column("coefficients", LargeBinary, nullable=False),
+)
+
+sift_features = Table(
+    "sift_features",
+    metadata,
+    Column("view_id", Integer, ForeignKey("views.id", ondelete="CASCADE"), primary_key=True),
+    Column("count", Integer, nullable=False),
+    Column("keypoints", LargeBinary, nullable=False),
+    Column("descriptors", LargeBinary, nullable=False),
+    Column("points3d", LargeBinary, nullable=False),
+)

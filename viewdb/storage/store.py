@@ -1,0 +1,359 @@
+"""The database file: opening, schema versioning, transactions, and reading/writing rows.
+
+One SQLite file per database, in WAL mode. Every connection sets ``journal_mode=WAL``,
+``busy_timeout``, ``synchronous=NORMAL`` and ``foreign_keys=ON``. The schema is created and
+upgraded only by the Alembic migrations in ``migrations/``; opening an older file upgrades
+it, a file from a newer viewdb is refused with :class:`~viewdb.errors.SchemaMismatch`.
+SQLAlchemy and sqlite3 errors are turned into :class:`~viewdb.errors.StorageError` here.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from sqlalchemy import event
+from sqlalchemy.engine import Connection, Engine
+
+from ..config import BuildConfig
+from ..errors import NotFound, SchemaMismatch, StorageError
+from . import schema as s
+from .codecs import decode_array, encode_array
+
+__all__ = ["ObjectRow", "Store", "ViewRow"]
+
+SQLITE_HEADER = b"SQLite format 3\x00"
+BUSY_TIMEOUT_MS = 10_000
+MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+
+@dataclass(frozen=True)
+class ObjectRow:
+    id: int
+    name: str
+    source: str
+    content_hash: str
+    n_faces: int
+    n_vertices: int
+    scale: float
+    centre: tuple[float, float, float]
+    views: int
+    empty_views: int
+    ingest_seconds: float
+    created_at: str
+
+
+@dataclass(frozen=True)
+class ViewRow:
+    id: int
+    azimuth: float
+    elevation: float
+    grid_gap: float
+
+
+def _migrations_dir() -> Path:
+    try:  # installed layout: migrations are shipped as the viewdb_migrations package
+        import viewdb_migrations
+
+        return Path(viewdb_migrations.__file__).resolve().parent
+    except ImportError:  # pragma: no cover - running from a source tree without install
+        return MIGRATIONS_DIR
+
+
+def _alembic_config(connection: Connection):  # type: ignore[no-untyped-def]
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(_migrations_dir()))
+    cfg.attributes["connection"] = connection
+    return cfg
+
+
+def known_revisions() -> set[str]:
+    """Revisions of ``migrations/versions`` (what this viewdb can read)."""
+    from alembic.config import Config
+    from alembic.script import ScriptDirectory
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(_migrations_dir()))
+    return {rev.revision for rev in ScriptDirectory.from_config(cfg).walk_revisions()}
+
+
+def _set_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
+    cur = dbapi_conn.cursor()
+    cur.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+    cur.execute("PRAGMA journal_mode=WAL")
+    cur.execute("PRAGMA synchronous=NORMAL")
+    cur.execute("PRAGMA foreign_keys=ON")
+    cur.close()
+
+
+class Store:
+    """An open database file."""
+
+    def __init__(self, path: str | Path, *, create: bool = True) -> None:
+        self.path = Path(path)
+        exists = self.path.exists() and self.path.stat().st_size > 0
+        if not exists and not create:
+            raise StorageError("no such database", self.path)
+        if exists:
+            self._check_header()
+        elif not self.path.parent.exists():
+            raise StorageError("its folder does not exist", self.path)
+        self.engine: Engine = sa.create_engine(f"sqlite:///{self.path}")
+        event.listen(self.engine, "connect", _set_pragmas)
+        try:
+            self._migrate()
+        except Exception:
+            self.engine.dispose()
+            raise
+
+    # ----------------------------------------------------------------- lifecycle
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def _check_header(self) -> None:
+        try:
+            with open(self.path, "rb") as f:
+                header = f.read(len(SQLITE_HEADER))
+        except OSError as exc:
+            raise StorageError(f"cannot be read: {exc.strerror}", self.path) from exc
+        if header != SQLITE_HEADER:
+            raise StorageError("is not a viewdb database (not an SQLite file)", self.path)
+
+    @contextmanager
+    def _errors(self) -> Iterator[None]:
+        try:
+            yield
+        except sa.exc.OperationalError as exc:
+            msg = str(exc.orig) if exc.orig else str(exc)
+            if "locked" in msg or "busy" in msg:
+                raise StorageError("database is busy (another process is writing)", self.path) from exc
+            raise StorageError(f"database error: {msg}", self.path) from exc
+        except sa.exc.DatabaseError as exc:
+            msg = str(exc.orig) if exc.orig else str(exc)
+            raise StorageError(f"database is corrupt or unreadable: {msg}", self.path) from exc
+
+    @contextmanager
+    def read(self) -> Iterator[Connection]:
+        with self._errors(), self.engine.connect() as conn:
+            yield conn
+
+    @contextmanager
+    def transaction(self) -> Iterator[Connection]:
+        """One write transaction: everything inside commits together or not at all."""
+        with self._errors(), self.engine.begin() as conn:
+            yield conn
+
+    def revision(self) -> str | None:
+        with self.read() as conn:
+            has = conn.exec_driver_sql(
+                "SELECT 1 FROM sqlite_master WHERE type='table' AND name='alembic_version'"
+            ).first()
+            if not has:
+                return None
+            row = conn.exec_driver_sql("SELECT version_num FROM alembic_version").first()
+            return None if row is None else str(row[0])
+
+    def _migrate(self) -> None:
+        current = self.revision()
+        if current == s.SCHEMA_REVISION:
+            return
+        if current is None:
+            with self.read() as conn:
+                tables = conn.exec_driver_sql(
+                    "SELECT count(*) FROM sqlite_master WHERE type='table'"
+                ).scalar_one()
+            if tables:
+                raise StorageError(
+                    "is an SQLite file but not a viewdb database (no schema version)", self.path
+                )
+        elif current not in known_revisions():
+            raise SchemaMismatch(
+                f"was written by a newer viewdb (schema revision {current}; this viewdb "
+                f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it",
+                self.path,
+            )
+        from alembic import command
+
+        with self.transaction() as conn:
+            command.upgrade(_alembic_config(conn), "head")
+
+    # ----------------------------------------------------------------- settings
+    def build_config(self) -> BuildConfig | None:
+        with self.read() as conn:
+            row = conn.execute(
+                sa.select(s.settings.c.value).where(s.settings.c.key == "build")
+            ).first()
+        return None if row is None else BuildConfig.from_dict(json.loads(row[0]))
+
+    def set_build_config(self, config: BuildConfig) -> None:
+        with self.transaction() as conn:
+            conn.execute(sa.delete(s.settings).where(s.settings.c.key == "build"))
+            conn.execute(
+                sa.insert(s.settings).values(key="build", value=json.dumps(config.to_dict()))
+            )
+
+    # ----------------------------------------------------------------- objects
+    def object_hashes(self) -> dict[str, str]:
+        with self.read() as conn:
+            rows = conn.execute(sa.select(s.objects.c.name, s.objects.c.content_hash)).all()
+        return {name: h for name, h in rows}
+
+    def objects(self) -> list[ObjectRow]:
+        o, v = s.objects, s.views
+        count = (
+            sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
+        )
+        query = sa.select(
+            o.c.id, o.c.name, o.c.source, o.c.content_hash, o.c.n_faces, o.c.n_vertices,
+            o.c.scale, o.c.centre, count, o.c.empty_views, o.c.ingest_seconds, o.c.created_at,
+        ).order_by(o.c.name)
+        with self.read() as conn:
+            rows = conn.execute(query).all()
+        return [
+            ObjectRow(
+                id=r[0], name=r[1], source=r[2], content_hash=r[3], n_faces=r[4],
+                n_vertices=r[5], scale=float(r[6]),
+                centre=tuple(float(x) for x in decode_array(r[7], np.float64, (3,))),  # type: ignore[arg-type]
+                views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
+                created_at=r[11],
+            )
+            for r in rows
+        ]
+
+    def object_id(self, conn: Connection, name: str) -> int:
+        row = conn.execute(sa.select(s.objects.c.id).where(s.objects.c.name == name)).first()
+        if row is None:
+            raise NotFound(f"no object named {name!r}", self.path)
+        return int(row[0])
+
+    def mesh_glb(self, name: str) -> bytes:
+        with self.read() as conn:
+            row = conn.execute(
+                sa.select(s.objects.c.mesh_glb).where(s.objects.c.name == name)
+            ).first()
+        if row is None:
+            raise NotFound(f"no object named {name!r}", self.path)
+        return bytes(row[0])
+
+    def write_object(self, desc: Any, grid_gap: float) -> None:
+        """Store one described object (replacing one of the same name) in one transaction."""
+        now = datetime.now(UTC).isoformat(timespec="seconds")
+        with self.transaction() as conn:
+            conn.execute(sa.delete(s.objects).where(s.objects.c.name == desc.name))
+            object_id = conn.execute(
+                sa.insert(s.objects).values(
+                    name=desc.name, source=desc.source, content_hash=desc.content_hash,
+                    n_faces=int(desc.n_faces), n_vertices=int(desc.n_vertices),
+                    centre=encode_array(np.asarray(desc.centre, np.float64)),
+                    scale=float(desc.scale), mesh_glb=desc.glb,
+                    empty_views=len(desc.empty_views), ingest_seconds=float(desc.seconds),
+                    created_at=now,
+                )
+            ).inserted_primary_key[0]
+            if not desc.views:
+                return
+            conn.execute(
+                sa.insert(s.views),
+                [
+                    {"object_id": object_id, "azimuth": float(v.azimuth),
+                     "elevation": float(v.elevation), "grid_gap": float(grid_gap)}
+                    for v in desc.views
+                ],
+            )
+            ids = {
+                (float(a), float(e)): int(i)
+                for i, a, e in conn.execute(
+                    sa.select(s.views.c.id, s.views.c.azimuth, s.views.c.elevation).where(
+                        s.views.c.object_id == object_id
+                    )
+                )
+            }
+            keyed = [(ids[(float(v.azimuth), float(v.elevation))], v) for v in desc.views]
+            conn.execute(
+                sa.insert(s.curves),
+                [{"view_id": i, "samples": encode_array(v.curve)} for i, v in keyed],
+            )
+            conn.execute(
+                sa.insert(s.fourier_points),
+                [{"view_id": i, "coefficients": encode_array(v.fourier)} for i, v in keyed],
+            )
+            conn.execute(
+                sa.insert(s.sift_features),
+                [
+                    {
+                        "view_id": i, "count": len(v.sift),
+                        "keypoints": encode_array(v.sift.keypoints),
+                        "descriptors": encode_array(v.sift.descriptors),
+                        "points3d": encode_array(v.sift.points3d),
+                    }
+                    for i, v in keyed
+                ],
+            )
+
+    # ----------------------------------------------------------------- views
+    def views(self, name: str) -> list[ViewRow]:
+        v = s.views
+        with self.read() as conn:
+            object_id = self.object_id(conn, name)
+            rows = conn.execute(
+                sa.select(v.c.id, v.c.azimuth, v.c.elevation, v.c.grid_gap)
+                .where(v.c.object_id == object_id)
+                .order_by(v.c.azimuth, v.c.elevation)
+            ).all()
+        return [ViewRow(int(i), float(a), float(e), float(g)) for i, a, e, g in rows]
+
+    def view_features(self, name: str, azimuth: float, elevation: float) -> dict[str, Any]:
+        """Curve, Fourier point and SIFT arrays of one stored view."""
+        v = s.views
+        with self.read() as conn:
+            object_id = self.object_id(conn, name)
+            row = conn.execute(
+                sa.select(
+                    s.curves.c.samples, s.fourier_points.c.coefficients,
+                    s.sift_features.c.keypoints, s.sift_features.c.descriptors,
+                    s.sift_features.c.points3d,
+                )
+                .select_from(
+                    v.join(s.curves, s.curves.c.view_id == v.c.id)
+                    .join(s.fourier_points, s.fourier_points.c.view_id == v.c.id)
+                    .join(s.sift_features, s.sift_features.c.view_id == v.c.id)
+                )
+                .where(
+                    v.c.object_id == object_id,
+                    v.c.azimuth == float(azimuth),
+                    v.c.elevation == float(elevation),
+                )
+            ).first()
+        if row is None:
+            raise NotFound(
+                f"object {name!r} has no stored view at azimuth {azimuth}, elevation {elevation}",
+                self.path,
+            )
+        return {
+            "curve": decode_array(row[0], np.float32, (None,)),
+            "fourier": decode_array(row[1], np.complex128, (None,)),
+            "keypoints": decode_array(row[2], np.float32, (None, 5)),
+            "descriptors": decode_array(row[3], np.uint8, (None, 128)),
+            "points3d": decode_array(row[4], np.float32, (None, 3)),
+        }
+
+    def table_counts(self) -> dict[str, int]:
+        out = {}
+        with self.read() as conn:
+            for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features):
+                out[table.name] = int(
+                    conn.execute(sa.select(sa.func.count()).select_from(table)).scalar_one()
+                )
+            keypoints = sa.func.coalesce(sa.func.sum(s.sift_features.c.count), 0)
+            out["sift_keypoints"] = int(conn.execute(sa.select(keypoints)).scalar_one())
+        return out
