@@ -204,19 +204,21 @@ def main(argv: list[str] | None = None) -> int:
         # without standalone mode click returns typer.Exit's code instead of raising it
         code = command.main(args=argv, prog_name="viewdb", standalone_mode=False)
     except typer.Exit as exc:
-        return exc.exit_code
+        code = exc.exit_code
     except typer.TyperException as exc:  # usage errors
         exc.show()
         return exc.exit_code
     except (KeyboardInterrupt, typer.Abort):
-        err.print("viewdb: interrupted", markup=False)
-        return 130
+        code = 130
     except viewdb.ViewDBError as exc:
         if _STATE["debug"]:
             raise
         err.print(f"viewdb: {exc}", markup=False)
         return 1
-    return code if isinstance(code, int) else 0
+    code = code if isinstance(code, int) else 0
+    if code == 130:  # typer turns KeyboardInterrupt into Exit(130), returned or raised
+        err.print("viewdb: interrupted", markup=False)
+    return code
 
 
 def run() -> None:

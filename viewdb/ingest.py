@@ -225,8 +225,9 @@ def run_ingest(
                     exc = fut.exception()
                     finish(futures[fut], exc if exc is not None else fut.result())
         except BaseException:
+            workers = list((getattr(pool, "_processes", None) or {}).values())
             pool.shutdown(wait=False, cancel_futures=True)
-            for proc in list(getattr(pool, "_processes", {}).values()):
+            for proc in workers:
                 proc.terminate()
             raise
         pool.shutdown(wait=True)

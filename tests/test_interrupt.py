@@ -1,0 +1,51 @@
+"""Ctrl-C during an ingest: exit code 130, one clean line, and no half-written object."""
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+import viewdb
+from tests.conftest import sample_files
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_sigint_mid_ingest_exits_130_and_leaves_whole_objects(tmp_path, jobs):
+    db = tmp_path / "ctrlc.db"
+    files = [str(p) for p in sample_files()]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "viewdb_cli.main", "ingest", *files, "--db", str(db), "--gap", "60",
+         "--image-size", "96", "--jobs", str(jobs)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    # wait until at least one object is committed, then interrupt
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        time.sleep(0.3)
+        try:
+            with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5) as conn:
+                if conn.execute("SELECT count(*) FROM objects").fetchone()[0] >= 1:
+                    break
+        except sqlite3.Error:
+            pass
+    os.kill(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "viewdb: interrupted"
+    assert "Traceback" not in err
+    with viewdb.open(db, create=False) as vdb:
+        objects = vdb.objects()
+        assert 1 <= len(objects) < len(files)
+        rows = vdb.info().rows
+        for o in objects:
+            assert o.views_stored + o.empty_views == o.views_grid
+    assert rows["views"] == rows["curves"] == rows["fourier_points"] == rows["sift_features"]
+    # re-running completes the catalogue
+    with viewdb.open(db) as vdb:
+        report = vdb.ingest(files)
+        assert not report.failed
+        assert len(vdb.objects()) == len(files)
