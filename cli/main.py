@@ -137,6 +137,23 @@ def info(
 
 
 @app.command()
+def check(db: DbOption) -> None:
+    """Verify a database: schema version, SQLite integrity, rows and blobs. Exit 0 or 1."""
+    with viewdb.open(db, create=False) as vdb:
+        report = vdb.check()
+    counts = ", ".join(f"{n} {what}" for what, n in report.checked.items())
+    if report.ok:
+        out.print(f"{db}: ok ({counts})")
+        return
+    for problem in report.problems:
+        out.print(f"{db}: {problem}", markup=False)
+    if report.more_problems:
+        out.print(f"{db}: ... and {report.more_problems} more problems")
+    out.print(f"{db}: FAILED ({len(report.problems) + report.more_problems} problems; checked {counts})")
+    raise typer.Exit(1)
+
+
+@app.command()
 def render(
     model_or_object: Annotated[str, typer.Argument(help="A mesh file, or an object name with --db.")],
     azimuth: Annotated[float, typer.Option(help="Azimuth h in degrees.")],

@@ -7,11 +7,11 @@ import subprocess
 import cv2
 import pytest
 from typer.testing import CliRunner
-from viewdb_cli.main import app, main
 
 from tests.conftest import ROOT, sample
+from viewdb_cli.main import app, main
 
-COMMANDS = ["ingest", "info", "render", "demo"]
+COMMANDS = ["ingest", "info", "render", "check", "demo"]
 
 
 def run(capsys, *args):

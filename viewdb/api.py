@@ -21,6 +21,7 @@ from .errors import NotFound, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .render import RenderedView, get_renderer
+from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
 
@@ -183,6 +184,10 @@ class ViewDB:
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone."""
         return get_renderer(self.config.render).render(self.mesh(name), azimuth, elevation)
+
+    def check(self, progress: Callable[[int, int], None] | None = None) -> CheckReport:
+        """Verify the file (see :mod:`viewdb.storage.integrity`); findings are in the report."""
+        return check_store(self._store, progress)
 
     def info(self) -> DatabaseInfo:
         return DatabaseInfo(

@@ -1,0 +1,139 @@
+"""``viewdb check``: verify that a database file is whole and self-consistent.
+
+Checks, in order: the schema revision is the one this viewdb writes; SQLite's own
+``integrity_check`` and ``foreign_key_check``; every view has exactly one curve, Fourier
+point and SIFT row; every blob decodes with the dtype and shape the schema promises; each
+Fourier point is the orthonormal DFT of its stored curve; each object's mesh is a GLB and
+its view count matches its grid. (R-tree checks join this list when the indexes land.)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import sqlalchemy as sa
+
+from ..camera import grid_views
+from ..errors import StorageError
+from ..features import fourier_point
+from . import schema as s
+from .codecs import decode_array
+from .store import Store
+
+__all__ = ["CheckReport", "check_store"]
+
+#: How far a stored Fourier point may be from the DFT of its stored curve.
+FOURIER_TOLERANCE = 1e-9
+#: Problems listed in full before the rest are only counted.
+MAX_LISTED = 50
+
+
+@dataclass
+class CheckReport:
+    """What ``viewdb check`` found. ``ok`` is True when ``problems`` is empty."""
+
+    path: str
+    checked: dict[str, int] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    more_problems: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def add(self, problem: str) -> None:
+        if len(self.problems) < MAX_LISTED:
+            self.problems.append(problem)
+        else:
+            self.more_problems += 1
+
+
+def check_store(store: Store, progress: Callable[[int, int], None] | None = None) -> CheckReport:
+    """Run every check on an open store and return the report (never raises for findings)."""
+    report = CheckReport(str(store.path))
+    revision = store.revision()
+    if revision != s.SCHEMA_REVISION:
+        report.add(f"schema revision is {revision}, expected {s.SCHEMA_REVISION}")
+    config = store.build_config()
+    if config is None:
+        report.add("settings: no build configuration stored")
+        return report
+    with store.read() as conn:
+        result = [r[0] for r in conn.exec_driver_sql("PRAGMA integrity_check").all()]
+        if result != ["ok"]:
+            report.add("sqlite integrity_check: " + "; ".join(result[:5]))
+        for row in conn.exec_driver_sql("PRAGMA foreign_key_check").all()[:MAX_LISTED]:
+            report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
+        _check_objects(conn, config.gap, report)
+        _check_views(conn, config, report, progress)
+    return report
+
+
+def _check_objects(conn: sa.Connection, gap: float, report: CheckReport) -> None:
+    o, v = s.objects, s.views
+    grid = len(grid_views(gap))
+    count = sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
+    rows = conn.execute(
+        sa.select(o.c.name, o.c.centre, sa.func.substr(o.c.mesh_glb, 1, 4), o.c.empty_views, count)
+    ).all()
+    report.checked["objects"] = len(rows)
+    for name, centre, magic, empty, n_views in rows:
+        try:
+            decode_array(centre, np.float64, (3,))
+        except StorageError as exc:
+            report.add(f"object {name!r}: centre: {exc.message}")
+        if bytes(magic) != b"glTF":
+            report.add(f"object {name!r}: stored mesh is not a GLB")
+        if n_views + empty != grid:
+            report.add(f"object {name!r}: {n_views} views + {empty} empty != grid of {grid}")
+
+
+def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: ignore[no-untyped-def]
+    v, c, f, k = s.views, s.curves, s.fourier_points, s.sift_features
+    n_curve, m = config.features.curve_samples, config.features.fourier_coefficients
+    total = conn.execute(sa.select(sa.func.count()).select_from(v)).scalar_one()
+    query = (
+        sa.select(
+            v.c.id, v.c.azimuth, v.c.elevation, c.c.samples, f.c.coefficients, k.c.count,
+            k.c.keypoints, k.c.descriptors, k.c.points3d,
+        )
+        .select_from(
+            v.outerjoin(c, c.c.view_id == v.c.id)
+            .outerjoin(f, f.c.view_id == v.c.id)
+            .outerjoin(k, k.c.view_id == v.c.id)
+        )
+        .order_by(v.c.id)
+    )
+    done = 0
+    for row in conn.execute(query):
+        vid, az, el, curve_blob, fourier_blob, count, kp, desc, pts = row
+        where = f"view {vid} ({az:g}, {el:g})"
+        if curve_blob is None or fourier_blob is None or kp is None:
+            report.add(f"{where}: missing curve, Fourier point or SIFT row")
+        else:
+            try:
+                curve = decode_array(curve_blob, np.float32, (n_curve,))
+                fourier = decode_array(fourier_blob, np.complex128, (m,))
+                decode_array(kp, np.float32, (count, 5))
+                decode_array(desc, np.uint8, (count, 128))
+                decode_array(pts, np.float32, (count, 3))
+            except StorageError as exc:
+                report.add(f"{where}: {exc.message}")
+            else:
+                expected = fourier_point(curve.astype(np.float64), m)
+                if not np.allclose(fourier, expected, rtol=0, atol=FOURIER_TOLERANCE):
+                    report.add(f"{where}: Fourier point does not match its curve")
+        done += 1
+        if progress is not None and done % 1000 == 0:
+            progress(done, total)
+    for table in (c, f, k):
+        orphans = conn.execute(
+            sa.select(sa.func.count()).select_from(table).where(
+                ~table.c.view_id.in_(sa.select(v.c.id))
+            )
+        ).scalar_one()
+        if orphans:
+            report.add(f"{table.name}: {orphans} rows belong to no view")
+    report.checked["views"] = done
