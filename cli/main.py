@@ -128,7 +128,7 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
-    table = Table("object", "faces", "views", "grid", "SIFT-less views", "ingest s")
+    table = Table("object", "faces", "views", "grid", "no silhouette", "ingest s")
     for o in data.objects:
         table.add_row(o.name, str(o.n_faces), str(o.views_stored), str(o.views_grid),
                       str(o.empty_views), f"{o.ingest_seconds:.1f}")

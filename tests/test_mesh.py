@@ -89,3 +89,23 @@ def test_bad_meshes_get_a_one_line_error_naming_the_file(tmp_path, name, content
 def test_missing_file(tmp_path):
     with pytest.raises(MeshError, match="no such file"):
         load_mesh(tmp_path / "nope.obj")
+
+
+def test_jpeg_textures_stay_jpeg_in_the_stored_glb(tmp_path):
+    import io
+
+    from PIL import Image
+
+    rng = np.random.default_rng(1)
+    noise = Image.fromarray(rng.integers(0, 255, (256, 256, 3), dtype=np.uint8))
+    buf = io.BytesIO()
+    noise.save(buf, format="JPEG", quality=80)
+    jpeg = Image.open(io.BytesIO(buf.getvalue()))
+    box = trimesh.creation.box((1, 1, 1))
+    uv = rng.random((len(box.vertices), 2))
+    box.visual = trimesh.visual.TextureVisuals(uv=uv, image=jpeg)
+    path = tmp_path / "textured.glb"
+    path.write_bytes(trimesh.Scene(box).export(file_type="glb"))
+    stored = load_mesh(path).to_glb()
+    assert b"image/jpeg" in stored
+    assert len(stored) < 1.2 * path.stat().st_size

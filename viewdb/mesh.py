@@ -139,9 +139,31 @@ def _baked_meshes(scene: trimesh.Scene) -> list[trimesh.Trimesh]:
         if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
             continue
         baked = geometry.copy()
+        _keep_texture_images(geometry, baked)
         baked.apply_transform(transform)
         meshes.append(baked)
     return meshes
+
+
+def _keep_texture_images(original: trimesh.Trimesh, copy: trimesh.Trimesh) -> None:
+    """Share the original PIL texture images with the copy.
+
+    ``Trimesh.copy`` copies images and loses their ``format``, and the GLB exporter keeps
+    JPEG textures as JPEG only when ``format == "JPEG"``: without this a stored mesh grows
+    several-fold (JPEG re-encoded as PNG).
+    """
+    src = getattr(original.visual, "material", None)
+    dst = getattr(copy.visual, "material", None)
+    if src is None or dst is None:
+        return
+    for attr in ("image", "baseColorTexture", "emissiveTexture", "normalTexture",
+                 "occlusionTexture", "metallicRoughnessTexture"):
+        image = getattr(src, attr, None)
+        if image is not None and hasattr(image, "format") and hasattr(dst, attr):
+            try:
+                setattr(dst, attr, image)
+            except Exception:  # noqa: S112 - read-only property on some material types
+                continue
 
 
 def _concatenate(scene: trimesh.Scene) -> trimesh.Trimesh:
