@@ -95,3 +95,23 @@ def test_existing_db_keeps_its_build_config(tmp_path):
         assert db.config.gap == 45 and db.config.render.image_size == 128
     with pytest.raises(viewdb.ViewDBError, match="gap 45"):
         viewdb.open(path, gap=10)
+
+
+def test_a_file_from_schema_0001_is_upgraded_in_place_with_its_data(tmp_path):
+    import shutil
+
+    from tests.conftest import ROOT
+
+    path = tmp_path / "old.db"
+    shutil.copy(ROOT / "tests" / "data" / "schema_0001.db", path)
+    with sqlite3.connect(path) as conn:
+        before = conn.execute("SELECT v.azimuth, v.elevation, c.samples FROM views v JOIN curves c ON c.view_id = v.id ORDER BY v.id").fetchall()
+        assert conn.execute("SELECT version_num FROM alembic_version").fetchone()[0] == "0001"
+    with viewdb.open(path, create=False) as db:
+        assert [o.name for o in db.objects()] == ["cone", "pyramid"]
+        assert db.check().ok
+    with sqlite3.connect(path) as conn:
+        assert conn.execute("SELECT version_num FROM alembic_version").fetchone()[0] == schema.SCHEMA_REVISION
+        after = conn.execute("SELECT v.azimuth, v.elevation, c.samples FROM views v JOIN curves c ON c.view_id = v.id ORDER BY v.id").fetchall()
+        assert after == before
+        assert conn.execute("SELECT DISTINCT skimmed FROM objects").fetchall() == [(0,)]

@@ -6,7 +6,9 @@
 Tables
 ------
 settings        key/value (JSON) of the build configuration
-objects         one row per object: name, source, content hash, the normalised mesh (GLB)
+objects         one row per object: name, source, content hash, the normalised mesh (GLB),
+                its symmetry type (H1–H4 × V1–V4, periods, verified generators as JSON)
+                and whether its views were skimmed
 views           one row per stored view: object, azimuth, elevation, grid gap
 curves          the view's centroid distance curve (float32 blob)
 fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob)
@@ -41,7 +43,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0001"
+SCHEMA_REVISION = "0002"
 
 metadata = MetaData()
 
@@ -67,6 +69,13 @@ objects = Table(
     Column("empty_views", Integer, nullable=False),
     Column("ingest_seconds", Float, nullable=False),
     Column("created_at", String, nullable=False),
+    # revision 0002: camera view skimming
+    Column("skimmed", Integer, nullable=False, server_default="0"),
+    Column("h_type", String, nullable=True),
+    Column("v_type", String, nullable=True),
+    Column("h_period", Float, nullable=True),
+    Column("v_period", Float, nullable=True),
+    Column("symmetry", Text, nullable=True),
 )
 
 views = Table(

@@ -49,6 +49,10 @@ class ObjectRow:
     empty_views: int
     ingest_seconds: float
     created_at: str
+    skimmed: bool = False
+    #: The symmetry type as stored (JSON of :class:`viewdb.symmetry.SymmetryType`), or None
+    #: for objects ingested before revision 0002.
+    symmetry: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,17 @@ def _set_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
     cur.execute("PRAGMA synchronous=NORMAL")
     cur.execute("PRAGMA foreign_keys=ON")
     cur.close()
+
+
+def _symmetry_columns(desc: Any) -> dict[str, Any]:
+    sym = getattr(desc, "symmetry", None)
+    if sym is None:
+        return {"skimmed": 0}
+    return {
+        "skimmed": int(bool(desc.skimmed)), "h_type": sym.h_type, "v_type": sym.v_type,
+        "h_period": float(sym.h_period), "v_period": float(sym.v_period),
+        "symmetry": json.dumps(sym.to_dict()),
+    }
 
 
 class Store:
@@ -216,6 +231,7 @@ class Store:
         query = sa.select(
             o.c.id, o.c.name, o.c.source, o.c.content_hash, o.c.n_faces, o.c.n_vertices,
             o.c.scale, o.c.centre, count, o.c.empty_views, o.c.ingest_seconds, o.c.created_at,
+            o.c.skimmed, o.c.symmetry,
         ).order_by(o.c.name)
         with self.read() as conn:
             rows = conn.execute(query).all()
@@ -225,7 +241,8 @@ class Store:
                 n_vertices=r[5], scale=float(r[6]),
                 centre=tuple(float(x) for x in decode_array(r[7], np.float64, (3,))),  # type: ignore[arg-type]
                 views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
-                created_at=r[11],
+                created_at=r[11], skimmed=bool(r[12]),
+                symmetry=None if r[13] is None else json.loads(r[13]),
             )
             for r in rows
         ]
@@ -257,7 +274,7 @@ class Store:
                     centre=encode_array(np.asarray(desc.centre, np.float64)),
                     scale=float(desc.scale), mesh_glb=desc.glb,
                     empty_views=len(desc.empty_views), ingest_seconds=float(desc.seconds),
-                    created_at=now,
+                    created_at=now, **_symmetry_columns(desc),
                 )
             ).inserted_primary_key[0]
             if not desc.views:
