@@ -80,9 +80,17 @@ def ingest(
     gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).")] = None,
     image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).")] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 1,
+    no_skim: Annotated[
+        bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
+    ] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
 ) -> None:
-    """Add meshes; an object is named after its file's stem. Re-running is a no-op."""
+    """Add meshes; an object is named after its file's stem. Re-running is a no-op.
+
+    Each object's symmetry type is found from its silhouettes, and only the views that
+    are not the same as (or the mirror of) a stored one are rendered and kept, unless
+    --no-skim.
+    """
     files = viewdb.describe_paths(paths)
     with viewdb.open(db, gap=gap, image_size=image_size) as vdb, _progress() as bar:
         task = bar.add_task("ingest", total=None)
@@ -93,7 +101,7 @@ def ingest(
             if p.outcome is not None and p.outcome.status == "failed":
                 err.print(f"viewdb: {p.outcome.error}", markup=False)
 
-        report = vdb.ingest(files, jobs=jobs, progress=on_progress)
+        report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress)
     counts = report.counts()
     if as_json:
         _echo_json({
@@ -128,10 +136,13 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
-    table = Table("object", "faces", "views", "grid", "no silhouette", "ingest s")
+    table = Table("object", "faces", "type", "periods", "views", "grid", "no silhouette", "ingest s")
     for o in data.objects:
-        table.add_row(o.name, str(o.n_faces), str(o.views_stored), str(o.views_grid),
-                      str(o.empty_views), f"{o.ingest_seconds:.1f}")
+        sym = o.symmetry
+        kind = f"{sym.h_type}/{sym.v_type}" if sym else "-"
+        periods = f"{sym.h_period:g}/{sym.v_period:g}" if sym else "-"
+        table.add_row(o.name, str(o.n_faces), kind, periods, str(o.views_stored),
+                      str(o.views_grid), str(o.empty_views), f"{o.ingest_seconds:.1f}")
     if data.objects:
         out.print(table)
 
@@ -207,7 +218,7 @@ def demo(
     folder.mkdir(parents=True, exist_ok=True)
     db_path = folder / "demo.db"
     out.print(f"viewdb demo: ingesting {len(models)} sample models into {db_path} (gap {gap:g}°)")
-    ingest(models, db_path, gap=gap, image_size=None, jobs=jobs, as_json=False)
+    ingest(models, db_path, gap=gap, image_size=None, jobs=jobs, no_skim=False, as_json=False)
     info(db_path, as_json=False)
     first = models[0].stem
     png = folder / f"{first}_30_20.png"

@@ -40,13 +40,26 @@ def pytest_report_header(config: pytest.Config) -> list[str]:
     ]
 
 
-@pytest.fixture(scope="session")
-def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Four sample models ingested on a 60° grid (36 views each), built once."""
+SMALL_DB_MODELS = ("marked_cube", "car", "mug", "l_bracket")
+
+
+def _build_small_db(tmp_path_factory: pytest.TempPathFactory, skim: bool) -> Path:
     import viewdb
 
-    path = tmp_path_factory.mktemp("db") / "small.db"
+    path = tmp_path_factory.mktemp("db") / ("small.db" if skim else "small_full.db")
     with viewdb.open(path, gap=60, image_size=128) as db:
-        report = db.ingest([sample(n) for n in ("marked_cube", "car", "mug", "l_bracket")])
+        report = db.ingest([sample(n) for n in SMALL_DB_MODELS], skim=skim)
     assert not report.failed, report.failed
     return path
+
+
+@pytest.fixture(scope="session")
+def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Four sample models ingested (skimmed) on a 60° grid of 36 views, built once."""
+    return _build_small_db(tmp_path_factory, skim=True)
+
+
+@pytest.fixture(scope="session")
+def small_db_full(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same four models with every grid view stored (--no-skim)."""
+    return _build_small_db(tmp_path_factory, skim=False)

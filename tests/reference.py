@@ -190,3 +190,89 @@ def naive_dft(x: np.ndarray, m: int) -> np.ndarray:
             for k in range(m)
         ]
     )
+
+
+# ---------------------------------------------------------------------------------------
+# Oracle for viewdb.symmetry: brute-force view relations of a finite symmetry group.
+# Shares nothing with the module but the camera contract (viewdb.camera.camera_pose):
+# the group is closed by multiplying all pairs until nothing new appears, and every pair
+# of grid views is compared with every g·C·M directly as matrices (no decomposition into
+# angles, no grid snapping).
+# ---------------------------------------------------------------------------------------
+
+__all__ += ["naive_group_closure", "naive_view_relations"]
+
+
+def naive_group_closure(generators: list[np.ndarray], limit: int = 2000) -> list[np.ndarray]:
+    """Every product of the (orthogonal) generators; raises if the group exceeds ``limit``."""
+    def key(m: np.ndarray) -> tuple[int, ...]:
+        return tuple(int(x) for x in np.rint(np.asarray(m) * 1e6).ravel())
+
+    elems: dict[tuple[int, ...], np.ndarray] = {}
+    for e in [np.eye(3)] + [np.asarray(g, dtype=float) for g in generators]:
+        elems.setdefault(key(e), e)
+    grew = True
+    while grew:
+        grew = False
+        for a in list(elems.values()):
+            for b in list(elems.values()):
+                m = a @ b
+                if key(m) not in elems:
+                    elems[key(m)] = m
+                    grew = True
+                    if len(elems) > limit:
+                        raise ValueError("group too large for the oracle")
+    return list(elems.values())
+
+
+def naive_view_relations(
+    generators: list[np.ndarray], gap: float
+) -> dict[tuple[float, float], tuple[int, int, bool]]:
+    """For every grid view: (class id, parity relative to the class root, self-mirror class).
+
+    Two views are related when some group element g and some M in diag(+-1, 1, +-1) with
+    det(g)·det(M) = +1 give g·C_a·M == C_b (mirrored when M's x-entry is -1); classes are
+    the transitive closure (plain union-find with a parity bit, a parity conflict marking
+    the class self-mirror).
+    """
+    from viewdb.camera import camera_pose, grid_views
+
+    views = [(float(h), float(v)) for h, v in grid_views(gap)]
+    cams = np.array([camera_pose(h, v)[:3, :3] for h, v in views])
+    ms = [np.diag([sx, 1.0, sz]) for sx in (1.0, -1.0) for sz in (1.0, -1.0)]
+    parent = list(range(len(views)))
+    par = [0] * len(views)  # parity to parent
+    conflict: set[int] = set()
+
+    def find(i: int) -> tuple[int, int]:
+        p = 0
+        while parent[i] != i:
+            p ^= par[i]
+            i = parent[i]
+        return i, p
+
+    def union(a: int, b: int, p: int) -> None:
+        ra, pa = find(a)
+        rb, pb = find(b)
+        if ra == rb:
+            if pa ^ pb != p:
+                conflict.add(ra)
+            return
+        parent[rb] = ra
+        par[rb] = pa ^ pb ^ p
+        if rb in conflict:
+            conflict.add(ra)
+
+    for g in naive_group_closure(generators):
+        for m in ms:
+            if np.linalg.det(g) * np.linalg.det(m) < 0:
+                continue
+            mapped = np.einsum("ij,ajk,kl->ail", g, cams, m)
+            close = np.all(np.abs(mapped[:, None] - cams[None, :]) < 1e-7, axis=(2, 3))
+            for a, b in zip(*np.nonzero(close), strict=True):
+                union(int(a), int(b), 1 if m[0, 0] < 0 else 0)
+    out = {}
+    for i, view in enumerate(views):
+        r, p = find(i)
+        out[view] = (r, p, r in conflict)
+    return out

@@ -33,7 +33,12 @@ def test_ingest_info_render_round_trip(tmp_path, capsys):
     assert code == 0
     assert {o["name"] for o in data["objects"]} == {"cone", "pyramid"}
     for o in data["objects"]:
-        assert o["views_grid"] == 16 and o["views_stored"] == 16
+        assert o["views_grid"] == 16 and 0 < o["views_stored"] < 16 and o["skimmed"]
+        assert o["h_type"] in ("H1", "H2", "H3", "H4") and o["v_type"] in ("V1", "V2", "V3", "V4")
+    assert next(o for o in data["objects"] if o["name"] == "cone")["h_type"] == "H1"
+    code, out, _ = run(capsys, "ingest", sample("cone"), "--db", tmp_path / "full.db", "--gap", 90,
+                       "--image-size", 64, "--no-skim", "--json")
+    assert code == 0 and json.loads(out)["views"] == 16
     assert data["schema_version"] and data["file_bytes"] > 0
     png = tmp_path / "cone.png"
     code, _, err = run(capsys, "render", "cone", "--azimuth", 30, "--elevation", 10, "--db", db, "--out", png)

@@ -8,8 +8,17 @@ Estimation for a Single-view Query Image in a Mobile Environment").
 ...     db.objects()
 """
 
-from .api import DatabaseInfo, ObjectInfo, StoredView, ViewDB, describe_paths, open, render_model
-from .config import BuildConfig, FeatureConfig, RenderConfig, SiftConfig
+from .api import (
+    CandidatePose,
+    DatabaseInfo,
+    ObjectInfo,
+    StoredView,
+    ViewDB,
+    describe_paths,
+    open,
+    render_model,
+)
+from .config import BuildConfig, FeatureConfig, RenderConfig, SiftConfig, SkimConfig
 from .errors import (
     FeatureError,
     ImageError,
@@ -24,11 +33,13 @@ from .errors import (
 )
 from .ingest import FileOutcome, IngestProgress, IngestReport
 from .render import RenderedView
+from .symmetry import SymmetryType
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BuildConfig",
+    "CandidatePose",
     "DatabaseInfo",
     "FeatureConfig",
     "FeatureError",
@@ -46,8 +57,10 @@ __all__ = [
     "RenderedView",
     "SchemaMismatch",
     "SiftConfig",
+    "SkimConfig",
     "StorageError",
     "StoredView",
+    "SymmetryType",
     "ViewDB",
     "ViewDBError",
     "__version__",

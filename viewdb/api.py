@@ -16,19 +16,30 @@ from numpy.typing import NDArray
 
 from .camera import grid_views, normalise_angle
 from .config import BuildConfig, RenderConfig
-from .describe import ObjectDescription
-from .errors import NotFound, ViewDBError
+from .describe import ObjectDescription, describe_view
+from .errors import FeatureError, NotFound, QueryError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .render import RenderedView, get_renderer
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
+from .symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
 
-__all__ = ["DatabaseInfo", "ObjectInfo", "StoredView", "ViewDB", "open", "render_model"]
+__all__ = [
+    "CandidatePose",
+    "DatabaseInfo",
+    "ObjectInfo",
+    "StoredView",
+    "ViewDB",
+    "open",
+    "render_model",
+]
 
 #: How many decoded meshes a database keeps in memory for :meth:`ViewDB.render`.
 MESH_CACHE_SIZE = 8
+#: How many regenerated (pruned or off-grid) views a database keeps in memory.
+VIEW_CACHE_SIZE = 256
 
 
 @dataclass(frozen=True)
@@ -48,12 +59,22 @@ class ObjectInfo:
     empty_views: int
     ingest_seconds: float
     created_at: str
+    #: Whether only the skim plan's views are stored (``--no-skim`` stores the grid).
+    skimmed: bool = False
+    #: The symmetry type; None for objects ingested before schema revision 0002.
+    symmetry: SymmetryType | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        sym = self.symmetry
         return {
             "name": self.name, "source": self.source, "content_hash": self.content_hash,
             "faces": self.n_faces, "vertices": self.n_vertices, "scale": self.scale,
-            "centre": list(self.centre), "views_stored": self.views_stored,
+            "centre": list(self.centre),
+            "h_type": sym.h_type if sym else None, "v_type": sym.v_type if sym else None,
+            "h_period": sym.h_period if sym else None,
+            "v_period": sym.v_period if sym else None,
+            "base_view": [sym.base_azimuth, sym.base_elevation] if sym else None,
+            "skimmed": self.skimmed, "views_stored": self.views_stored,
             "views_grid": self.views_grid, "empty_views": self.empty_views,
             "ingest_seconds": round(self.ingest_seconds, 3), "created_at": self.created_at,
         }
@@ -61,7 +82,7 @@ class ObjectInfo:
 
 @dataclass(frozen=True, eq=False)
 class StoredView:
-    """A stored view's features, read back from the database."""
+    """A view's features: read from the database, or regenerated from the stored mesh."""
 
     object: str
     azimuth: float
@@ -71,6 +92,25 @@ class StoredView:
     keypoints: NDArray[np.float32] = field(repr=False)
     descriptors: NDArray[np.uint8] = field(repr=False)
     points3d: NDArray[np.float32] = field(repr=False)
+    #: False when read from the database; True when rendered and described on demand
+    #: (a view the skim plan pruned, or one off the grid).
+    regenerated: bool = False
+    #: For a pruned grid view: the stored view it maps to, and whether its curve is that
+    #: view's curve reversed. None for stored and off-grid views.
+    stored_as: tuple[float, float] | None = None
+    mirrored: bool = False
+
+
+@dataclass(frozen=True)
+class CandidatePose:
+    """A grid view whose silhouette is the same as (or the mirror of) a matched view's."""
+
+    azimuth: float
+    elevation: float
+    #: The candidate's distance curve is the matched view's curve reversed.
+    mirrored: bool
+    #: Whether the database stores this view (otherwise it is regenerated on demand).
+    stored: bool
 
 
 @dataclass(frozen=True)
@@ -90,6 +130,7 @@ class DatabaseInfo:
             "curve_samples": self.config.features.curve_samples,
             "fourier_coefficients": self.config.features.fourier_coefficients,
             "sift_max_keypoints": self.config.sift.max_keypoints,
+            "skim_sigma": self.config.skim.sigma,
             "rows": self.rows, "objects": [o.to_dict() for o in self.objects],
         }
 
@@ -101,6 +142,8 @@ class ViewDB:
         self._store = store
         self.config = config
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
+        self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
+        self._plans: dict[str, ViewClasses] = {}
 
     @property
     def path(self) -> Path:
@@ -121,22 +164,32 @@ class ViewDB:
         paths: Iterable[str | Path],
         *,
         jobs: int = 1,
+        skim: bool = True,
         progress: Callable[[IngestProgress], None] | None = None,
     ) -> IngestReport:
         """Add mesh files; an object is named after its file's stem.
 
-        Unchanged files (same name and content hash) are skipped; changed ones replace
-        their object. Each object is written in one transaction. Files that fail are
-        listed in the report's ``failed`` and the rest still go in.
+        Each object is classified (symmetry type H1–H4 × V1–V4); with ``skim`` only the
+        views its skim plan keeps are rendered and stored (the paper's camera view
+        skimming), otherwise the whole grid. Unchanged files (same name and content hash)
+        are skipped; changed ones replace their object. Each object is written in one
+        transaction. Files that fail are listed in the report's ``failed`` and the rest
+        still go in.
         """
         def write(desc: ObjectDescription) -> None:
             self._store.write_object(desc, self.config.gap)
-            self._meshes.pop(desc.name, None)
+            self._forget(desc.name)
 
         return run_ingest(
             list(paths), self.config, self._store.object_hashes(), write,
-            jobs=jobs, progress=progress,
+            jobs=jobs, skim=skim, progress=progress,
         )
+
+    def _forget(self, name: str) -> None:
+        self._meshes.pop(name, None)
+        self._plans.pop(name, None)
+        for key in [k for k in self._regenerated if k[0] == name]:
+            del self._regenerated[key]
 
     # ------------------------------------------------------------------ reading
     def _info(self, row: ObjectRow) -> ObjectInfo:
@@ -146,6 +199,8 @@ class ViewDB:
             centre=row.centre, views_stored=row.views,
             views_grid=len(grid_views(self.config.gap)), empty_views=row.empty_views,
             ingest_seconds=row.ingest_seconds, created_at=row.created_at,
+            skimmed=row.skimmed,
+            symmetry=None if row.symmetry is None else SymmetryType.from_dict(row.symmetry),
         )
 
     def objects(self) -> list[ObjectInfo]:
@@ -162,12 +217,80 @@ class ViewDB:
         """``(azimuth, elevation)`` of every stored view of object ``name``."""
         return [(v.azimuth, v.elevation) for v in self._store.views(name)]
 
-    def view(self, name: str, azimuth: float, elevation: float) -> StoredView:
-        """The stored features of one view."""
+    def symmetry(self, name: str) -> SymmetryType | None:
+        """The object's symmetry type (None for objects from before schema 0002)."""
+        return self.object(name).symmetry
+
+    def view_plan(self, name: str) -> ViewClasses:
+        """How the object's grid views map to its stored ones (identity if not skimmed)."""
+        plan = self._plans.get(name)
+        if plan is None:
+            info = self.object(name)
+            if info.skimmed and info.symmetry is not None:
+                plan = skim_plan(info.symmetry, self.config.gap)
+            else:
+                plan = plan_without_skimming(self.config.gap)
+            self._plans[name] = plan
+        return plan
+
+    def candidate_poses(self, name: str, azimuth: float, elevation: float) -> list[CandidatePose]:
+        """Every grid view with the same or the mirrored silhouette as grid view (h, v).
+
+        The paper's candidate pose extraction (eqs. 1–2), from the object's verified
+        symmetry generators; a query matched at one view could be in any of these poses.
+        """
         a, e = normalise_angle(azimuth), normalise_angle(elevation)
-        f = self._store.view_features(name, a, e)
+        stored = set(self.views(name))
+        symmetry = self.symmetry(name)
+        classes = skim_plan(symmetry, self.config.gap) if symmetry else self.view_plan(name)
+        try:
+            members = classes.members(a, e)
+        except ValueError as exc:
+            raise QueryError(str(exc)) from exc
+        return [CandidatePose(h, v, m, (h, v) in stored) for h, v, m in members]
+
+    def view(self, name: str, azimuth: float, elevation: float) -> StoredView:
+        """The features of any view of a stored object.
+
+        A stored view is read from the database; any other (pruned by skimming, or off
+        the grid) is rendered from the stored mesh and described, and kept in a bounded
+        cache. Either way the result has the same fields.
+        """
+        a, e = normalise_angle(azimuth), normalise_angle(elevation)
+        try:
+            f = self._store.view_features(name, a, e)
+        except NotFound:
+            return self._regenerate(name, a, e)
         return StoredView(name, a, e, f["curve"], f["fourier"], f["keypoints"],
                           f["descriptors"], f["points3d"])
+
+    def _regenerate(self, name: str, azimuth: float, elevation: float) -> StoredView:
+        key = (name, azimuth, elevation)
+        cached = self._regenerated.get(key)
+        if cached is not None:
+            self._regenerated.move_to_end(key)
+            return cached
+        stored_as, mirrored = None, False
+        try:
+            stored_as, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
+        except KeyError:
+            pass  # off the grid
+        try:
+            desc = describe_view(self.render(name, azimuth, elevation), self.config)
+        except FeatureError as exc:
+            raise NotFound(
+                f"object {name!r} has no silhouette at azimuth {azimuth:g}, "
+                f"elevation {elevation:g}", self.path,
+            ) from exc
+        view = StoredView(
+            name, azimuth, elevation, desc.curve, desc.fourier, desc.sift.keypoints,
+            desc.sift.descriptors, desc.sift.points3d, regenerated=True,
+            stored_as=stored_as, mirrored=mirrored,
+        )
+        self._regenerated[key] = view
+        while len(self._regenerated) > VIEW_CACHE_SIZE:
+            self._regenerated.popitem(last=False)
+        return view
 
     def mesh(self, name: str) -> NormalisedMesh:
         """The stored normalised mesh of ``name`` (decoded once, then cached)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["BuildConfig", "FeatureConfig", "RenderConfig", "SiftConfig"]
+__all__ = ["BuildConfig", "FeatureConfig", "RenderConfig", "SiftConfig", "SkimConfig"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,15 @@ class SiftConfig:
 
 
 @dataclass(frozen=True)
+class SkimConfig:
+    """Camera view skimming (paper section II.B; :mod:`viewdb.symmetry`)."""
+
+    #: RMS difference of two distance curves (mean 1) below which they are the same shape;
+    #: 2.5x the worst rasterisation noise measured between truly equal views at 256 px.
+    sigma: float = 0.02
+
+
+@dataclass(frozen=True)
 class BuildConfig:
     """Everything that decides what an ingest stores; fixed per database file."""
 
@@ -71,6 +80,7 @@ class BuildConfig:
     render: RenderConfig = field(default_factory=RenderConfig)
     features: FeatureConfig = field(default_factory=FeatureConfig)
     sift: SiftConfig = field(default_factory=SiftConfig)
+    skim: SkimConfig = field(default_factory=SkimConfig)
 
     def __post_init__(self) -> None:
         if self.gap <= 0 or abs(360.0 / self.gap - round(360.0 / self.gap)) > 1e-9:
@@ -86,4 +96,5 @@ class BuildConfig:
             render=RenderConfig(**data["render"]),
             features=FeatureConfig(**data["features"]),
             sift=SiftConfig(**data["sift"]),
+            skim=SkimConfig(**data.get("skim", {})),
         )

@@ -18,10 +18,17 @@ from .config import BuildConfig
 from .errors import FeatureError
 from .features import distance_curve, fourier_point
 from .mesh import NormalisedMesh
-from .render import RenderedView, get_renderer
+from .render import Renderer, RenderedView, get_renderer
 from .sift import SiftFeatures, extract_sift, lift_points
+from .symmetry import SymmetryType, classify, plan_without_skimming, skim_plan
 
-__all__ = ["ObjectDescription", "ViewDescription", "describe_object", "describe_view"]
+__all__ = [
+    "ObjectDescription",
+    "ViewDescription",
+    "classify_object",
+    "describe_object",
+    "describe_view",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +60,10 @@ class ObjectDescription:
     #: Grid views that gave no usable silhouette (e.g. a flat part seen edge-on).
     empty_views: list[tuple[float, float]]
     seconds: float
+    #: The object's symmetry type (always classified, also without skimming).
+    symmetry: SymmetryType | None = None
+    #: Whether only the views the skim plan keeps were described.
+    skimmed: bool = False
 
 
 def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
@@ -71,15 +82,50 @@ def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
     return ViewDescription(view.azimuth, view.elevation, curve, fourier, sift)
 
 
+def classify_object(
+    mesh: NormalisedMesh, config: BuildConfig, renderer: Renderer | None = None
+) -> SymmetryType:
+    """The symmetry type of ``mesh`` from silhouette-only renders (Algorithm 1 + checks).
+
+    Only the views classification needs are rendered (the rings and a verification
+    sample, depth only); a view with no silhouette gets an all-zero curve, which matches
+    no real shape.
+    """
+    renderer = renderer or get_renderer(config.render)
+    samples = config.features.curve_samples
+
+    def curve_at(azimuth: float, elevation: float) -> NDArray[np.float64]:
+        mask = renderer.render(mesh, azimuth, elevation, shaded=False).mask
+        try:
+            return distance_curve(mask, samples)
+        except FeatureError:
+            return np.zeros(samples)
+
+    return classify(curve_at, config.gap, config.skim.sigma)
+
+
 def describe_object(
     mesh: NormalisedMesh,
     config: BuildConfig,
-    views: Sequence[tuple[float, float]],
-    on_view: Callable[[], None] | None = None,
+    *,
+    skim: bool = True,
+    views: Sequence[tuple[float, float]] | None = None,
+    on_view: Callable[[int], None] | None = None,
 ) -> ObjectDescription:
-    """Render ``views`` of ``mesh`` and describe each one."""
+    """Classify ``mesh``, then render and describe the views to store.
+
+    With ``skim`` only the views of the skim plan are described; otherwise the whole
+    grid. ``views`` overrides both (a test hook). ``on_view(n)`` is told of every ``n``
+    grid views dealt with (pruned views count as dealt with when the plan is made).
+    """
     start = time.perf_counter()
     renderer = get_renderer(config.render)
+    symmetry = classify_object(mesh, config, renderer)
+    if views is None:
+        plan = skim_plan(symmetry, config.gap) if skim else plan_without_skimming(config.gap)
+        views = list(plan.kept)
+        if on_view is not None and plan.views_grid > plan.views_stored:
+            on_view(plan.views_grid - plan.views_stored)
     described: list[ViewDescription] = []
     empty: list[tuple[float, float]] = []
     for azimuth, elevation in views:
@@ -89,7 +135,7 @@ def describe_object(
         except FeatureError:
             empty.append((azimuth, elevation))
         if on_view is not None:
-            on_view()
+            on_view(1)
     return ObjectDescription(
         name=mesh.name,
         source=mesh.source,
@@ -102,4 +148,6 @@ def describe_object(
         views=described,
         empty_views=empty,
         seconds=time.perf_counter() - start,
+        symmetry=symmetry,
+        skimmed=skim,
     )

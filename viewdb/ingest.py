@@ -90,16 +90,14 @@ def _init_worker(ticks: Any) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
 
 
-def _tick() -> None:
+def _tick(n: int) -> None:
     if _TICKS is not None:
-        _TICKS.put(1)
+        _TICKS.put(n)
 
 
-def _describe_file(
-    path: str, name: str, config: BuildConfig, views: Sequence[tuple[float, float]]
-) -> ObjectDescription:
+def _describe_file(path: str, name: str, config: BuildConfig, skim: bool) -> ObjectDescription:
     mesh = load_mesh(path, name)
-    return describe_object(mesh, config, views, on_view=_tick)
+    return describe_object(mesh, config, skim=skim, on_view=_tick)
 
 
 @dataclass
@@ -116,6 +114,7 @@ def run_ingest(
     write: Callable[[ObjectDescription], None],
     *,
     jobs: int = 1,
+    skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
 ) -> IngestReport:
     """Describe every new or changed file and hand each result to ``write``.
@@ -126,7 +125,7 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    views = grid_views(config.gap)
+    grid = len(grid_views(config.gap))
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -151,7 +150,7 @@ def run_ingest(
             continue
         todo.append(_Job(str(path), name, name in existing_hashes))
 
-    total_views = len(todo) * len(views)
+    total_views = len(todo) * grid
     done_views = 0
     files_total = len(report.outcomes) + len(todo)
 
@@ -184,19 +183,21 @@ def run_ingest(
 
     if jobs <= 1 or len(todo) <= 1:
         for job in todo:
-            def tick() -> None:
+            expected_done = done_views + grid
+
+            def tick(n: int) -> None:
                 nonlocal done_views
-                done_views += 1
+                done_views += n
                 notify()
 
             try:
                 mesh = load_mesh(job.path, job.name)
                 result: ObjectDescription | BaseException = describe_object(
-                    mesh, config, views, on_view=tick
+                    mesh, config, skim=skim, on_view=tick
                 )
             except ViewDBError as exc:
                 result = exc
-            done_views = min(done_views, total_views)
+            done_views = expected_done  # a failed file counts as dealt with
             finish(job, result)
     else:
         ctx = mp.get_context("spawn")
@@ -208,7 +209,7 @@ def run_ingest(
         futures: dict[Future[ObjectDescription], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job.path, job.name, config, views)] = job
+                futures[pool.submit(_describe_file, job.path, job.name, config, skim)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
@@ -231,5 +232,8 @@ def run_ingest(
                 proc.terminate()
             raise
         pool.shutdown(wait=True)
+        if done_views != total_views:  # files that failed part-way
+            done_views = total_views
+            notify()
     report.seconds = time.perf_counter() - start
     return report

@@ -9,6 +9,7 @@ its view count matches its grid. (R-tree checks join this list when the indexes 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -18,6 +19,7 @@ import sqlalchemy as sa
 from ..camera import grid_views
 from ..errors import StorageError
 from ..features import fourier_point
+from ..symmetry import SymmetryType, skim_plan
 from . import schema as s
 from .codecs import decode_array
 from .store import Store
@@ -76,18 +78,35 @@ def _check_objects(conn: sa.Connection, gap: float, report: CheckReport) -> None
     grid = len(grid_views(gap))
     count = sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
     rows = conn.execute(
-        sa.select(o.c.name, o.c.centre, sa.func.substr(o.c.mesh_glb, 1, 4), o.c.empty_views, count)
+        sa.select(
+            o.c.name, o.c.centre, sa.func.substr(o.c.mesh_glb, 1, 4), o.c.empty_views, count,
+            o.c.skimmed, o.c.symmetry,
+        )
     ).all()
     report.checked["objects"] = len(rows)
-    for name, centre, magic, empty, n_views in rows:
+    for name, centre, magic, empty, n_views, skimmed, symmetry in rows:
+        expected = grid
+        if symmetry is not None:
+            try:
+                sym = SymmetryType.from_dict(json.loads(symmetry))
+            except (ValueError, KeyError, TypeError) as exc:
+                report.add(f"object {name!r}: symmetry type does not decode: {exc}")
+            else:
+                if skimmed:
+                    expected = skim_plan(sym, gap).views_stored
+        elif skimmed:
+            report.add(f"object {name!r}: skimmed but has no symmetry type")
         try:
             decode_array(centre, np.float64, (3,))
         except StorageError as exc:
             report.add(f"object {name!r}: centre: {exc.message}")
         if bytes(magic) != b"glTF":
             report.add(f"object {name!r}: stored mesh is not a GLB")
-        if n_views + empty != grid:
-            report.add(f"object {name!r}: {n_views} views + {empty} empty != grid of {grid}")
+        if n_views + empty != expected:
+            report.add(
+                f"object {name!r}: {n_views} views + {empty} empty != {expected} "
+                + ("kept by its skim plan" if expected != grid else "in the grid")
+            )
 
 
 def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: ignore[no-untyped-def]
