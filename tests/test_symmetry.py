@@ -219,6 +219,8 @@ def _assert_agrees_with_oracle(gens, gap):
         ([("mirror_elevation", 45, 0)], 45),  # an oblique plane through the x axis
         # a cube's 3-fold axis along (1, 1, 1): lands on the grid only at special views
         ([("matrix", 0, 0, 1, 1, 0, 0, 0, 1, 0)], 45),
+        # the cube group again, reached only by words longer than four generators
+        ([("mirror_azimuth", 45), ("rot_y", 180), ("rot_horizontal", 90, 0)], 45),
     ],
 )
 def test_union_find_agrees_with_the_brute_force_oracle(gens, gap):
@@ -480,3 +482,28 @@ def test_dice_on_a_20_degree_grid_keeps_only_the_grid_preserving_symmetries():
     sym, _ = classify_model("cube_dice", 20)
     assert (sym.h_type, sym.v_type) == ("H2", "V2")
     assert skim_plan(sym).views_stored == related_views(BOX, 20).views_stored
+
+
+def test_the_docstring_table_of_class_counts():
+    h_gens = {
+        "H1": lambda g: [("rot_y", g), ("mirror_azimuth", 0)],
+        "H2": lambda g: [("mirror_azimuth", 0)],
+        "H3": lambda g: [("mirror_azimuth", 0), ("mirror_azimuth", 45)],
+        "H4": lambda g: [],
+    }
+    v_gens = {
+        "V2": lambda g: [("mirror_y", 0)],
+        "V2'": lambda g: [("mirror_y", 0), ("mirror_azimuth", 90)],
+        "V3": lambda g: [("mirror_azimuth", 90), ("rot_horizontal", 90, 0)],
+        "V4": lambda g: [],
+    }
+    table = {  # (gap 10, gap 30), as in the module docstring
+        "H1": {"V2": (10, 4), "V2'": (10, 4), "V3": (1, 1), "V4": (19, 7)},
+        "H2": {"V2": (181, 25), "V2'": (100, 16), "V3": (95, 14), "V4": (343, 43)},
+        "H3": {"V2": (50, 8), "V2'": (50, 8), "V3": (45, 6), "V4": (95, 14)},
+        "H4": {"V2": (342, 42), "V2'": (181, 25), "V3": (176, 23), "V4": (648, 72)},
+    }
+    for h, row in table.items():
+        for v, counts in row.items():
+            got = tuple(related_views(h_gens[h](g) + v_gens[v](g), g).views_stored for g in (10, 30))
+            assert got == counts, (h, v)

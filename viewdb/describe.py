@@ -18,7 +18,7 @@ from .config import BuildConfig
 from .errors import FeatureError
 from .features import distance_curve, fourier_point
 from .mesh import NormalisedMesh
-from .render import Renderer, RenderedView, get_renderer
+from .render import RenderedView, Renderer, get_renderer
 from .sift import SiftFeatures, extract_sift, lift_points
 from .symmetry import SymmetryType, classify, plan_without_skimming, skim_plan
 
