@@ -105,3 +105,16 @@ def test_shading_darkens_faces_turned_away_from_the_camera(cube):
     green_level = view.color[s, cols[-4]].max()
     assert green_level < red_level
     assert red_level == pytest.approx(255 * (0.3 + 0.7 * np.cos(np.radians(30))), abs=6)
+
+
+def test_back_faces_are_drawn_in_both_render_modes(tmp_path):
+    # an open shell: one triangle facing +Z; from behind (h = 180) only its back is seen
+    tri = trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [0, 1, 0.2]], [[0, 1, 2]], process=False)
+    path = tmp_path / "tri.ply"
+    tri.export(path)
+    mesh = load_mesh(path)
+    r = get_renderer()
+    front, back = r.render(mesh, 0, 0, shaded=False).mask, r.render(mesh, 180, 0, shaded=False).mask
+    assert back.sum() > 1000
+    np.testing.assert_array_equal(back, r.render(mesh, 180, 0).mask)
+    np.testing.assert_array_equal(back, front[:, ::-1])

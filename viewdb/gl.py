@@ -11,6 +11,12 @@ a sampling grid symmetric about the image's vertical axis, and lifting keypoints
 the depth being where the pixel is — so it makes pyrender allocate single-sampled buffers
 (:func:`_single_sampled`). It also renders about twice as fast in software.
 
+No face culling. A silhouette is every triangle's projection, whatever its winding: open
+shells (a car body with no floor) and meshes with flipped triangles must not lose faces
+seen from behind. pyrender honours ``SKIP_CULL_FACES`` when it binds a material but
+always culls back faces in its depth-only pass, which viewdb uses for fast silhouettes;
+:func:`_no_face_culling` makes it never enable culling.
+
 Importing this module does not import OpenGL; call
 :func:`pyrender_module` when rendering is actually needed, so the rest of viewdb (queries
 on a shipped client db) works on machines with no GL at all.
@@ -42,6 +48,7 @@ def pyrender_module() -> ModuleType:
                 "install libegl1 and libgl1-mesa-dri (see install.sh)"
             ) from exc
         _single_sampled(pyrender)
+        _no_face_culling(pyrender)
         _PYRENDER = pyrender
     return _PYRENDER
 
@@ -58,3 +65,19 @@ def _single_sampled(pyrender: ModuleType) -> None:
 
     renderer_module.glRenderbufferStorageMultisample = storage_multisample
     renderer_module._viewdb_single_sampled = True
+
+
+def _no_face_culling(pyrender: ModuleType) -> None:
+    """Make pyrender's renderer ignore requests to enable back-face culling."""
+    renderer_module = pyrender.renderer
+    if getattr(renderer_module, "_viewdb_no_culling", False):
+        return
+    enable = renderer_module.glEnable
+    cull_face = renderer_module.GL_CULL_FACE
+
+    def gl_enable(capability: int) -> None:
+        if capability != cull_face:
+            enable(capability)
+
+    renderer_module.glEnable = gl_enable
+    renderer_module._viewdb_no_culling = True
