@@ -6,7 +6,9 @@
    views stored against the full grid at ``--gap``.
 2. Ingests the first ``--ingest-limit`` models twice in this run, with and without
    skimming (same machine, same jobs), and prints both times and the ratio.
-3. Retrieval check (the paper's claim that skimming keeps accuracy): random grid views
+3. No-loss audit: for every grid view of those models, the curve of a fresh silhouette
+   render against the curve of the kept view it maps to (reversed when mirrored).
+4. Retrieval check (the paper's claim that skimming keeps accuracy): random grid views
    of those models as queries (the paper's protocol), ranked by brute force (Euclidean
    distance to every stored curve and its reverse) over both databases; prints rank-1
    accuracy of each and how often the two disagree on the best object.
@@ -28,6 +30,7 @@ from viewdb.config import BuildConfig
 from viewdb.describe import classify_object
 from viewdb.features import distance_curve, mirror_curve
 from viewdb.mesh import load_mesh
+from viewdb.render import get_renderer
 from viewdb.symmetry import skim_plan
 
 
@@ -38,6 +41,25 @@ def curves_of(db: viewdb.ViewDB) -> dict[str, np.ndarray]:
         c = np.asarray(curves, dtype=np.float64)
         out[o.name] = np.vstack([c, [mirror_curve(x) for x in c]])  # stored + their mirrors
     return out
+
+
+def audit(mesh, plan, renderer, config) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """RMS difference of every grid view's fresh curve to its kept view's (mirrored) curve."""
+    n = config.features.curve_samples
+    curves: dict[tuple[float, float], np.ndarray] = {}
+
+    def curve(h: float, v: float) -> np.ndarray:
+        if (h, v) not in curves:
+            try:
+                curves[(h, v)] = distance_curve(renderer.render(mesh, h, v, shaded=False).mask, n)
+            except viewdb.FeatureError:
+                curves[(h, v)] = np.zeros(n)
+        return curves[(h, v)]
+
+    return np.array([
+        np.sqrt(np.mean((curve(*view) - (mirror_curve(curve(*kept)) if mirrored else curve(*kept))) ** 2))
+        for view, (kept, mirrored) in plan.mapping.items()
+    ])
 
 
 def best_object(curves: dict[str, np.ndarray], query: np.ndarray) -> tuple[str, float]:
@@ -103,7 +125,16 @@ def main() -> None:
             else:
                 print(f"  ingest time ratio skim/no-skim: {skim_time / wall:.2f}")
 
-        print(f"== 3. retrieval: {args.queries} random grid views as queries")
+        print("== 3. no-loss audit: every grid view against its kept view (RMS)")
+        renderer = get_renderer(config.render)
+        for path in subset:
+            mesh = load_mesh(path)
+            plan = skim_plan(classify_object(mesh, config, renderer), args.gap)
+            errors = audit(mesh, plan, renderer, config)
+            print(f"  {path.stem:24s} max {errors.max():.4f}  p99 {np.percentile(errors, 99):.4f}  "
+                  f"over sigma {(errors > config.skim.sigma).sum()} of {len(errors)}")
+
+        print(f"== 4. retrieval: {args.queries} random grid views as queries")
         with viewdb.open(dbs[True]) as skim_db, viewdb.open(dbs[False]) as full_db:
             cs, cf = curves_of(skim_db), curves_of(full_db)
             names = sorted(cs)
