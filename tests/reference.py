@@ -276,3 +276,62 @@ def naive_view_relations(
         r, p = find(i)
         out[view] = (r, p, r in conflict)
     return out
+
+
+# ---------------------------------------------------------------------------------------
+# Oracles for viewdb.search.bounds: the textbook full-matrix DTW recursion in plain Python
+# floats, brute-force window min/max, the envelope distance cell by cell, and the range of
+# a linear functional over a box by enumerating every vertex of the box (small N only).
+# ---------------------------------------------------------------------------------------
+
+__all__ += ["naive_dtw", "naive_envelope", "naive_lb_keogh", "naive_box_by_vertices"]
+
+
+def naive_dtw(q, c, r: int | None = None) -> float:
+    """sqrt of the least squared-cost warping path, cells |i - j| <= r (None: no band)."""
+    q = [float(v) for v in q]
+    c = [float(v) for v in c]
+    n, mm = len(q), len(c)
+    inf = math.inf
+    D = [[inf] * (mm + 1) for _ in range(n + 1)]
+    D[0][0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, mm + 1):
+            if r is not None and abs(i - j) > r:
+                continue
+            cost = (q[i - 1] - c[j - 1]) ** 2
+            D[i][j] = cost + min(D[i - 1][j - 1], D[i - 1][j], D[i][j - 1])
+    return math.sqrt(D[n][mm])
+
+
+def naive_envelope(q, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """U_i = max of q over |t - i| <= r, L_i = min (window clipped to the sequence)."""
+    n = len(q)
+    window = [[float(q[t]) for t in range(n) if abs(t - i) <= r] for i in range(n)]
+    return np.array([min(w) for w in window]), np.array([max(w) for w in window])
+
+
+def naive_lb_keogh(lower, upper, c) -> float:
+    """Distance from c to the envelope, one sample at a time."""
+    s = 0.0
+    for lo, hi, v in zip(lower, upper, c, strict=True):
+        if v > hi:
+            s += (v - hi) ** 2
+        elif v < lo:
+            s += (lo - v) ** 2
+    return math.sqrt(s)
+
+
+def naive_box_by_vertices(lower, upper, F) -> tuple[np.ndarray, np.ndarray]:
+    """Min and max of each row of F . x over all 2^N vertices x of the box [lower, upper]."""
+    import itertools
+
+    n = len(lower)
+    verts = np.array(
+        [
+            [upper[t] if bit else lower[t] for t, bit in enumerate(bits)]
+            for bits in itertools.product((0, 1), repeat=n)
+        ]
+    )
+    vals = verts @ np.asarray(F).T
+    return vals.min(axis=0), vals.max(axis=0)

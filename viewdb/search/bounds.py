@@ -1,0 +1,578 @@
+"""Distances and lower bounds for the k-NN search (Tak & Hwang, III.A, Algorithm 2).
+
+Algorithm 2 ranks index entries by a chain of ever tighter, ever dearer lower bounds of
+the dynamic time warping distance between the query curve ``q`` and a stored curve
+``c`` (both of length ``N``, fixed start point, so this is ordinary *non-cyclic* DTW)::
+
+    MINDIST(box, MBR)  <=  Fourier_Dist(box, F c)  <=  LB_Keogh(L, U, c)  <=  DTW_r(q, c)
+
+for every MBR containing the candidate's coordinates ``F c``.  The bounds follow
+Keogh & Ratanamahatana, "Exact indexing of dynamic time warping", KAIS 7, 2005
+(LB_Keogh, the envelope, MINDIST) and Zhu & Shasha, "Warping indexes with envelope
+transforms for query by humming", SIGMOD 2003 (the *envelope transform*: the box of
+feature values reachable from the envelope, which is what :func:`envelope_box`
+computes for the DFT features of the index).
+
+Conventions
+-----------
+DTW
+    :func:`dtw` is DTW with a Sakoe-Chiba band of ``r`` samples (cells ``|i - j| <= r``),
+    cost ``(q_i - c_j)^2`` per cell, steps (1,0), (0,1), (1,1), path from ``(0, 0)`` to
+    ``(N-1, N-1)``; it returns the *square root* of the least path cost, so ``r = 0`` is
+    exactly the Euclidean distance and every bound here is in the same units.
+Coordinates
+    The index stores, for each view, the real vector
+    ``F c = [Re X_0, ..., Re X_{m-1}, Im X_0, ..., Im X_{m-1}]`` where
+    ``X = np.fft.fft(c, norm="ortho")`` (:func:`viewdb.features.fourier_point`); see
+    :func:`fourier_coordinates` and :func:`complex_to_coordinates`.  ``Im X_0`` is
+    always 0 for a real curve; it is *kept*, so the layout is a plain ``2m`` vector
+    (the row of ``F`` is zero, the box and all points have 0 there, it never adds to a
+    distance).  Curves are stored as float32 but everything here computes in float64.
+
+Why the chain holds
+-------------------
+``LB_Keogh <= DTW`` (Keogh & Ratanamahatana, Prop. 1).  With ``U_j = max q[j-r:j+r+1]``
+and ``L_j = min(...)``, every warping path in the band matches each ``c_j`` with at
+least one ``q_i``, ``|i - j| <= r``, hence ``L_j <= q_i <= U_j`` and
+``(q_i - c_j)^2 >= dist(c_j, [L_j, U_j])^2``.  The cells for different ``j`` are
+different cells of the path and all costs are >= 0, so the path costs at least
+``LB_Keogh^2``.  :func:`lb_keogh_reverse` is the same with the roles swapped (DTW with a
+symmetric band is symmetric) and :func:`lb_kim` uses the two cells ``(0, 0)`` and
+``(N-1, N-1)`` every path contains.
+
+``Fourier_Dist <= LB_Keogh``.  Let ``x* = clip(c, L, U)``, the point of the envelope
+``{x : L <= x <= U}`` nearest to ``c``; by definition ``||x* - c|| = LB_Keogh(L, U, c)``.
+Each coordinate is a linear functional ``F_k . x``, and :func:`envelope_box` is its
+exact range over the envelope, so ``F x*`` lies in the box ``[lo, hi]`` and
+``Fourier_Dist(box, F c) <= ||F x* - F c|| = ||F (x* - c)||``.  Finally ``F`` is a
+contraction: ``||F v||^2 = sum_{k<m} |V_k|^2 <= sum_{k<N} |V_k|^2 = ||v||^2`` by
+Parseval for the orthonormal DFT.  (The rows of ``F`` are orthogonal but *not* unit
+length: the ``Re``/``Im`` rows of ``0 < k < N/2`` have norm ``1/sqrt 2``.  Weighting them
+by ``sqrt 2`` would still be a contraction for ``m <= (N+1)/2`` and give a tighter bound,
+but the stored coordinates are the unweighted ones, as in the paper.)
+
+``MINDIST <= Fourier_Dist``: ``F c`` lies in the MBR, so the box is at least as close to
+the MBR as to the point.
+
+Plain Fourier distance ``||F q - F c||`` does **not** lower-bound DTW: e.g. a spike
+at ``t = 10`` and the same spike at ``t = 11`` have DTW 0 for ``r >= 1`` but different
+DFTs.  Only the distance to the *box* of the query's envelope does.
+
+Mirrored views
+--------------
+The mirrored view's curve is ``c'[i] = c[(-i) % N]`` (:func:`viewdb.features.mirror_curve`),
+whose DFT is ``conj(X)``, so ``F c' = S F c`` with ``S = diag(I_m, -I_m)``, an isometry.
+Hence ``Fourier_Dist(box, F c') = Fourier_Dist(S box, F c)`` and
+``MINDIST(box, S MBR) = MINDIST(S box, MBR)``, where ``S box`` is :func:`mirror_box`
+(``lo'_Im = -hi_Im``, ``hi'_Im = -lo_Im``, the ``Re`` half unchanged).  The search
+therefore needs only the index of the stored views: it queries it with both ``box``
+and ``mirror_box(box)``, and, since Algorithm 2 pushes ``S`` and ``S'`` from one Fourier
+point (lines 15-19), the key of a point or node must be the *smaller* of the two
+distances to stay a lower bound for both.  ``LB_Keogh`` and ``DTW`` of the mirror must be
+computed on ``mirror_curve(c)`` itself (the mirror is not an order-preserving re-indexing,
+so there is no shortcut in the time domain).
+
+Floating point
+--------------
+:func:`envelope_box` rounds the box outward by a bound on the rounding error of the dot
+products (about ``4 N eps`` relative), so that a candidate lying inside the envelope
+(``LB_Keogh == 0``) always gets ``Fourier_Dist == 0`` even when its coordinates come from
+an FFT rather than from ``F @ c``; the box is wider than exact by ~1e-13 for
+``N = 128`` curves of mean 1, which costs nothing in pruning.  Other comparisons in the
+chain hold up to rounding of the last few ulps.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = [
+    "complex_to_coordinates",
+    "dtw",
+    "envelope",
+    "envelope_box",
+    "fourier_coordinates",
+    "fourier_dist",
+    "fourier_dist_many",
+    "lb_keogh",
+    "lb_keogh_many",
+    "lb_keogh_reverse",
+    "lb_kim",
+    "mindist",
+    "mindist_many",
+    "mirror_box",
+    "mirror_coordinates",
+]
+
+
+# ---------------------------------------------------------------------------------------
+# numba kernels (private; inputs are validated float64 contiguous arrays)
+# ---------------------------------------------------------------------------------------
+
+
+@njit(cache=True, nogil=True)
+def _dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
+    n = q.shape[0]
+    thresh = best_so_far * best_so_far
+    prev = np.empty(n)
+    cur = np.empty(n)
+    # row 0: only the horizontal step is possible
+    hi = min(n - 1, r)
+    acc = 0.0
+    for j in range(hi + 1):
+        d = q[0] - c[j]
+        acc += d * d
+        cur[j] = acc
+    if cur[0] > thresh and math.sqrt(cur[0]) > best_so_far:
+        return np.inf
+    prev, cur = cur, prev
+    for i in range(1, n):
+        lo = max(0, i - r)
+        hi = min(n - 1, i + r)
+        phi = min(n - 1, i - 1 + r)  # last valid column of row i-1
+        plo = max(0, i - 1 - r)  # first valid column of row i-1
+        rowmin = np.inf
+        qi = q[i]
+        for j in range(lo, hi + 1):
+            best = np.inf
+            if j <= phi:  # (i-1, j)
+                best = prev[j]
+            if j - 1 >= plo:  # (i-1, j-1); j-1 <= phi always holds
+                v = prev[j - 1]
+                if v < best:
+                    best = v
+            if j - 1 >= lo:  # (i, j-1)
+                v = cur[j - 1]
+                if v < best:
+                    best = v
+            d = qi - c[j]
+            v = d * d + best
+            cur[j] = v
+            if v < rowmin:
+                rowmin = v
+        # every path crosses row i and costs are >= 0: the path cost is >= rowmin
+        if rowmin > thresh and math.sqrt(rowmin) > best_so_far:
+            return np.inf
+        prev, cur = cur, prev
+    return math.sqrt(prev[n - 1])
+
+
+@njit(cache=True, nogil=True)
+def _envelope_kernel(q, r):  # pragma: no cover - compiled
+    n = q.shape[0]
+    lower = np.empty(n)
+    upper = np.empty(n)
+    for i in range(n):
+        a = max(0, i - r)
+        b = min(n - 1, i + r)
+        lo = q[a]
+        hi = q[a]
+        for t in range(a + 1, b + 1):
+            v = q[t]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        lower[i] = lo
+        upper[i] = hi
+    return lower, upper
+
+
+@njit(cache=True, nogil=True)
+def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
+    s = 0.0
+    for i in range(c.shape[0]):
+        v = c[i]
+        if v > upper[i]:
+            d = v - upper[i]
+            s += d * d
+        elif v < lower[i]:
+            d = lower[i] - v
+            s += d * d
+    return math.sqrt(s)
+
+
+@njit(cache=True, nogil=True)
+def _all_finite(a):  # pragma: no cover - compiled
+    for i in range(a.shape[0]):
+        if not math.isfinite(a[i]):
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _ordered(lo, hi):  # pragma: no cover - compiled
+    for i in range(lo.shape[0]):
+        if lo[i] > hi[i]:
+            return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------
+# validation helpers
+# ---------------------------------------------------------------------------------------
+
+
+def _seq(x: object, name: str, *, ndim: int = 1) -> NDArray[np.float64]:
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    if a.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-D, got shape {a.shape}")
+    if a.size == 0 or (ndim == 2 and a.shape[1] == 0):
+        raise ValueError(f"{name} must not be empty")
+    if not _all_finite(a.reshape(-1)):
+        raise ValueError(f"{name} must contain only finite values")
+    return a
+
+
+def _same_shape(*pairs: tuple[str, np.ndarray]) -> None:
+    shape = pairs[0][1].shape
+    for name, a in pairs[1:]:
+        if a.shape != shape:
+            raise ValueError(f"{pairs[0][0]} and {name} must have the same shape, got {shape} and {a.shape}")
+
+
+def _band(r: object, n: int) -> int:
+    if isinstance(r, bool) or not isinstance(r, numbers.Integral):
+        raise TypeError(f"band r must be an integer, got {r!r}")
+    r = int(r)
+    if r < 0:
+        raise ValueError(f"band r must be >= 0, got {r}")
+    return min(r, n - 1)
+
+
+def _box(lo: object, hi: object) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    lo_a = _seq(lo, "lo")
+    hi_a = _seq(hi, "hi")
+    _same_shape(("lo", lo_a), ("hi", hi_a))
+    if not _ordered(lo_a, hi_a):
+        raise ValueError("box must have lo <= hi in every coordinate")
+    return lo_a, hi_a
+
+
+# ---------------------------------------------------------------------------------------
+# time domain
+# ---------------------------------------------------------------------------------------
+
+
+def dtw(q: np.ndarray, c: np.ndarray, r: int, best_so_far: float = math.inf) -> float:
+    """DTW distance with a Sakoe-Chiba band, with early abandoning.
+
+    Parameters
+    ----------
+    q, c : numpy.ndarray
+        1-D finite sequences of the same length ``N`` (computed in float64).
+    r : int
+        Band half-width: only cells ``|i - j| <= r`` are used; ``r >= N - 1`` is
+        unconstrained DTW and ``r = 0`` the Euclidean distance.
+    best_so_far : float, optional
+        Early-abandoning threshold (``>= 0``, may be ``inf``).  As soon as every cell of
+        a row of the cost matrix costs more than ``best_so_far**2`` the path cost must
+        too, and ``inf`` is returned (UCR suite; Keogh & Ratanamahatana 2005).
+
+    Returns
+    -------
+    float
+        ``sqrt`` of the least cost ``sum (q_i - c_j)^2`` over warping paths from
+        ``(0, 0)`` to ``(N-1, N-1)`` in the band; ``inf`` only if that distance exceeds
+        ``best_so_far`` (otherwise the exact distance, even if it equals it).
+
+    Raises
+    ------
+    ValueError
+        Shapes differ or are not 1-D, non-finite values, ``r < 0`` or a negative or NaN
+        ``best_so_far``.
+    TypeError
+        ``r`` is not an integer.
+
+    Notes
+    -----
+    O(N r) time, O(N) memory (two rows).
+    """
+    qa = _seq(q, "q")
+    ca = _seq(c, "c")
+    _same_shape(("q", qa), ("c", ca))
+    rr = _band(r, qa.shape[0])
+    bsf = float(best_so_far)
+    if math.isnan(bsf) or bsf < 0:
+        raise ValueError(f"best_so_far must be >= 0, got {best_so_far!r}")
+    return float(_dtw_kernel(qa, ca, rr, bsf))
+
+
+def envelope(q: np.ndarray, r: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """LB_Keogh envelope of a sequence (Keogh & Ratanamahatana 2005, eq. 7).
+
+    Parameters
+    ----------
+    q : numpy.ndarray
+        1-D finite sequence of length ``N``.
+    r : int
+        Band half-width, ``>= 0``.
+
+    Returns
+    -------
+    (L, U) : tuple of numpy.ndarray
+        float64 ``(N,)``: ``U_i = max(q[max(0, i-r) : i+r+1])`` and ``L_i`` the min
+        (windows clipped at the ends, no wrap-around).
+    """
+    qa = _seq(q, "q")
+    rr = _band(r, qa.shape[0])
+    return _envelope_kernel(qa, rr)
+
+
+def lb_keogh(L: np.ndarray, U: np.ndarray, c: np.ndarray) -> float:
+    """LB_Keogh lower bound of ``DTW(q, c, r)`` from the envelope of ``q``.
+
+    Parameters
+    ----------
+    L, U : numpy.ndarray
+        Envelope of the query from :func:`envelope` (``L <= U``).
+    c : numpy.ndarray
+        Candidate sequence, same length.
+
+    Returns
+    -------
+    float
+        ``sqrt(sum_i d_i^2)`` with ``d_i = c_i - U_i`` if ``c_i > U_i``, ``L_i - c_i`` if
+        ``c_i < L_i``, else 0: the Euclidean distance from ``c`` to the envelope
+        (Keogh & Ratanamahatana 2005, eq. 8).
+    """
+    La = _seq(L, "L")
+    Ua = _seq(U, "U")
+    ca = _seq(c, "c")
+    _same_shape(("L", La), ("U", Ua), ("c", ca))
+    if not _ordered(La, Ua):
+        raise ValueError("envelope must have L <= U")
+    return float(_lb_keogh_kernel(La, Ua, ca))
+
+
+def lb_keogh_many(L: np.ndarray, U: np.ndarray, C: np.ndarray) -> NDArray[np.float64]:
+    """:func:`lb_keogh` of every row of ``C`` (shape ``(k, N)``); returns ``(k,)``."""
+    La = _seq(L, "L")
+    Ua = _seq(U, "U")
+    _same_shape(("L", La), ("U", Ua))
+    Ca = _seq(C, "C", ndim=2)
+    if Ca.shape[1] != La.shape[0]:
+        raise ValueError(f"rows of C must have length {La.shape[0]}, got {Ca.shape[1]}")
+    if not _ordered(La, Ua):
+        raise ValueError("envelope must have L <= U")
+    d = np.maximum(Ca - Ua, 0.0) + np.maximum(La - Ca, 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
+def lb_keogh_reverse(q: np.ndarray, c: np.ndarray, r: int) -> float:
+    """LB_Keogh with the envelope built around the candidate: ``lb_keogh(*envelope(c, r), q)``.
+
+    Also a lower bound of ``DTW(q, c, r)`` because banded DTW is symmetric; the larger of
+    the two is the UCR suite's "LB_Keogh EQ / EC" cascade.
+    """
+    qa = _seq(q, "q")
+    ca = _seq(c, "c")
+    _same_shape(("q", qa), ("c", ca))
+    rr = _band(r, qa.shape[0])
+    lower, upper = _envelope_kernel(ca, rr)
+    return float(_lb_keogh_kernel(lower, upper, qa))
+
+
+def lb_kim(q: np.ndarray, c: np.ndarray) -> float:
+    """First/last-point lower bound of DTW (the UCR suite's cheap LB_Kim).
+
+    Every warping path contains the cells ``(0, 0)`` and ``(N-1, N-1)`` (distinct cells for
+    ``N >= 2``), so ``DTW >= sqrt((q_0 - c_0)^2 + (q_{N-1} - c_{N-1})^2)`` for any band.
+    For ``N = 1`` it is ``|q_0 - c_0|``, the DTW itself.
+    """
+    qa = _seq(q, "q")
+    ca = _seq(c, "c")
+    _same_shape(("q", qa), ("c", ca))
+    d0 = qa[0] - ca[0]
+    if qa.shape[0] == 1:
+        return float(abs(d0))
+    d1 = qa[-1] - ca[-1]
+    return float(math.sqrt(d0 * d0 + d1 * d1))
+
+
+# ---------------------------------------------------------------------------------------
+# Fourier coordinates and the query box
+# ---------------------------------------------------------------------------------------
+
+
+def fourier_coordinates(m: int, n: int) -> NDArray[np.float64]:
+    """The linear map from a curve to its index coordinates.
+
+    Parameters
+    ----------
+    m : int
+        Number of DFT coefficients, ``1 <= m <= n``.
+    n : int
+        Curve length ``N >= 1``.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(2m, n)`` matrix ``F`` with ``F[k, t] = cos(2 pi k t / n) / sqrt(n)`` and
+        ``F[m + k, t] = -sin(2 pi k t / n) / sqrt(n)``, so that
+        ``F @ x = [Re X_0..Re X_{m-1}, Im X_0..Im X_{m-1}]`` with
+        ``X = np.fft.fft(x, norm="ortho")``.  Row ``m`` (``Im X_0``) is identically zero
+        and kept.  ``||F v|| <= ||v||`` for every ``v`` (Parseval).
+    """
+    if isinstance(m, bool) or not isinstance(m, numbers.Integral):
+        raise TypeError(f"m must be an integer, got {m!r}")
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral):
+        raise TypeError(f"n must be an integer, got {n!r}")
+    m, n = int(m), int(n)
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    if not 1 <= m <= n:
+        raise ValueError(f"m must be in [1, {n}], got {m}")
+    k = np.arange(m)[:, None]
+    t = np.arange(n)[None, :]
+    angle = (2.0 * np.pi / n) * ((k * t) % n)  # exact phase reduction
+    scale = 1.0 / math.sqrt(n)
+    F = np.concatenate([np.cos(angle), -np.sin(angle)]) * scale
+    F[m] = 0.0  # Im X_0: exactly zero
+    if n % 2 == 0 and m > n // 2:
+        F[m + n // 2] = 0.0  # Im X_{N/2}: exactly zero too
+    return F
+
+
+def complex_to_coordinates(points: np.ndarray) -> NDArray[np.float64]:
+    """Index coordinates of Fourier points: ``[Re X, Im X]`` along the last axis.
+
+    ``points`` is complex ``(m,)`` or ``(k, m)`` (e.g. from
+    :func:`viewdb.features.fourier_point`); returns float64 ``(2m,)`` or ``(k, 2m)``,
+    equal to ``F @ c`` for :func:`fourier_coordinates`.
+    """
+    X = np.asarray(points)
+    if X.ndim not in (1, 2) or X.shape[-1] == 0:
+        raise ValueError(f"points must be 1-D or 2-D and non-empty, got shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("points must contain only finite values")
+    return np.concatenate([X.real, X.imag], axis=-1).astype(np.float64, copy=False)
+
+
+def envelope_box(
+    L: np.ndarray, U: np.ndarray, F: np.ndarray
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The query box: exact range of each coordinate over the envelope (Zhu & Shasha 2003).
+
+    Parameters
+    ----------
+    L, U : numpy.ndarray
+        Envelope ``(N,)`` with ``L <= U`` (from :func:`envelope`).
+    F : numpy.ndarray
+        ``(d, N)`` coordinate map (from :func:`fourier_coordinates`).
+
+    Returns
+    -------
+    (lo, hi) : tuple of numpy.ndarray
+        float64 ``(d,)``: ``lo_k = sum_t min(F_kt L_t, F_kt U_t)`` and
+        ``hi_k = sum_t max(F_kt L_t, F_kt U_t)``, the min and max of ``F_k . x`` over
+        ``L <= x <= U`` (a linear function on a box attains its extremes at a vertex,
+        chosen per ``t`` by the sign of ``F_kt``), each rounded outward by
+        ``4 N eps (sum_t |F_kt| M_t + max_t M_t)``, ``M_t = max(|L_t|, |U_t|)``, to absorb
+        the rounding of the dot products here and of the FFT that gives the candidates'
+        coordinates (the second term covers the all-zero rows, which an FFT only
+        reproduces up to rounding).
+    """
+    La = _seq(L, "L")
+    Ua = _seq(U, "U")
+    _same_shape(("L", La), ("U", Ua))
+    if not _ordered(La, Ua):
+        raise ValueError("envelope must have L <= U")
+    Fa = _seq(F, "F", ndim=2)
+    if Fa.shape[1] != La.shape[0]:
+        raise ValueError(f"F must have {La.shape[0]} columns, got shape {Fa.shape}")
+    pos = np.maximum(Fa, 0.0)
+    neg = np.minimum(Fa, 0.0)
+    lo = pos @ La + neg @ Ua
+    hi = pos @ Ua + neg @ La
+    size = np.maximum(np.abs(La), np.abs(Ua))
+    # |error| of F_k . x (dot product or FFT) <= ~ N eps sum_t |F_kt| |x_t|, plus a floor
+    # for rows that are exactly 0 in F (Im X_0, Im X_{N/2}) but not in an FFT result
+    slack = (4.0 * La.shape[0] * np.finfo(np.float64).eps) * (np.abs(Fa) @ size + size.max())
+    return lo - slack, hi + slack
+
+
+def mirror_box(lo: np.ndarray, hi: np.ndarray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The box ``S [lo, hi]`` for mirrored candidates, ``S = diag(I_m, -I_m)``.
+
+    ``lo`` and ``hi`` have length ``2m`` in the layout of :func:`fourier_coordinates`;
+    the ``Re`` half is unchanged and the ``Im`` half becomes ``[-hi_Im, -lo_Im]``.  Then
+    ``fourier_dist(*mirror_box(lo, hi), F c) == fourier_dist(lo, hi, F mirror_curve(c))``
+    and likewise for :func:`mindist` with the MBR of the stored (unmirrored) points.
+    """
+    lo_a, hi_a = _box(lo, hi)
+    if lo_a.shape[0] % 2:
+        raise ValueError(f"box must have even length 2m, got {lo_a.shape[0]}")
+    m = lo_a.shape[0] // 2
+    new_lo = np.concatenate([lo_a[:m], -hi_a[m:]])
+    new_hi = np.concatenate([hi_a[:m], -lo_a[m:]])
+    return new_lo, new_hi
+
+
+def mirror_coordinates(p: np.ndarray) -> NDArray[np.float64]:
+    """Coordinates of the mirrored curve: ``S p`` (``Im`` half negated), rows of a 2-D ``p``."""
+    pa = np.asarray(p, dtype=np.float64)
+    if pa.ndim not in (1, 2) or pa.shape[-1] % 2 or pa.shape[-1] == 0:
+        raise ValueError(f"p must be 1-D or 2-D with even length 2m, got shape {pa.shape}")
+    m = pa.shape[-1] // 2
+    out = pa.copy()
+    out[..., m:] *= -1.0
+    return out
+
+
+def fourier_dist(lo: np.ndarray, hi: np.ndarray, p: np.ndarray) -> float:
+    """Fourier_Dist: Euclidean distance from the point ``p`` to the box ``[lo, hi]``.
+
+    ``p = F @ c`` are the candidate's coordinates; 0 if ``p`` is inside the box.  A lower
+    bound of ``LB_Keogh(L, U, c)`` when ``[lo, hi] = envelope_box(L, U, F)`` (module
+    docstring; Zhu & Shasha 2003, Keogh & Ratanamahatana 2005).
+    """
+    lo_a, hi_a = _box(lo, hi)
+    pa = _seq(p, "p")
+    _same_shape(("lo", lo_a), ("p", pa))
+    d = np.maximum(lo_a - pa, 0.0) + np.maximum(pa - hi_a, 0.0)
+    return float(math.sqrt(float(d @ d)))
+
+
+def fourier_dist_many(lo: np.ndarray, hi: np.ndarray, P: np.ndarray) -> NDArray[np.float64]:
+    """:func:`fourier_dist` for every row of ``P`` (shape ``(k, d)``); returns ``(k,)``."""
+    lo_a, hi_a = _box(lo, hi)
+    Pa = _seq(P, "P", ndim=2)
+    if Pa.shape[1] != lo_a.shape[0]:
+        raise ValueError(f"rows of P must have length {lo_a.shape[0]}, got {Pa.shape[1]}")
+    d = np.maximum(lo_a - Pa, 0.0) + np.maximum(Pa - hi_a, 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
+def mindist(lo: np.ndarray, hi: np.ndarray, mbr_lo: np.ndarray, mbr_hi: np.ndarray) -> float:
+    """MINDIST: Euclidean distance between the query box and an MBR (0 if they meet).
+
+    Per coordinate the gap is ``max(lo - mbr_hi, mbr_lo - hi, 0)`` (Keogh &
+    Ratanamahatana 2005, eq. 12, with the query box in place of a point).
+    """
+    lo_a, hi_a = _box(lo, hi)
+    blo, bhi = _box(mbr_lo, mbr_hi)
+    _same_shape(("lo", lo_a), ("mbr_lo", blo))
+    d = np.maximum(lo_a - bhi, 0.0) + np.maximum(blo - hi_a, 0.0)
+    return float(math.sqrt(float(d @ d)))
+
+
+def mindist_many(
+    lo: np.ndarray, hi: np.ndarray, mbr_lo: np.ndarray, mbr_hi: np.ndarray
+) -> NDArray[np.float64]:
+    """:func:`mindist` to each of ``k`` MBRs given as rows of ``(k, d)`` arrays."""
+    lo_a, hi_a = _box(lo, hi)
+    blo = _seq(mbr_lo, "mbr_lo", ndim=2)
+    bhi = _seq(mbr_hi, "mbr_hi", ndim=2)
+    _same_shape(("mbr_lo", blo), ("mbr_hi", bhi))
+    if blo.shape[1] != lo_a.shape[0]:
+        raise ValueError(f"MBRs must have {lo_a.shape[0]} columns, got {blo.shape[1]}")
+    if np.any(blo > bhi):
+        raise ValueError("MBRs must have lo <= hi in every coordinate")
+    d = np.maximum(lo_a - bhi, 0.0) + np.maximum(blo - hi_a, 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
