@@ -5,8 +5,13 @@ exact distance of everything below it (:mod:`viewdb.search.bounds` proves the ch
 
 * an **object** (its views' MBR in Fourier space), keyed by ``MINDIST`` of the query box
   (or the mirrored box) to the MBR;
-* a **Fourier point** of one view, keyed by ``Fourier_Dist`` (box or mirrored box);
-* a **curve** (a view's curve, or its reverse for the mirror view), keyed by LB_Keogh;
+* a **curve** (a view's curve, or its reverse for the mirror view), keyed by
+  ``max(Fourier_Dist, LB_Keogh)``: both bound the exact distance, so their maximum does
+  too. Algorithm 2 pushes the Fourier point first and the curve when that pops; here
+  both bounds are computed at once, vectorised over an object's views when the object
+  pops, and sorted: the queue holds one *cursor* per opened object, keyed by the bound
+  of its next unrefined curve (a lazy merge of the sorted lists), which pops curves in
+  exactly the order the per-curve entries would, with a queue of objects, not views;
 * a **curve with its DTW distance**, keyed by the exact distance.
 
 When an exact entry reaches the top, no entry left can beat it, so its object is final
@@ -35,7 +40,7 @@ from .bounds import (
     envelope_box,
     fourier_coordinates,
     fourier_dist_many,
-    lb_keogh,
+    lb_keogh_many,
     mindist,
     mirror_box,
 )
@@ -74,6 +79,8 @@ class TierArrays:
     owner: NDArray[np.int64]
     #: Distance curves, (n, N) float64.
     curves: NDArray[np.float64]
+    #: The curves of the mirror views (reversed about the start), (n, N).
+    mirrored: NDArray[np.float64] = field(init=False)
     coords: NDArray[np.float64] = field(init=False)
     mbr_lo: NDArray[np.float64] = field(init=False)
     mbr_hi: NDArray[np.float64] = field(init=False)
@@ -82,6 +89,8 @@ class TierArrays:
 
     def __post_init__(self) -> None:
         n = self.curves.shape[1]
+        self.curves = np.ascontiguousarray(self.curves, dtype=np.float64)
+        self.mirrored = np.ascontiguousarray(np.roll(self.curves[:, ::-1], 1, axis=1))
         m = max(INDEXED_COEFFICIENTS) + 1
         self._F = fourier_coordinates(m, n)
         self._rows = np.array(
@@ -125,7 +134,8 @@ def knn(
     box, mbox, (lower, upper) = tier.query_boxes(q, r)
     heap: list[tuple[float, int, int, int, int]] = []  # (key, tiebreak, kind, index, mirrored)
     counter = 0
-    OBJECT, POINT, CURVE, EXACT = 0, 1, 2, 3
+    OBJECT, CURSOR, EXACT = 0, 2, 3
+    cursors: dict[int, tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]] = {}
     for o in range(len(tier.names)):
         key = min(mindist(*box, tier.mbr_lo[o], tier.mbr_hi[o]),
                   mindist(*mbox, tier.mbr_lo[o], tier.mbr_hi[o]))
@@ -137,7 +147,7 @@ def knn(
     done: set[int] = set()
     while heap and len(result) < k:
         key, _, kind, index, mirrored = heapq.heappop(heap)
-        owner = index if kind == OBJECT else int(tier.owner[index])
+        owner = index if kind in (OBJECT, CURSOR) else int(tier.owner[index])
         if owner in done:
             continue
         if kind == EXACT:
@@ -146,23 +156,30 @@ def knn(
         elif kind == OBJECT:
             stats.objects_visited += 1
             views = views_of[index]
-            d = np.minimum(fourier_dist_many(*box, tier.coords[views]),
-                           fourier_dist_many(*mbox, tier.coords[views]))
-            for v, dv in zip(views, d, strict=True):
-                heapq.heappush(heap, (float(dv), counter, POINT, int(v), 0))
-                counter += 1
-        elif kind == POINT:
-            stats.points_visited += 1
-            c = tier.curves[index]
-            for m, curve in ((0, c), (1, mirror_curve(c))):
-                stats.lb_keogh += 1
-                heapq.heappush(heap, (lb_keogh(lower, upper, curve), counter, CURVE, index, m))
-                counter += 1
-        else:  # CURVE: refine to the exact distance
-            stats.dtw += 1
-            c = tier.curves[index]
-            curve = mirror_curve(c) if mirrored else c
-            heapq.heappush(heap, (dtw(q, curve, r), counter, EXACT, index, mirrored))
+            stats.points_visited += len(views)
+            stats.lb_keogh += 2 * len(views)
+            points = tier.coords[views]
+            keys = np.concatenate([
+                np.maximum(fourier_dist_many(*box, points),
+                           lb_keogh_many(lower, upper, tier.curves[views])),
+                np.maximum(fourier_dist_many(*mbox, points),
+                           lb_keogh_many(lower, upper, tier.mirrored[views])),
+            ])
+            order = np.argsort(keys, kind="stable")
+            cursors[index] = (keys[order], np.concatenate([views, views])[order],
+                              (order >= len(views)).astype(np.int64))
+            heapq.heappush(heap, (float(cursors[index][0][0]), counter, CURSOR, index, 0))
             counter += 1
+        elif kind == CURSOR:  # the object's next curve in bound order: refine it exactly
+            keys, order_views, order_mirror = cursors[index]
+            position = mirrored  # the cursor's position rides in the last slot
+            view, m = int(order_views[position]), int(order_mirror[position])
+            stats.dtw += 1
+            curve = tier.mirrored[view] if m else tier.curves[view]
+            heapq.heappush(heap, (dtw(q, curve, r), counter, EXACT, view, m))
+            counter += 1
+            if position + 1 < len(keys):
+                heapq.heappush(heap, (float(keys[position + 1]), counter, CURSOR, index, position + 1))
+                counter += 1
     stats.seconds = time.perf_counter() - start
     return result, stats
