@@ -6,8 +6,14 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+# No per-example deadline: the first example of a test may compile numba kernels or
+# create the GL context, and CI machines are shared; speed is measured in benchmarks.
+settings.register_profile("viewdb", deadline=None)
+settings.load_profile("viewdb")
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "sample_models"
