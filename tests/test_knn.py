@@ -71,3 +71,22 @@ def test_r0_is_euclidean(r):
         best = min(np.linalg.norm(q - tier.curves[res[0].view]),
                    np.linalg.norm(q - np.roll(tier.curves[res[0].view][::-1], 1)))
         assert res[0].distance == pytest.approx(best)
+
+
+def test_db_search_finds_the_object_of_a_rendered_query(small_db):
+    with viewdb.open(small_db, create=False) as db:
+        for name in ("car", "mug", "l_bracket"):
+            q = distance_curve(db.render(name, 37, 22).mask, db.config.features.curve_samples)
+            hits, stats = db.search(q, k=2)
+            assert len(hits) == 2 and hits[0].distance <= hits[1].distance
+            # the best hit's view, regenerated, is at the reported distance from the query
+            best = db.view(hits[0].object, hits[0].azimuth, hits[0].elevation).curve
+            from viewdb.features import mirror_curve
+            from viewdb.search.bounds import dtw
+
+            target = mirror_curve(best) if hits[0].mirrored else best
+            assert dtw(q, target, 6) == pytest.approx(hits[0].distance)
+        with pytest.raises(viewdb.QueryError):
+            db.search(np.ones(5))
+        with pytest.raises(viewdb.QueryError):
+            db.search(q, k=0)

@@ -21,6 +21,7 @@ from .errors import FeatureError, NotFound, QueryError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .render import RenderedView, get_renderer
+from .search.knn import SearchStats, TierArrays, knn
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
@@ -30,6 +31,7 @@ __all__ = [
     "CandidatePose",
     "DatabaseInfo",
     "ObjectInfo",
+    "SearchHit",
     "StoredView",
     "ViewDB",
     "open",
@@ -114,6 +116,18 @@ class CandidatePose:
 
 
 @dataclass(frozen=True)
+class SearchHit:
+    """One object found by :meth:`ViewDB.search`, with its best stored view."""
+
+    object: str
+    distance: float
+    azimuth: float
+    elevation: float
+    #: The query matches the stored view's mirror (its reversed curve).
+    mirrored: bool
+
+
+@dataclass(frozen=True)
 class DatabaseInfo:
     path: str
     file_bytes: int
@@ -144,6 +158,7 @@ class ViewDB:
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._plans: dict[str, ViewClasses] = {}
+        self._tier: tuple[TierArrays, list[tuple[int, float, float]]] | None = None
 
     @property
     def path(self) -> Path:
@@ -186,6 +201,7 @@ class ViewDB:
         )
 
     def _forget(self, name: str) -> None:
+        self._tier = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         for key in [k for k in self._regenerated if k[0] == name]:
@@ -216,6 +232,36 @@ class ViewDB:
     def views(self, name: str) -> list[tuple[float, float]]:
         """``(azimuth, elevation)`` of every stored view of object ``name``."""
         return [(v.azimuth, v.elevation) for v in self._store.views(name)]
+
+    def search(
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
+    ) -> tuple[list[SearchHit], SearchStats]:
+        """The ``k`` objects whose stored views are nearest to a distance curve.
+
+        Exact (Algorithm 2, best-first over lower bounds): the same objects and distances
+        as a scan of every stored view with DTW (Sakoe–Chiba band of ``band`` samples)
+        against the curve and its mirror. The tier is loaded into memory on first use.
+        """
+        if k < 1:
+            raise QueryError(f"k must be at least 1, got {k}")
+        q = np.asarray(curve, dtype=np.float64)
+        if q.shape != (self.config.features.curve_samples,) or not np.all(np.isfinite(q)):
+            raise QueryError(
+                f"query curve must be {self.config.features.curve_samples} finite samples"
+            )
+        if self._tier is None:
+            names, views, curves = self._store.all_curves()
+            if not names:
+                raise QueryError("the database holds no views", self.path)
+            owner = np.array([o for o, _, _ in views], dtype=np.int64)
+            self._tier = (TierArrays(names, owner, np.asarray(curves, np.float64)), views)
+        tier, views = self._tier
+        found, stats = knn(q, tier, k, band)
+        hits = [
+            SearchHit(n.object, n.distance, views[n.view][1], views[n.view][2], n.mirrored)
+            for n in found
+        ]
+        return hits, stats
 
     def symmetry(self, name: str) -> SymmetryType | None:
         """The object's symmetry type (None for objects from before schema 0002)."""

@@ -364,6 +364,26 @@ class Store:
             "points3d": decode_array(row[4], np.float32, (None, 3)),
         }
 
+    def all_curves(self) -> tuple[list[str], list[tuple[int, float, float]], list[Any]]:
+        """Every stored curve in one pass: object names, (object index, azimuth, elevation)
+        per view, and the decoded curves (float32), ordered by object name then view id."""
+        o, v, c = s.objects, s.views, s.curves
+        query = (
+            sa.select(o.c.name, v.c.azimuth, v.c.elevation, c.c.samples)
+            .select_from(o.join(v, v.c.object_id == o.c.id).join(c, c.c.view_id == v.c.id))
+            .order_by(o.c.name, v.c.id)
+        )
+        names: list[str] = []
+        views: list[tuple[int, float, float]] = []
+        curves = []
+        with self.read() as conn:
+            for name, azimuth, elevation, blob in conn.execute(query):
+                if not names or names[-1] != name:
+                    names.append(name)
+                views.append((len(names) - 1, float(azimuth), float(elevation)))
+                curves.append(decode_array(blob, np.float32, (None,)))
+        return names, views, curves
+
     def table_counts(self) -> dict[str, int]:
         out = {}
         with self.read() as conn:
