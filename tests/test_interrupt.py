@@ -18,7 +18,7 @@ def test_sigint_mid_ingest_exits_130_and_leaves_whole_objects(tmp_path, jobs):
     db = tmp_path / "ctrlc.db"
     files = [str(p) for p in sample_files()]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "viewdb_cli.main", "ingest", *files, "--db", str(db), "--gap", "60",
+        [sys.executable, "-m", "viewdb_cli.main", "ingest", *files, "--db", str(db), "--gap", "20", "--no-skim",
          "--image-size", "96", "--jobs", str(jobs)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )

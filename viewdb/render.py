@@ -106,6 +106,13 @@ def orthographic_depth(
     return out.astype(np.float32)
 
 
+def _reraise_interrupt(exc: Exception) -> None:
+    """Ctrl-C inside a ctypes call into GL surfaces as ``ctypes.ArgumentError`` naming
+    KeyboardInterrupt; it must stay an interrupt, not become a RenderError."""
+    if "KeyboardInterrupt" in str(exc):
+        raise KeyboardInterrupt from exc
+
+
 class Renderer:
     """Renders views of one mesh at a time; keeps that mesh's GL scene between calls."""
 
@@ -128,6 +135,7 @@ class Renderer:
                 smooth = geometry.visual.kind != "face"
                 scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=smooth))
         except Exception as exc:
+            _reraise_interrupt(exc)
             raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
         camera = pyrender.OrthographicCamera(
             xmag=cfg.xmag, ymag=cfg.xmag, znear=cfg.znear, zfar=cfg.zfar
@@ -163,6 +171,7 @@ class Renderer:
                 )
                 albedo = None
         except Exception as exc:
+            _reraise_interrupt(exc)
             raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
         mask = np.asarray(depth) > 0
         depth = orthographic_depth(np.asarray(depth), mask, cfg.znear, cfg.zfar)
