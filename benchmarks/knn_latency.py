@@ -16,7 +16,7 @@ import numpy as np
 
 import viewdb
 from viewdb.features import mirror_curve
-from viewdb.search.knn import TierArrays, brute_force_knn, knn
+from viewdb.search.knn import brute_force_knn, knn
 
 
 def main() -> None:
@@ -28,14 +28,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     with viewdb.open(args.db, create=False) as db:
-        names, owner, curves = [], [], []
-        for i, o in enumerate(db.objects()):
-            names.append(o.name)
-            for h, v in db.views(o.name):
-                owner.append(i)
-                curves.append(db.view(o.name, h, v).curve)
-    tier = TierArrays(names, np.array(owner), np.asarray(curves, float))
-    print(f"{len(names)} objects, {len(curves)} views")
+        start = time.perf_counter()
+        tier, _ = db.search_tier()
+        load = time.perf_counter() - start
+    curves = tier.curves
+    print(f"{len(tier.names)} objects, {len(curves)} views (loaded in {load:.2f} s)")
     rng = np.random.default_rng(args.seed)
     queries = []
     for _ in range(args.queries):

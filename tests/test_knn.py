@@ -42,13 +42,10 @@ def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects):
 
 def test_knn_on_real_curves_of_a_skimmed_db_prunes_most_views(small_db):
     with viewdb.open(small_db, create=False) as db:
-        names, owner, curves = [], [], []
-        for i, o in enumerate(db.objects()):
-            names.append(o.name)
-            for h, v in db.views(o.name):
-                owner.append(i)
-                curves.append(db.view(o.name, h, v).curve)
-        tier = TierArrays(names, np.array(owner), np.asarray(curves, float))
+        tier, views = db.search_tier()
+        names, curves = tier.names, tier.curves
+        for (o, h, v), c in zip(views, curves, strict=True):  # the tier is what is stored
+            np.testing.assert_array_equal(c, db.view(names[o], h, v).curve)
         rng = np.random.default_rng(3)
         dtws = []
         for name in names:

@@ -249,19 +249,26 @@ class ViewDB:
             raise QueryError(
                 f"query curve must be {self.config.features.curve_samples} finite samples"
             )
-        if self._tier is None:
-            names, views, curves = self._store.all_curves()
-            if not names:
-                raise QueryError("the database holds no views", self.path)
-            owner = np.array([o for o, _, _ in views], dtype=np.int64)
-            self._tier = (TierArrays(names, owner, np.asarray(curves, np.float64)), views)
-        tier, views = self._tier
+        tier, views = self.search_tier()
         found, stats = knn(q, tier, k, band)
         hits = [
             SearchHit(n.object, n.distance, views[n.view][1], views[n.view][2], n.mirrored)
             for n in found
         ]
         return hits, stats
+
+    def search_tier(self) -> tuple[TierArrays, list[tuple[int, float, float]]]:
+        """Every stored curve in memory for search, with (object index, h, v) per view.
+
+        Loaded in one query on first use and kept until the next ingest.
+        """
+        if self._tier is None:
+            names, views, curves = self._store.all_curves()
+            if not names:
+                raise QueryError("the database holds no views", self.path)
+            owner = np.array([o for o, _, _ in views], dtype=np.int64)
+            self._tier = (TierArrays(names, owner, np.asarray(curves, np.float64)), views)
+        return self._tier
 
     def symmetry(self, name: str) -> SymmetryType | None:
         """The object's symmetry type (None for objects from before schema 0002)."""
