@@ -8,7 +8,7 @@ worker process can hand it back to the writer).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -109,23 +109,21 @@ def describe_object(
     config: BuildConfig,
     *,
     skim: bool = True,
-    views: Sequence[tuple[float, float]] | None = None,
     on_view: Callable[[int], None] | None = None,
 ) -> ObjectDescription:
     """Classify ``mesh``, then render and describe the views to store.
 
     With ``skim`` only the views of the skim plan are described; otherwise the whole
-    grid. ``views`` overrides both (a test hook). ``on_view(n)`` is told of every ``n``
-    grid views dealt with (pruned views count as dealt with when the plan is made).
+    grid. ``on_view(n)`` is told of every ``n`` grid views dealt with (pruned views count
+    as dealt with when the plan is made).
     """
     start = time.perf_counter()
     renderer = get_renderer(config.render)
     symmetry = classify_object(mesh, config, renderer)
-    if views is None:
-        plan = skim_plan(symmetry, config.gap) if skim else plan_without_skimming(config.gap)
-        views = list(plan.kept)
-        if on_view is not None and plan.views_grid > plan.views_stored:
-            on_view(plan.views_grid - plan.views_stored)
+    plan = skim_plan(symmetry, config.gap) if skim else plan_without_skimming(config.gap)
+    views = list(plan.kept)
+    if on_view is not None and plan.views_grid > plan.views_stored:
+        on_view(plan.views_grid - plan.views_stored)
     described: list[ViewDescription] = []
     empty: list[tuple[float, float]] = []
     for azimuth, elevation in views:

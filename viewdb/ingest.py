@@ -95,8 +95,10 @@ def _tick(n: int) -> None:
         _TICKS.put(n)
 
 
-def _describe_file(path: str, name: str, config: BuildConfig, skim: bool) -> ObjectDescription:
-    mesh = load_mesh(path, name)
+def _describe_file(
+    path: str, name: str, digest: str, config: BuildConfig, skim: bool
+) -> ObjectDescription:
+    mesh = load_mesh(path, name, digest)
     return describe_object(mesh, config, skim=skim, on_view=_tick)
 
 
@@ -104,6 +106,8 @@ def _describe_file(path: str, name: str, config: BuildConfig, skim: bool) -> Obj
 class _Job:
     path: str
     name: str
+    #: The file's content hash, computed once when deciding whether to ingest it.
+    digest: str
     replaces: bool
 
 
@@ -148,7 +152,7 @@ def run_ingest(
         if existing_hashes.get(name) == digest:
             report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
-        todo.append(_Job(str(path), name, name in existing_hashes))
+        todo.append(_Job(str(path), name, digest, name in existing_hashes))
 
     total_views = len(todo) * grid
     done_views = 0
@@ -191,7 +195,7 @@ def run_ingest(
                 notify()
 
             try:
-                mesh = load_mesh(job.path, job.name)
+                mesh = load_mesh(job.path, job.name, job.digest)
                 result: ObjectDescription | BaseException = describe_object(
                     mesh, config, skim=skim, on_view=tick
                 )
@@ -209,7 +213,7 @@ def run_ingest(
         futures: dict[Future[ObjectDescription], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job.path, job.name, config, skim)] = job
+                futures[pool.submit(_describe_file, job.path, job.name, job.digest, config, skim)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

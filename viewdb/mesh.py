@@ -75,7 +75,9 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def load_mesh(path: str | Path, name: str | None = None) -> NormalisedMesh:
+def load_mesh(
+    path: str | Path, name: str | None = None, content_hash: str | None = None
+) -> NormalisedMesh:
     """Load a mesh file and normalise it.
 
     Parameters
@@ -84,6 +86,8 @@ def load_mesh(path: str | Path, name: str | None = None) -> NormalisedMesh:
         An OBJ, PLY, STL, OFF, GLB or glTF file.
     name
         Object name; defaults to the file's stem.
+    content_hash
+        The file's :func:`file_hash` if the caller already computed it.
 
     Raises
     ------
@@ -103,8 +107,8 @@ def load_mesh(path: str | Path, name: str | None = None) -> NormalisedMesh:
         loaded = trimesh.load(str(path), process=False)
     except Exception as exc:  # trimesh raises many types for bad files
         raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
-    content_hash = file_hash(path)
-    return _normalise(loaded, name or path.stem, str(path), content_hash, path)
+    digest = content_hash or file_hash(path)
+    return _normalise(loaded, name or path.stem, str(path), digest, path)
 
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
