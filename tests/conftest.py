@@ -69,3 +69,21 @@ def small_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def small_db_full(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The same four models with every grid view stored (--no-skim)."""
     return _build_small_db(tmp_path_factory, skim=False)
+
+
+TIERED_DB_MODELS = ("marked_cube", "car", "mug", "l_bracket", "chair", "arrow")
+
+
+@pytest.fixture(scope="session")
+def tiered_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Six sample models (skimmed) on a 30° server grid with a 90° client grid, so the
+    sparse tier is a real subset of the full one; built once."""
+    import viewdb
+    from viewdb.config import BuildConfig, IndexConfig, RenderConfig
+
+    path = tmp_path_factory.mktemp("db") / "tiered.db"
+    config = BuildConfig(gap=30, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=90))
+    with viewdb.open(path, config=config) as db:
+        report = db.ingest([sample(n) for n in TIERED_DB_MODELS])
+    assert not report.failed, report.failed
+    return path

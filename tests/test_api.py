@@ -97,6 +97,10 @@ def test_a_failed_write_leaves_no_half_object(tmp_path, monkeypatch):
         assert [r[0] for r in conn.execute("SELECT name FROM objects")] == ["cone"]
         n_views = conn.execute("SELECT count(*) FROM views").fetchone()[0]
         assert 0 < n_views == conn.execute("SELECT count(*) FROM curves").fetchone()[0]
+        assert {r[0] for r in conn.execute("SELECT DISTINCT object_id FROM index_groups")} == {
+            r[0] for r in conn.execute("SELECT id FROM objects")}
+    with viewdb.open(path, create=False) as db:
+        assert db.check().ok, db.check().problems  # R-trees hold exactly the cone's groups
 
 
 def test_parallel_ingest_stores_the_same_as_serial(tmp_path):
@@ -135,3 +139,29 @@ def test_curve_of_stored_view_is_the_curve_of_its_silhouette(small_db):
     np.testing.assert_allclose(
         stored.curve, distance_curve(view.mask, db.config.features.curve_samples), atol=1e-6
     )
+
+
+def test_a_write_failing_inside_the_r_tree_rolls_back_everything(tmp_path, monkeypatch):
+    from viewdb.storage.spatial import FourierIndex
+
+    path = tmp_path / "db.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        db.ingest([sample("cone")])
+        with sqlite3.connect(path) as conn:
+            pages_before = conn.execute("SELECT tier, page, data FROM rtree_pages ORDER BY 1, 2").fetchall()
+        real = FourierIndex.insert_box
+
+        def failing(self, *args):
+            real(self, *args)  # one entry goes into the tree (and its pages), then it fails
+            raise viewdb.StorageError("disk on fire")
+
+        monkeypatch.setattr(FourierIndex, "insert_box", failing)
+        assert db.ingest([sample("pyramid")]).counts()["failed"] == 1
+        monkeypatch.setattr(FourierIndex, "insert_box", real)
+        with sqlite3.connect(path) as conn:
+            assert conn.execute("SELECT tier, page, data FROM rtree_pages ORDER BY 1, 2").fetchall() == pages_before
+            assert [r[0] for r in conn.execute("SELECT name FROM objects")] == ["cone"]
+        assert db.ingest([sample("pyramid")]).counts()["added"] == 1  # and it goes in later
+        assert db.check().ok, db.check().problems
+        q = distance_curve(db.render("pyramid", 30, 20).mask, db.config.features.curve_samples)
+        assert db.search(q, k=1)[0][0].object == "pyramid"

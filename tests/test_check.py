@@ -43,6 +43,15 @@ def test_healthy_db_passes(copy_db, capsys):
         ("UPDATE objects SET symmetry = '{}' WHERE name = 'mug'", "symmetry type does not decode"),
         ("UPDATE sift_features SET count = count + 1 WHERE view_id = 9", "array blob has shape"),
         ("UPDATE alembic_version SET version_num = '0000'", "schema revision"),
+        ("DELETE FROM index_groups WHERE id = (SELECT MIN(id) FROM index_groups)",
+         "has no group row"),
+        ("UPDATE index_groups SET curves = (SELECT MAX(curves) FROM index_groups g2 WHERE"
+         " g2.object_id != index_groups.object_id) WHERE id = (SELECT MIN(id) FROM index_groups"
+         " WHERE tier = 'full')", "index_groups"),
+        ("UPDATE index_groups SET tier = 'sparse' WHERE id = (SELECT MIN(id) FROM index_groups"
+         " WHERE tier = 'full')", "not in the R-tree"),
+        ("DELETE FROM rtree_meta WHERE tier = 'sparse'", "sparse tier: R-tree cannot be opened"),
+        ("DELETE FROM rtree_pages WHERE tier = 'full'", "full tier: R-tree cannot be opened"),
     ],
 )
 def test_each_kind_of_damage_is_reported(copy_db, capsys, damage, finding):
@@ -55,6 +64,8 @@ def test_each_kind_of_damage_is_reported(copy_db, capsys, damage, finding):
         return
     report = check(copy_db)
     assert not report.ok
+    if finding == "index_groups":  # another group's curves: wrong shape, curve or box
+        finding = "group"
     assert any(finding in p for p in report.problems), report.problems
     assert main(["check", "--db", str(copy_db)]) == 1
     assert "FAILED" in capsys.readouterr().out
@@ -87,3 +98,36 @@ def test_check_does_not_modify_the_file(copy_db):
     before = copy_db.read_bytes()
     check(copy_db)
     assert copy_db.read_bytes() == before
+
+
+def test_r_tree_damage_is_reported(copy_db):
+    from viewdb.storage.codecs import decode_array
+    from viewdb.storage.spatial import FourierIndex
+
+    with sqlite3.connect(copy_db) as conn:
+        gid, lo, hi = conn.execute(
+            "SELECT id, lo, hi FROM index_groups WHERE tier = 'full' ORDER BY id LIMIT 1"
+        ).fetchone()
+        index = FourierIndex.open(conn, "full")
+        lo, hi = decode_array(lo, np.float64, (6,)), decode_array(hi, np.float64, (6,))
+        index.delete_box(gid, lo, hi)
+        index.insert_box(gid, lo - 0.5, hi)  # the entry is there, with the wrong box
+        index.insert_box(10**6, lo, hi)  # and an entry no group row has
+        index.close()
+    problems = check(copy_db).problems
+    assert any(f"group {gid}: R-tree box differs" in p for p in problems), problems
+    assert any("R-tree entry 1000000 has no group row" in p for p in problems), problems
+
+
+def test_a_group_whose_box_misses_its_views_is_reported(copy_db):
+    with sqlite3.connect(copy_db) as conn:
+        gid = conn.execute("SELECT MIN(id) FROM index_groups").fetchone()[0]
+        blob = conn.execute("SELECT curves FROM index_groups WHERE id = ?", (gid,)).fetchone()[0]
+        from viewdb.storage.codecs import decode_array
+
+        curves = decode_array(blob, np.float32, (None, 128)).copy()
+        curves[0] = curves[0][::-1].copy() * 1.5
+        conn.execute("UPDATE index_groups SET curves = ? WHERE id = ?", (encode_array(curves), gid))
+    problems = check(copy_db).problems
+    assert any(f"group {gid}" in p and ("outside its box" in p or "differs from the stored" in p)
+               for p in problems), problems

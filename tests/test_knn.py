@@ -1,4 +1,5 @@
-"""Algorithm 2 returns exactly the brute-force top-k distinct objects."""
+"""Algorithm 2 returns exactly the brute-force top-k distinct objects, in memory and
+through the R-trees stored in a database file."""
 
 import numpy as np
 import pytest
@@ -6,7 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from viewdb.features import distance_curve
+from viewdb.features import distance_curve, mirror_curve
+from viewdb.search.bounds import dtw
 from viewdb.search.knn import TierArrays, brute_force_knn, knn
 
 
@@ -25,37 +27,32 @@ def same(a, b):
     np.testing.assert_allclose([x.distance for x in a], [x.distance for x in b], rtol=0, atol=1e-9)
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 6), st.integers(2, 10))
-def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects):
+@settings(max_examples=80)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 6), st.integers(2, 10),
+       st.integers(1, 12))
+def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects, group_views):
     rng = np.random.default_rng(seed)
     owner = rng.integers(0, objects, 80)
     owner[:objects] = np.arange(objects)
-    tier = TierArrays([f"o{i}" for i in range(objects)], owner, smooth_curves(rng, 80))
+    tier = TierArrays([f"o{i}" for i in range(objects)], owner, smooth_curves(rng, 80),
+                      group_views=group_views)
     query = smooth_curves(rng, 1)[0]
     if rng.random() < 0.5:  # a noisy copy (or mirror) of a stored curve
         query = tier.curves[rng.integers(80)][:: rng.choice([1, -1])] + rng.normal(0, 0.01, 64)
     result, stats = knn(query, tier, k, r)
     same(result, brute_force_knn(query, tier, k, r))
     assert len(result) == min(k, objects)
+    assert stats.dtw <= 2 * len(tier.curves)
 
 
-def test_knn_on_real_curves_of_a_skimmed_db_prunes_most_views(small_db):
-    with viewdb.open(small_db, create=False) as db:
-        tier, views = db.search_tier()
-        names, curves = tier.names, tier.curves
-        for (o, h, v), c in zip(views, curves, strict=True):  # the tier is what is stored
-            np.testing.assert_array_equal(c, db.view(names[o], h, v).curve)
-        rng = np.random.default_rng(3)
-        dtws = []
-        for name in names:
-            for h, v in rng.uniform(0, 360, (3, 2)):
-                q = distance_curve(db.render(name, h, v).mask, 128)
-                for k in (1, 3):
-                    result, stats = knn(q, tier, k, 4)
-                    same(result, brute_force_knn(q, tier, k, 4))
-                    dtws.append(stats.dtw)
-    assert np.mean(dtws) < 0.5 * 2 * len(curves)  # most views never reach DTW
+def test_groups_partition_each_objects_views():
+    rng = np.random.default_rng(0)
+    owner = rng.integers(0, 5, 300)
+    tier = TierArrays([f"o{i}" for i in range(5)], owner, smooth_curves(rng, 300), group_views=7)
+    members = np.concatenate(tier.groups)
+    assert sorted(members.tolist()) == list(range(300))
+    for g in tier.groups:
+        assert len(g) <= 7 and len(set(owner[g].tolist())) == 1
 
 
 @pytest.mark.parametrize("r", [0, 3])
@@ -64,10 +61,63 @@ def test_r0_is_euclidean(r):
     tier = TierArrays(["a", "b"], np.array([0, 1, 0, 1]), smooth_curves(rng, 4))
     q = smooth_curves(rng, 1)[0]
     res, _ = knn(q, tier, 2, r)
+    best = min(dtw(q, c, r) for c in (tier.curves[res[0].view], mirror_curve(tier.curves[res[0].view])))
+    assert res[0].distance == pytest.approx(best)
     if r == 0:
-        best = min(np.linalg.norm(q - tier.curves[res[0].view]),
-                   np.linalg.norm(q - np.roll(tier.curves[res[0].view][::-1], 1)))
-        assert res[0].distance == pytest.approx(best)
+        assert res[0].distance == pytest.approx(min(
+            np.linalg.norm(q - tier.curves[res[0].view]),
+            np.linalg.norm(q - mirror_curve(tier.curves[res[0].view]))))
+
+
+def _render_queries(db, rng, count):
+    names = [o.name for o in db.objects()]
+    out = []
+    for _ in range(count):
+        name = names[rng.integers(len(names))]
+        h, v = rng.uniform(0, 360, 2)
+        out.append(distance_curve(db.render(name, h, v).mask, db.config.features.curve_samples))
+    return out
+
+
+@pytest.mark.parametrize("tier_name", ["full", "sparse"])
+def test_stored_tier_search_equals_brute_force_on_rendered_queries(tiered_db, tier_name):
+    rng = np.random.default_rng(5 if tier_name == "full" else 6)
+    with viewdb.open(tiered_db, create=False) as db:
+        tier, rows = db.search_tier(tier_name)
+        queries = _render_queries(db, rng, 12)
+        queries += [mirror_curve(q) + rng.normal(0, 0.02, len(q)) for q in queries[:6]]
+        dtws = []
+        for q in queries:
+            for k, band in ((1, 6), (3, 0), (5, 4)):
+                hits, stats = db.search(q, k=k, band=band, tier=tier_name)
+                expected = brute_force_knn(q, tier, k, band)
+                assert [h.object for h in hits] == [e.object for e in expected]
+                np.testing.assert_allclose([h.distance for h in hits],
+                                           [e.distance for e in expected], rtol=0, atol=1e-9)
+                for h in hits:  # the reported view is at that distance
+                    i = next(j for j, row in enumerate(rows) if row[1:] == (h.azimuth, h.elevation)
+                             and tier.names[tier.owner[j]] == h.object)
+                    c = mirror_curve(tier.curves[i]) if h.mirrored else tier.curves[i]
+                    assert dtw(q, c, band) == pytest.approx(h.distance, abs=1e-9)
+                dtws.append(stats.dtw)
+    assert np.mean(dtws) < 0.5 * 2 * len(tier.curves)  # most curves never reach DTW
+
+
+@settings(max_examples=40)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 8), st.sampled_from(["full", "sparse"]))
+def test_stored_tier_equals_brute_force_on_perturbed_stored_curves(tiered_db, seed, k, band, tier_name):
+    rng = np.random.default_rng(seed)
+    with viewdb.open(tiered_db, create=False) as db:
+        tier, _ = db.search_tier(tier_name)
+        q = tier.curves[rng.integers(len(tier.curves))]
+        q = q * rng.uniform(0.9, 1.1) + rng.normal(0, rng.choice([0.0, 0.01, 0.1]), len(q))
+        if rng.random() < 0.5:
+            q = mirror_curve(q)
+        hits, _ = db.search(q, k=k, band=band, tier=tier_name)
+        expected = brute_force_knn(q, tier, k, band)
+        assert [h.object for h in hits] == [e.object for e in expected]
+        np.testing.assert_allclose([h.distance for h in hits], [e.distance for e in expected],
+                                   rtol=0, atol=1e-9)
 
 
 def test_db_search_finds_the_object_of_a_rendered_query(small_db):
@@ -78,12 +128,11 @@ def test_db_search_finds_the_object_of_a_rendered_query(small_db):
             assert len(hits) == 2 and hits[0].distance <= hits[1].distance
             # the best hit's view, regenerated, is at the reported distance from the query
             best = db.view(hits[0].object, hits[0].azimuth, hits[0].elevation).curve
-            from viewdb.features import mirror_curve
-            from viewdb.search.bounds import dtw
-
             target = mirror_curve(best) if hits[0].mirrored else best
             assert dtw(q, target, 6) == pytest.approx(hits[0].distance)
         with pytest.raises(viewdb.QueryError):
             db.search(np.ones(5))
         with pytest.raises(viewdb.QueryError):
             db.search(q, k=0)
+        with pytest.raises(viewdb.QueryError, match="tier"):
+            db.search(q, tier="medium")

@@ -21,10 +21,11 @@ from .errors import FeatureError, NotFound, QueryError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .render import RenderedView, get_renderer
-from .search.knn import SearchStats, TierArrays, knn
+from .search.knn import SearchStats, TierArrays, knn, objects_within
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
+from .storage.tiers import TIERS, TierReader
 from .symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
 
 __all__ = [
@@ -158,13 +159,16 @@ class ViewDB:
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._plans: dict[str, ViewClasses] = {}
-        self._tier: tuple[TierArrays, list[tuple[int, float, float]]] | None = None
+        self._reader: TierReader | None = None
 
     @property
     def path(self) -> Path:
         return self._store.path
 
     def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
         self._store.close()
 
     def __enter__(self) -> ViewDB:
@@ -192,7 +196,7 @@ class ViewDB:
         still go in.
         """
         def write(desc: ObjectDescription) -> None:
-            self._store.write_object(desc, self.config.gap)
+            self._store.write_object(desc, self.config)
             self._forget(desc.name)
 
         return run_ingest(
@@ -201,7 +205,6 @@ class ViewDB:
         )
 
     def _forget(self, name: str) -> None:
-        self._tier = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         for key in [k for k in self._regenerated if k[0] == name]:
@@ -234,41 +237,62 @@ class ViewDB:
         return [(v.azimuth, v.elevation) for v in self._store.views(name)]
 
     def search(
-        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full"
     ) -> tuple[list[SearchHit], SearchStats]:
-        """The ``k`` objects whose stored views are nearest to a distance curve.
+        """The ``k`` objects whose views in ``tier`` are nearest to a distance curve.
 
-        Exact (Algorithm 2, best-first over lower bounds): the same objects and distances
-        as a scan of every stored view with DTW (Sakoe–Chiba band of ``band`` samples)
-        against the curve and its mirror. The tier is loaded into memory on first use.
+        Exact (Algorithm 2, best-first over lower bounds through the tier's R-tree): the
+        same objects and distances as a scan of every view of the tier with DTW
+        (Sakoe–Chiba band of ``band`` samples) against the curve and its mirror.
+        ``tier`` is ``"full"`` (every stored view) or ``"sparse"`` (the client grid).
         """
+        q = self._query_curve(curve, k, tier)
+        with self._tier_reader().snapshot() as reader:
+            source = reader.tier(tier)
+            if source.n_groups == 0:
+                raise QueryError("the database holds no views", self.path)
+            found, stats = knn(q, source, k, band)
+            angles = reader.view_angles([n.view for n in found])
+        hits = [SearchHit(n.object, n.distance, *angles[n.view], n.mirrored) for n in found]
+        return hits, stats
+
+    def objects_within(
+        self, curve: NDArray[np.floating], distance: float, *, band: int = 6, tier: str = "full"
+    ) -> dict[str, float]:
+        """Objects of ``tier`` that may have a view within ``distance`` of the curve (an
+        R-tree range query): ``name -> lower bound of its distance``. Every object whose
+        exact distance is at most ``distance`` is included (CS1's server-side candidates).
+        """
+        q = self._query_curve(curve, 1, tier)
+        if not distance >= 0:
+            raise QueryError(f"distance must be >= 0, got {distance}")
+        with self._tier_reader().snapshot() as reader:
+            return objects_within(q, reader.tier(tier), float(distance), band)
+
+    def _query_curve(self, curve: NDArray[np.floating], k: int, tier: str) -> NDArray[np.float64]:
         if k < 1:
             raise QueryError(f"k must be at least 1, got {k}")
+        if tier not in TIERS:
+            raise QueryError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
         q = np.asarray(curve, dtype=np.float64)
         if q.shape != (self.config.features.curve_samples,) or not np.all(np.isfinite(q)):
             raise QueryError(
                 f"query curve must be {self.config.features.curve_samples} finite samples"
             )
-        tier, views = self.search_tier()
-        found, stats = knn(q, tier, k, band)
-        hits = [
-            SearchHit(n.object, n.distance, views[n.view][1], views[n.view][2], n.mirrored)
-            for n in found
-        ]
-        return hits, stats
+        return q
 
-    def search_tier(self) -> tuple[TierArrays, list[tuple[int, float, float]]]:
-        """Every stored curve in memory for search, with (object index, h, v) per view.
+    def _tier_reader(self) -> TierReader:
+        if self._reader is None:
+            self._reader = TierReader(self.path)
+        return self._reader
 
-        Loaded in one query on first use and kept until the next ingest.
-        """
-        if self._tier is None:
-            names, views, curves = self._store.all_curves()
-            if not names:
-                raise QueryError("the database holds no views", self.path)
-            owner = np.array([o for o, _, _ in views], dtype=np.int64)
-            self._tier = (TierArrays(names, owner, np.asarray(curves, np.float64)), views)
-        return self._tier
+    def search_tier(self, tier: str = "full") -> tuple[TierArrays, list[tuple[int, float, float]]]:
+        """Every view of ``tier`` in memory, with ``(view id, azimuth, elevation)`` per row:
+        the reference for brute force and flat scans (read in one query)."""
+        if tier not in TIERS:
+            raise QueryError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
+        with self._tier_reader().snapshot() as reader:
+            return reader.tier_arrays(tier)
 
     def symmetry(self, name: str) -> SymmetryType | None:
         """The object's symmetry type (None for objects from before schema 0002)."""
@@ -406,6 +430,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
                 wanted = replace(wanted, gap=float(gap))
             if image_size is not None:
                 wanted = replace(wanted, render=replace(wanted.render, image_size=image_size))
+            wanted = wanted.resolved()
             store.set_build_config(wanted)
             stored = wanted
         else:

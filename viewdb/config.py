@@ -6,10 +6,14 @@ later ingest into the same file renders and describes views exactly the same way
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import math
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-__all__ = ["BuildConfig", "FeatureConfig", "RenderConfig", "SiftConfig", "SkimConfig"]
+__all__ = [
+    "BuildConfig", "FeatureConfig", "IndexConfig", "RenderConfig", "SiftConfig", "SkimConfig",
+    "default_client_gap",
+]
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,33 @@ class SkimConfig:
 
 
 @dataclass(frozen=True)
+class IndexConfig:
+    """The Fourier-point R-trees (paper section II.C; :mod:`viewdb.search.grouping`)."""
+
+    #: Client grid gap of the sparse tier, a multiple of the server gap that divides 360;
+    #: None picks the smallest such multiple of at least 30 degrees (the paper's best).
+    client_gap: float | None = None
+    #: At most this many views of one object under one R-tree entry (MBR).
+    group_views: int = 32
+
+    def __post_init__(self) -> None:
+        if self.group_views < 1:
+            raise ValueError(f"group_views must be at least 1, got {self.group_views}")
+
+
+def default_client_gap(gap: float) -> float:
+    """The smallest multiple of ``gap`` that is at least 30 degrees and divides 360."""
+    multiple = max(1, math.ceil(30.0 / gap - 1e-9))
+    while not _divides_360(multiple * gap):
+        multiple += 1
+    return float(multiple * gap)
+
+
+def _divides_360(gap: float) -> bool:
+    return gap > 0 and abs(360.0 / gap - round(360.0 / gap)) <= 1e-9
+
+
+@dataclass(frozen=True)
 class BuildConfig:
     """Everything that decides what an ingest stores; fixed per database file."""
 
@@ -81,10 +112,30 @@ class BuildConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
     sift: SiftConfig = field(default_factory=SiftConfig)
     skim: SkimConfig = field(default_factory=SkimConfig)
+    index: IndexConfig = field(default_factory=IndexConfig)
 
     def __post_init__(self) -> None:
-        if self.gap <= 0 or abs(360.0 / self.gap - round(360.0 / self.gap)) > 1e-9:
+        if not _divides_360(self.gap):
             raise ValueError(f"gap must divide 360 evenly, got {self.gap}")
+        client = self.index.client_gap
+        if client is not None:
+            ratio = client / self.gap
+            if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 or not _divides_360(client):
+                raise ValueError(
+                    f"client gap must be a multiple of the gap ({self.gap:g}) that divides 360, "
+                    f"got {client:g}"
+                )
+
+    @property
+    def client_gap(self) -> float:
+        """The sparse tier's grid gap (:func:`default_client_gap` unless set)."""
+        client = self.index.client_gap
+        return default_client_gap(self.gap) if client is None else float(client)
+
+    def resolved(self) -> BuildConfig:
+        """This configuration with every default that depends on others filled in (what a
+        new database file records, so later changes of defaults do not change it)."""
+        return replace(self, index=replace(self.index, client_gap=self.client_gap))
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -97,4 +148,5 @@ class BuildConfig:
             features=FeatureConfig(**data["features"]),
             sift=SiftConfig(**data["sift"]),
             skim=SkimConfig(**data.get("skim", {})),
+            index=IndexConfig(**data.get("index", {})),
         )

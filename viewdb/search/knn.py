@@ -3,57 +3,67 @@
 One min-priority queue mixes four kinds of entries, each keyed by a lower bound of the
 exact distance of everything below it (:mod:`viewdb.search.bounds` proves the chain):
 
-* an **object** (its views' MBR in Fourier space), keyed by ``MINDIST`` of the query box
-  (or the mirrored box) to the MBR;
+* a **group** (an MBR around a few views of one object, :mod:`viewdb.search.grouping`),
+  keyed by ``MINDIST`` of the query box (or the mirrored box) to the MBR;
 * a **curve** (a view's curve, or its reverse for the mirror view), keyed by
   ``max(Fourier_Dist, LB_Keogh)``: both bound the exact distance, so their maximum does
   too. Algorithm 2 pushes the Fourier point first and the curve when that pops; here
-  both bounds are computed at once, vectorised over an object's views when the object
-  pops, and sorted: the queue holds one *cursor* per opened object, keyed by the bound
+  both bounds are computed at once, vectorised over a group's views when the group
+  pops, and sorted: the queue holds one *cursor* per opened group, keyed by the bound
   of its next unrefined curve (a lazy merge of the sorted lists), which pops curves in
-  exactly the order the per-curve entries would, with a queue of objects, not views;
+  exactly the order the per-curve entries would;
 * a **curve with its DTW distance**, keyed by the exact distance.
 
 When an exact entry reaches the top, no entry left can beat it, so its object is final
 (Algorithm 2, lines 8–11); entries of objects already in the result are dropped (lines
 5–6). The exact distance of a view is ``min(DTW(q, c), DTW(q, reverse(c)))`` with a
-Sakoe–Chiba band of ``r`` samples. :func:`brute_force_knn` computes the same answer by
-scanning everything and is the oracle the tests compare against.
+Sakoe–Chiba band of ``r`` samples.
 
-This module works on in-memory arrays (:class:`TierArrays`); the R-tree pages of
-:mod:`viewdb.storage.spatial` are the persistent form of the same grouping.
+Groups come from a :class:`TierSource`: an R-tree in the database
+(:class:`viewdb.storage.tiers.StoredTier`) or arrays in memory (:class:`TierArrays`).
+The queue is fed by **range browsing**: it holds every group whose MINDIST is at most a
+radius ``rho``; entries are popped only while the top key is ``<= rho``, and when the
+top exceeds ``rho`` (or the queue runs dry) ``rho`` grows and the source is asked for
+the groups within the new radius. Every group with key ``<= rho`` is in the queue
+whenever something is popped, so entries pop in exactly the order of a queue that held
+all groups from the start: the result is that of Algorithm 2. :func:`brute_force_knn`
+computes the same answer by scanning everything and is the oracle the tests use.
 """
 
 from __future__ import annotations
 
 import heapq
+import math
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..features import mirror_curve
-from .bounds import (
-    dtw,
-    envelope,
-    envelope_box,
-    fourier_coordinates,
-    fourier_dist_many,
-    lb_keogh_many,
-    mindist,
-    mirror_box,
-)
+from .bounds import dtw, envelope, envelope_box, fourier_dist_many, lb_keogh_many, mindist_many, mirror_box
+from .grouping import group_points, indexed_coordinates, indexed_rows, padded_mbr
 
-__all__ = ["Neighbour", "SearchStats", "TierArrays", "brute_force_knn", "knn"]
+__all__ = [
+    "Group",
+    "Neighbour",
+    "QueryBoxes",
+    "SearchStats",
+    "TierArrays",
+    "TierSource",
+    "brute_force_knn",
+    "knn",
+    "objects_within",
+]
 
-#: Fourier coefficients indexed: X_1..X_3 (X_0 is constant: curves have mean 1).
-INDEXED_COEFFICIENTS = (1, 2, 3)
+#: First search radius of the range browsing (curves have mean 1; near views are ~0.1 apart).
+INITIAL_RADIUS = 0.125
 
 
 @dataclass(frozen=True)
 class Neighbour:
-    """One result: an object, its best view and the exact distance."""
+    """One result: an object, its best view (an id of the source) and the exact distance."""
 
     object: str
     view: int
@@ -63,52 +73,129 @@ class Neighbour:
 
 @dataclass
 class SearchStats:
-    objects_visited: int = 0
+    """What a search did: groups opened, bounds and DTWs computed, range expansions."""
+
+    groups_visited: int = 0
     points_visited: int = 0
     lb_keogh: int = 0
     dtw: int = 0
+    expansions: int = 0
     seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, float]:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class QueryBoxes:
+    """A query curve, its LB_Keogh envelope and the envelope's box (and mirror) in the
+    indexed coordinates."""
+
+    curve: NDArray[np.float64]
+    band: int
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
+    box: tuple[NDArray[np.float64], NDArray[np.float64]]
+    mirrored_box: tuple[NDArray[np.float64], NDArray[np.float64]]
+
+    @classmethod
+    def of(cls, curve: NDArray[np.floating], band: int) -> QueryBoxes:
+        from .bounds import fourier_coordinates
+        from .grouping import INDEXED_COEFFICIENTS
+
+        q = np.ascontiguousarray(curve, dtype=np.float64)
+        lower, upper = envelope(q, band)
+        m = max(INDEXED_COEFFICIENTS) + 1
+        lo, hi = envelope_box(lower, upper, fourier_coordinates(m, len(q)))
+        mlo, mhi = mirror_box(lo, hi)
+        rows = indexed_rows(m)
+        return cls(q, band, lower, upper, (lo[rows], hi[rows]), (mlo[rows], mhi[rows]))
+
+    def mindist(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+        """MINDIST of the query (either orientation) to MBRs given as rows of (k, d)."""
+        return np.minimum(mindist_many(*self.box, lo, hi), mindist_many(*self.mirrored_box, lo, hi))
+
+
+@dataclass(frozen=True)
+class Group:
+    """A few views of one object, as a search needs them."""
+
+    object: int
+    #: View ids (of the source), (n,).
+    views: NDArray[np.int64]
+    #: Distance curves, (n, N) float64, and their mirrors.
+    curves: NDArray[np.float64]
+    mirrored: NDArray[np.float64]
+    #: Indexed Fourier coordinates of ``curves``, (n, d).
+    coords: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, object: int, views: NDArray[np.int64], curves: NDArray[np.floating]) -> Group:
+        c = np.ascontiguousarray(curves, dtype=np.float64)
+        return cls(object, views, c, np.ascontiguousarray(np.roll(c[:, ::-1], 1, axis=1)),
+                   indexed_coordinates(c))
+
+
+class TierSource(Protocol):
+    """Where a search gets its groups from."""
+
+    #: Number of groups in the tier.
+    n_groups: int
+
+    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+        """``(group id, MINDIST, object)`` of (at least) every group with MINDIST ``<= radius``."""
+        ...
+
+    def group(self, gid: int) -> Group: ...
+
+    def object_name(self, index: int) -> str: ...
 
 
 @dataclass
 class TierArrays:
-    """The views of one tier: curves, indexed Fourier coordinates, object grouping."""
+    """A tier held in memory: curves with their owners, grouped like the stored R-trees.
+
+    The reference implementation of :class:`TierSource` (and what tests build from
+    random curves); :func:`brute_force_knn` scans it.
+    """
 
     names: list[str]
     #: Object index of each view, (n,).
     owner: NDArray[np.int64]
     #: Distance curves, (n, N) float64.
     curves: NDArray[np.float64]
-    #: The curves of the mirror views (reversed about the start), (n, N).
-    mirrored: NDArray[np.float64] = field(init=False)
-    coords: NDArray[np.float64] = field(init=False)
+    group_views: int = 32
+    groups: list[NDArray[np.int64]] = field(init=False)
     mbr_lo: NDArray[np.float64] = field(init=False)
     mbr_hi: NDArray[np.float64] = field(init=False)
-    _rows: NDArray[np.int64] = field(init=False)
-    _F: NDArray[np.float64] = field(init=False)
 
     def __post_init__(self) -> None:
-        n = self.curves.shape[1]
         self.curves = np.ascontiguousarray(self.curves, dtype=np.float64)
-        self.mirrored = np.ascontiguousarray(np.roll(self.curves[:, ::-1], 1, axis=1))
-        m = max(INDEXED_COEFFICIENTS) + 1
-        self._F = fourier_coordinates(m, n)
-        self._rows = np.array(
-            [k for k in INDEXED_COEFFICIENTS] + [m + k for k in INDEXED_COEFFICIENTS]
-        )
-        self.coords = (self.curves @ self._F.T)[:, self._rows]
-        groups = len(self.names)
-        self.mbr_lo = np.full((groups, len(self._rows)), np.inf)
-        self.mbr_hi = np.full((groups, len(self._rows)), -np.inf)
-        np.minimum.at(self.mbr_lo, self.owner, self.coords)
-        np.maximum.at(self.mbr_hi, self.owner, self.coords)
+        self.owner = np.asarray(self.owner, dtype=np.int64)
+        coords = indexed_coordinates(self.curves)
+        self.groups = []
+        for o in range(len(self.names)):
+            views = np.flatnonzero(self.owner == o)
+            self.groups += [views[g] for g in group_points(coords[views], self.group_views)]
+        boxes = [padded_mbr(coords[g]) for g in self.groups]
+        self.mbr_lo = np.array([b[0] for b in boxes]).reshape(len(boxes), -1)
+        self.mbr_hi = np.array([b[1] for b in boxes]).reshape(len(boxes), -1)
 
-    def query_boxes(self, query: NDArray[np.float64], r: int):  # type: ignore[no-untyped-def]
-        """The query envelope's box and its mirror, in the indexed coordinates."""
-        lower, upper = envelope(query, r)
-        lo, hi = envelope_box(lower, upper, self._F)
-        mlo, mhi = mirror_box(lo, hi)
-        return (lo[self._rows], hi[self._rows]), (mlo[self._rows], mhi[self._rows]), (lower, upper)
+    @property
+    def n_groups(self) -> int:
+        return len(self.groups)
+
+    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+        keys = query.mindist(self.mbr_lo, self.mbr_hi)
+        hits = np.flatnonzero(keys <= radius)
+        return [(int(g), float(keys[g]), int(self.owner[self.groups[g][0]])) for g in hits]
+
+    def group(self, gid: int) -> Group:
+        views = self.groups[gid]
+        return Group.of(int(self.owner[views[0]]), views, self.curves[views])
+
+    def object_name(self, index: int) -> str:
+        return self.names[index]
 
 
 def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: int) -> list[Neighbour]:
@@ -124,62 +211,98 @@ def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: in
     return sorted(best.values(), key=lambda nb: (nb.distance, nb.object))[:k]
 
 
+_GROUP, _CURSOR, _EXACT = 0, 1, 2
+
+
 def knn(
-    query: NDArray[np.floating], tier: TierArrays, k: int, r: int
+    query: NDArray[np.floating], source: TierSource, k: int, r: int
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`."""
     start = time.perf_counter()
     stats = SearchStats()
-    q = np.asarray(query, dtype=np.float64)
-    box, mbox, (lower, upper) = tier.query_boxes(q, r)
-    heap: list[tuple[float, int, int, int, int]] = []  # (key, tiebreak, kind, index, mirrored)
+    qb = QueryBoxes.of(query, r)
+    q = qb.curve
+    # entries: (key, tiebreak, kind, gid, x): x is the object of a group entry and the
+    # position in the group's sorted bounds of a cursor or exact entry
+    heap: list[tuple[float, int, int, int, int]] = []
     counter = 0
-    OBJECT, CURSOR, EXACT = 0, 2, 3
-    cursors: dict[int, tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]] = {}
-    for o in range(len(tier.names)):
-        key = min(mindist(*box, tier.mbr_lo[o], tier.mbr_hi[o]),
-                  mindist(*mbox, tier.mbr_lo[o], tier.mbr_hi[o]))
-        heap.append((key, counter, OBJECT, o, 0))
-        counter += 1
-    heapq.heapify(heap)
-    views_of = [np.flatnonzero(tier.owner == o) for o in range(len(tier.names))]
+    seen: set[int] = set()
+    opened: dict[int, tuple[Group, NDArray[np.float64], NDArray[np.int64]]] = {}
+    radius = -math.inf
+    exhausted = source.n_groups == 0
     result: list[Neighbour] = []
     done: set[int] = set()
-    while heap and len(result) < k:
-        key, _, kind, index, mirrored = heapq.heappop(heap)
-        owner = index if kind in (OBJECT, CURSOR) else int(tier.owner[index])
-        if owner in done:
-            continue
-        if kind == EXACT:
-            done.add(owner)
-            result.append(Neighbour(tier.names[owner], index, key, bool(mirrored)))
-        elif kind == OBJECT:
-            stats.objects_visited += 1
-            views = views_of[index]
-            stats.points_visited += len(views)
-            stats.lb_keogh += 2 * len(views)
-            points = tier.coords[views]
+    while len(result) < k:
+        while not exhausted and (not heap or heap[0][0] > radius):
+            radius = max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS)
+            stats.expansions += 1
+            for gid, key, owner in source.groups_within(qb, radius):
+                if gid not in seen:
+                    seen.add(gid)
+                    heap.append((key, counter, _GROUP, gid, owner))
+                    counter += 1
+            heapq.heapify(heap)
+            exhausted = len(seen) >= source.n_groups
+        if not heap:
+            break
+        key, _, kind, gid, position = heapq.heappop(heap)
+        if kind == _GROUP:
+            if position in done:  # a group entry carries its object in the last slot
+                continue
+            group = source.group(gid)
+            stats.groups_visited += 1
+            n = len(group.views)
+            stats.points_visited += n
+            stats.lb_keogh += 2 * n
             keys = np.concatenate([
-                np.maximum(fourier_dist_many(*box, points),
-                           lb_keogh_many(lower, upper, tier.curves[views])),
-                np.maximum(fourier_dist_many(*mbox, points),
-                           lb_keogh_many(lower, upper, tier.mirrored[views])),
+                np.maximum(fourier_dist_many(*qb.box, group.coords),
+                           lb_keogh_many(qb.lower, qb.upper, group.curves)),
+                np.maximum(fourier_dist_many(*qb.mirrored_box, group.coords),
+                           lb_keogh_many(qb.lower, qb.upper, group.mirrored)),
             ])
             order = np.argsort(keys, kind="stable")
-            cursors[index] = (keys[order], np.concatenate([views, views])[order],
-                              (order >= len(views)).astype(np.int64))
-            heapq.heappush(heap, (float(cursors[index][0][0]), counter, CURSOR, index, 0))
+            opened[gid] = (group, keys[order], order)
+            heapq.heappush(heap, (float(keys[order[0]]), counter, _CURSOR, gid, 0))
             counter += 1
-        elif kind == CURSOR:  # the object's next curve in bound order: refine it exactly
-            keys, order_views, order_mirror = cursors[index]
-            position = mirrored  # the cursor's position rides in the last slot
-            view, m = int(order_views[position]), int(order_mirror[position])
-            stats.dtw += 1
-            curve = tier.mirrored[view] if m else tier.curves[view]
-            heapq.heappush(heap, (dtw(q, curve, r), counter, EXACT, view, m))
+            continue
+        group, keys, order = opened[gid]
+        if group.object in done:
+            continue
+        n = len(group.views)
+        slot = int(order[position])
+        view, mirrored = slot % n, slot >= n
+        if kind == _EXACT:
+            done.add(group.object)
+            result.append(Neighbour(source.object_name(group.object), int(group.views[view]),
+                                    key, mirrored))
+            continue
+        # a cursor: refine its curve exactly, move on to the group's next curve
+        stats.dtw += 1
+        curve = group.mirrored[view] if mirrored else group.curves[view]
+        heapq.heappush(heap, (dtw(q, curve, r), counter, _EXACT, gid, position))
+        counter += 1
+        if position + 1 < len(keys):
+            heapq.heappush(heap, (float(keys[position + 1]), counter, _CURSOR, gid, position + 1))
             counter += 1
-            if position + 1 < len(keys):
-                heapq.heappush(heap, (float(keys[position + 1]), counter, CURSOR, index, position + 1))
-                counter += 1
     stats.seconds = time.perf_counter() - start
     return result, stats
+
+
+def objects_within(
+    query: NDArray[np.floating], source: TierSource, radius: float, r: int
+) -> dict[str, float]:
+    """Objects with a group whose MINDIST to the query box is at most ``radius``, each with
+    its smallest such MINDIST (a lower bound of its exact distance).
+
+    Every object whose exact distance is ``<= radius`` is among them (MINDIST bounds the
+    distance of each of the group's views from below): the candidates a CS1 server must
+    refine when the client's k-th distance is ``radius``.
+    """
+    if not radius >= 0:
+        raise ValueError(f"radius must be >= 0, got {radius}")
+    qb = QueryBoxes.of(query, r)
+    best: dict[int, float] = {}
+    for _, key, owner in source.groups_within(qb, radius):
+        if key <= radius and key < best.get(owner, math.inf):
+            best[owner] = key
+    return {source.object_name(o): key for o, key in sorted(best.items(), key=lambda x: x[1])}

@@ -72,6 +72,8 @@ def decode_array(
     StorageError
         The blob is malformed or not of the expected dtype/shape.
     """
+    if not isinstance(blob, (bytes, bytearray, memoryview)):
+        raise StorageError(f"array blob is missing (a {type(blob).__name__})")
     buf = bytes(blob)
     if len(buf) < _HEADER.size:
         raise StorageError(f"array blob too short ({len(buf)} bytes)")

@@ -4,7 +4,10 @@ Checks, in order: the schema revision is the one this viewdb writes; SQLite's ow
 ``integrity_check`` and ``foreign_key_check``; every view has exactly one curve, Fourier
 point and SIFT row; every blob decodes with the dtype and shape the schema promises; each
 Fourier point is the orthonormal DFT of its stored curve; each object's mesh is a GLB and
-its view count matches its grid. (R-tree checks join this list when the indexes land.)
+its view count matches its grid; and both tiers' R-trees: every R-tree entry is a group
+row and vice versa with the same box, each group's curves are its views' stored curves and
+lie in its box, the full tier holds every view once and the sparse tier exactly the client
+grid's stand-ins.
 """
 
 from __future__ import annotations
@@ -17,12 +20,15 @@ import numpy as np
 import sqlalchemy as sa
 
 from ..camera import grid_views
-from ..errors import StorageError
+from ..errors import NotFound, StorageError
 from ..features import fourier_point
+from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from ..symmetry import SymmetryType, skim_plan
 from . import schema as s
 from .codecs import decode_array
+from .spatial import FourierIndex
 from .store import Store
+from .tiers import TIERS
 
 __all__ = ["CheckReport", "check_store"]
 
@@ -70,6 +76,7 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
             report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
         _check_objects(conn, config.gap, report)
         _check_views(conn, config, report, progress)
+        _check_tiers(conn.connection.driver_connection, config, report)
     return report
 
 
@@ -156,3 +163,88 @@ def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: 
         if orphans:
             report.add(f"{table.name}: {orphans} rows belong to no view")
     report.checked["views"] = done
+
+
+def _check_tiers(raw, config, report: CheckReport) -> None:  # type: ignore[no-untyped-def]
+    n = config.features.curve_samples
+    curves = {}
+    for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
+        try:
+            curves[int(vid)] = decode_array(blob, np.float32, (n,))
+        except StorageError:
+            continue  # reported with the views
+    views: dict[int, list[tuple[int, float, float]]] = {}
+    for vid, oid, az, el in raw.execute(
+        "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
+    ):
+        views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
+    objects = raw.execute("SELECT id, name, skimmed, symmetry FROM objects").fetchall()
+    for tier in TIERS:
+        try:
+            index = FourierIndex.open(raw, tier)
+        except (StorageError, NotFound) as exc:
+            report.add(f"{tier} tier: R-tree cannot be opened: {exc}")
+            continue
+        try:
+            if index.dimension != DIMENSION:
+                report.add(f"{tier} tier: R-tree has dimension {index.dimension}, not {DIMENSION}")
+                continue
+            entries = {}
+            everything = np.full(DIMENSION, 1e300)
+            ids, los, his = index.intersection_boxes(-everything, everything)
+            for gid, lo, hi in zip(ids.tolist(), los, his, strict=True):
+                entries[gid] = (lo, hi)
+            in_tier: dict[int, set[int]] = {}
+            rows = raw.execute(
+                "SELECT id, object_id, view_ids, curves, lo, hi FROM index_groups WHERE tier = ?",
+                (tier,),
+            ).fetchall()
+            for gid, oid, blob_ids, blob_curves, blob_lo, blob_hi in rows:
+                where = f"{tier} tier group {gid}"
+                try:
+                    ids_g = decode_array(blob_ids, np.int64, (None,))
+                    curves_g = decode_array(blob_curves, np.float32, (len(ids_g), n))
+                    lo = decode_array(blob_lo, np.float64, (DIMENSION,))
+                    hi = decode_array(blob_hi, np.float64, (DIMENSION,))
+                except StorageError as exc:
+                    report.add(f"{where}: {exc.message}")
+                    continue
+                entry = entries.pop(gid, None)
+                if entry is None:
+                    report.add(f"{where}: not in the R-tree")
+                elif not (np.array_equal(entry[0], lo) and np.array_equal(entry[1], hi)):
+                    report.add(f"{where}: R-tree box differs from the stored box")
+                coords = indexed_coordinates(curves_g)
+                if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
+                    report.add(f"{where}: views lie outside its box")
+                owned = {vid for vid, _, _ in views.get(int(oid), [])}
+                mine = in_tier.setdefault(int(oid), set())
+                for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
+                    if vid not in owned:
+                        report.add(f"{where}: view {vid} is not a view of its object")
+                    elif vid in curves and not np.array_equal(curves[vid], curve):
+                        report.add(f"{where}: curve of view {vid} differs from the stored curve")
+                    if vid in mine:
+                        report.add(f"{where}: view {vid} is in the tier twice")
+                    mine.add(vid)
+            for gid in sorted(entries):
+                report.add(f"{tier} tier: R-tree entry {gid} has no group row")
+            for oid, name, skimmed, symmetry in objects:
+                stored = views.get(int(oid), [])
+                sym = None
+                if symmetry is not None:
+                    try:
+                        sym = SymmetryType.from_dict(json.loads(symmetry))
+                    except (ValueError, KeyError, TypeError):
+                        continue  # reported with the objects
+                members = tier_members([(a, e) for _, a, e in stored], config.gap,
+                                       config.client_gap, sym, bool(skimmed))[tier]
+                expected = {stored[i][0] for i in members}
+                if in_tier.get(int(oid), set()) != expected:
+                    report.add(
+                        f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "
+                        f"views, expected {len(expected)}"
+                    )
+            report.checked[f"{tier}_groups"] = len(rows)
+        finally:
+            index.discard()

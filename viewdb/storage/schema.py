@@ -13,6 +13,11 @@ views           one row per stored view: object, azimuth, elevation, grid gap
 curves          the view's centroid distance curve (float32 blob)
 fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob)
 sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
+index_groups    R-tree entries: a few views of one object in one tier (``full`` or
+                ``sparse``), with their MBR in the indexed Fourier coordinates and a
+                copy of their curves (one read per group at search time)
+rtree_pages     the libspatialindex pages of each tier's R-tree (one BLOB per page)
+rtree_meta      each tier's R-tree: dimension and header page
 """
 
 from __future__ import annotations
@@ -35,15 +40,18 @@ __all__ = [
     "SCHEMA_REVISION",
     "curves",
     "fourier_points",
+    "index_groups",
     "metadata",
     "objects",
+    "rtree_meta",
+    "rtree_pages",
     "settings",
     "sift_features",
     "views",
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0002"
+SCHEMA_REVISION = "0003"
 
 metadata = MetaData()
 
@@ -112,4 +120,36 @@ sift_features = Table(
     Column("keypoints", LargeBinary, nullable=False),
     Column("descriptors", LargeBinary, nullable=False),
     Column("points3d", LargeBinary, nullable=False),
+)
+
+# revision 0003: the Fourier-point R-trees of the sparse and full tiers
+index_groups = Table(
+    "index_groups",
+    metadata,
+    Column("id", Integer, primary_key=True),
+    Column("tier", String, nullable=False),
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
+    #: int64 (n,) view ids; float32 (n, N) curves; float64 (d,) MBR corners
+    Column("view_ids", LargeBinary, nullable=False),
+    Column("curves", LargeBinary, nullable=False),
+    Column("lo", LargeBinary, nullable=False),
+    Column("hi", LargeBinary, nullable=False),
+)
+Index("ix_index_groups_object", index_groups.c.object_id)
+Index("ix_index_groups_tier", index_groups.c.tier)
+
+rtree_pages = Table(
+    "rtree_pages",
+    metadata,
+    Column("tier", Text, primary_key=True),
+    Column("page", Integer, primary_key=True),
+    Column("data", LargeBinary, nullable=False),
+)
+
+rtree_meta = Table(
+    "rtree_meta",
+    metadata,
+    Column("tier", Text, primary_key=True),
+    Column("dimension", Integer, nullable=False),
+    Column("header_page", Integer, nullable=False),
 )

@@ -447,6 +447,39 @@ class FourierIndex:
             raise self._error(exc, "cannot insert into the R-tree") from exc
         self._check_storage("cannot insert into the R-tree")
 
+    def insert_box(self, id: int, lo: object, hi: object) -> None:
+        """Insert entry ``id`` with the box ``[lo, hi]`` (an MBR of several points)."""
+        box = self._box(lo, hi)
+        try:
+            self.index.insert(int(id), box)
+        except RTreeError as exc:
+            raise self._error(exc, "cannot insert into the R-tree") from exc
+        self._check_storage("cannot insert into the R-tree")
+
+    def delete_box(self, id: int, lo: object, hi: object) -> None:
+        """Remove entry ``id`` with the box ``[lo, hi]`` (exactly as inserted)."""
+        box = self._box(lo, hi)
+        try:
+            self.index.delete(int(id), box)
+        except RTreeError as exc:
+            raise self._error(exc, "cannot delete from the R-tree") from exc
+        self._check_storage("cannot delete from the R-tree")
+
+    def intersection_boxes(
+        self, lo: object, hi: object
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Ids and boxes (``lo``, ``hi`` rows) of the entries that meet ``[lo, hi]``."""
+        box = self._box(lo, hi)
+        try:
+            items = list(self.index.intersection(box, objects=True))
+        except RTreeError as exc:
+            raise self._error(exc, "cannot read the R-tree") from exc
+        self._check_storage("cannot read the R-tree")
+        d = self.dimension
+        ids = np.fromiter((it.id for it in items), dtype=np.int64, count=len(items))
+        bounds = np.array([it.bbox for it in items], dtype=np.float64).reshape(len(items), 2 * d)
+        return ids, bounds[:, :d], bounds[:, d:]
+
     def bulk_load(self, ids: Iterable[int], points: object) -> None:
         """Insert many points.  Into an *empty* tree this rebuilds the tier with the STR
         bulk loader (the meta row is rewritten); otherwise it inserts one by one."""

@@ -25,8 +25,10 @@ from sqlalchemy.engine import Connection, Engine
 
 from ..config import BuildConfig
 from ..errors import NotFound, SchemaMismatch, StorageError
+from ..search.grouping import tier_members
 from . import schema as s
 from .codecs import decode_array, encode_array
+from .tiers import delete_groups, write_groups
 
 __all__ = ["ObjectRow", "Store", "ViewRow"]
 
@@ -262,10 +264,14 @@ class Store:
             raise NotFound(f"no object named {name!r}", self.path)
         return bytes(row[0])
 
-    def write_object(self, desc: Any, grid_gap: float) -> None:
-        """Store one described object (replacing one of the same name) in one transaction."""
+    def write_object(self, desc: Any, config: BuildConfig) -> None:
+        """Store one described object (replacing one of the same name), with its entries
+        in both tiers' R-trees, in one transaction."""
         now = datetime.now(UTC).isoformat(timespec="seconds")
+        grid_gap = config.gap
         with self.transaction() as conn:
+            old = conn.execute(sa.select(s.objects.c.id).where(s.objects.c.name == desc.name)).all()
+            delete_groups(conn.connection.driver_connection, [r[0] for r in old])
             conn.execute(sa.delete(s.objects).where(s.objects.c.name == desc.name))
             object_id = conn.execute(
                 sa.insert(s.objects).values(
@@ -316,6 +322,11 @@ class Store:
                     for i, v in keyed
                 ],
             )
+            positions = [(float(v.azimuth), float(v.elevation)) for v in desc.views]
+            members = tier_members(positions, config.gap, config.client_gap,
+                                   getattr(desc, "symmetry", None), bool(getattr(desc, "skimmed", False)))
+            write_groups(conn.connection.driver_connection, object_id, [i for i, _ in keyed],
+                         np.stack([v.curve for v in desc.views]), members, config.index.group_views)
 
     # ----------------------------------------------------------------- views
     def views(self, name: str) -> list[ViewRow]:

@@ -1,0 +1,304 @@
+"""The sparse and full tiers in the database: groups of views and their R-trees.
+
+Writing: :func:`write_groups` adds one object's groups to both tiers (rows of
+``index_groups`` and an R-tree entry per group) inside the caller's transaction, and
+:func:`delete_groups` takes them out again; the ingest calls both in the transaction
+that writes the object, so an object is in the index exactly when it is in the file.
+
+Reading: :class:`StoredTier` is a :class:`~viewdb.search.knn.TierSource` over one tier
+of an open file: the R-tree answers "which groups lie within distance d of the query
+box" (a box query widened by d, then the exact MINDIST), and a group's views and curves
+are one row read (cached).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import BuildConfig
+from ..errors import QueryError, StorageError
+from ..search.grouping import (
+    DIMENSION,
+    group_points,
+    indexed_coordinates,
+    padded_mbr,
+    tier_members,
+)
+from ..search.knn import Group, QueryBoxes, TierArrays
+from .codecs import decode_array, encode_array
+from .spatial import FourierIndex, _raw
+
+__all__ = [
+    "TIERS",
+    "StoredTier",
+    "TierReader",
+    "create_tiers",
+    "delete_groups",
+    "index_stored_objects",
+    "write_groups",
+]
+
+#: The two tiers: every stored view (server grid) and the client grid's stand-ins.
+TIERS = ("full", "sparse")
+
+#: Groups kept decoded in memory per open tier (a group of 32 views is ~40 KB).
+GROUP_CACHE = 4096
+
+
+def create_tiers(conn: Any) -> None:
+    """Create the empty R-trees of both tiers (the tables must exist)."""
+    for tier in TIERS:
+        FourierIndex.create(conn, tier, DIMENSION).close()
+
+
+def write_groups(
+    conn: Any,
+    object_id: int,
+    view_ids: Sequence[int],
+    curves: NDArray[np.floating],
+    members: Mapping[str, Sequence[int]],
+    group_views: int,
+) -> dict[str, int]:
+    """Group one object's views of each tier and index the groups; returns group counts.
+
+    ``members[tier]`` are positions in ``view_ids``/``curves`` of the views in that tier.
+    Runs in the caller's transaction; on an error the caller must roll back.
+    """
+    raw = _raw(conn)
+    ids = np.asarray(view_ids, dtype=np.int64)
+    all_curves = np.asarray(curves, dtype=np.float32)
+    counts = {}
+    for tier in TIERS:
+        sel = np.asarray(members.get(tier, ()), dtype=np.int64)
+        counts[tier] = 0
+        if not len(sel):
+            continue
+        tier_curves = all_curves[sel]
+        coords = indexed_coordinates(tier_curves)
+        index = FourierIndex.open(raw, tier)
+        try:
+            for group in group_points(coords, group_views):
+                lo, hi = padded_mbr(coords[group])
+                gid = raw.execute(
+                    "INSERT INTO index_groups (tier, object_id, view_ids, curves, lo, hi)"
+                    " VALUES (?, ?, ?, ?, ?, ?)",
+                    (tier, int(object_id), encode_array(ids[sel][group]),
+                     encode_array(tier_curves[group]), encode_array(lo), encode_array(hi)),
+                ).lastrowid
+                index.insert_box(int(gid), lo, hi)
+                counts[tier] += 1
+            index.close()
+        except BaseException:
+            index.discard()
+            raise
+    return counts
+
+
+def delete_groups(conn: Any, object_ids: Iterable[int]) -> None:
+    """Take the objects' groups out of both tiers (caller's transaction)."""
+    raw = _raw(conn)
+    for object_id in object_ids:
+        rows = raw.execute(
+            "SELECT id, tier, lo, hi FROM index_groups WHERE object_id = ?", (int(object_id),)
+        ).fetchall()
+        for tier in TIERS:
+            mine = [r for r in rows if r[1] == tier]
+            if not mine:
+                continue
+            index = FourierIndex.open(raw, tier)
+            try:
+                for gid, _, lo, hi in mine:
+                    index.delete_box(
+                        gid, decode_array(lo, np.float64, (DIMENSION,)),
+                        decode_array(hi, np.float64, (DIMENSION,)),
+                    )
+                index.close()
+            except BaseException:
+                index.discard()
+                raise
+        raw.execute("DELETE FROM index_groups WHERE object_id = ?", (int(object_id),))
+
+
+class StoredTier:
+    """One tier of an open database as a search source (see the module doc).
+
+    Reads through ``conn`` (a plain :class:`sqlite3.Connection`), which the caller keeps
+    in one read transaction per search so the R-tree pages and rows agree.
+    """
+
+    def __init__(self, conn: sqlite3.Connection, tier: str) -> None:
+        if tier not in TIERS:
+            raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
+        self.conn = conn
+        self.tier = tier
+        self.index = FourierIndex.open(conn, tier)
+        self._owner: dict[int, int] = dict(
+            conn.execute("SELECT id, object_id FROM index_groups WHERE tier = ?", (tier,))
+        )
+        self._names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
+        self._groups: OrderedDict[int, Group] = OrderedDict()
+        self.n_groups = len(self._owner)
+
+    def close(self) -> None:
+        self.index.discard()
+
+    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+        found: dict[int, float] = {}
+        for lo, hi in (query.box, query.mirrored_box):
+            gids, glo, ghi = self.index.intersection_boxes(lo - radius, hi + radius)
+            if not len(gids):
+                continue
+            keys = query.mindist(glo, ghi)
+            for gid, key in zip(gids.tolist(), keys.tolist(), strict=True):
+                found[gid] = key
+        return [(gid, key, self._owner[gid]) for gid, key in found.items()]
+
+    def group(self, gid: int) -> Group:
+        group = self._groups.get(gid)
+        if group is not None:
+            self._groups.move_to_end(gid)
+            return group
+        row = self.conn.execute(
+            "SELECT object_id, view_ids, curves FROM index_groups WHERE id = ?", (gid,)
+        ).fetchone()
+        views = decode_array(row[1], np.int64, (None,))
+        curves = decode_array(row[2], np.float32, (len(views), None))
+        group = Group.of(int(row[0]), views, curves)
+        self._groups[gid] = group
+        if len(self._groups) > GROUP_CACHE:
+            self._groups.popitem(last=False)
+        return group
+
+    def object_name(self, index: int) -> str:
+        return self._names[index]
+
+
+def index_stored_objects(conn: Any, config: BuildConfig) -> int:
+    """Index every stored object's views in both tiers (for files from before the
+    R-trees; the tiers must be empty). Returns the number of objects indexed."""
+    from ..symmetry import SymmetryType
+
+    raw = _raw(conn)
+    objects = raw.execute("SELECT id, skimmed, symmetry FROM objects ORDER BY id").fetchall()
+    for object_id, skimmed, symmetry in objects:
+        rows = raw.execute(
+            "SELECT v.id, v.azimuth, v.elevation, c.samples FROM views v"
+            " JOIN curves c ON c.view_id = v.id WHERE v.object_id = ? ORDER BY v.id",
+            (object_id,),
+        ).fetchall()
+        if not rows:
+            continue
+        sym = None if symmetry is None else SymmetryType.from_dict(json.loads(symmetry))
+        positions = [(float(r[1]), float(r[2])) for r in rows]
+        members = tier_members(positions, config.gap, config.client_gap, sym, bool(skimmed))
+        curves = np.stack([decode_array(r[3], np.float32, (None,)) for r in rows])
+        write_groups(raw, object_id, [r[0] for r in rows], curves, members,
+                     config.index.group_views)
+    return len(objects)
+
+
+class TierReader:
+    """A read connection for searches, with the tiers opened on it.
+
+    Each :meth:`snapshot` is one read transaction (WAL: a consistent view of the file while
+    an ingest writes). If another connection committed since the last snapshot (SQLite's
+    ``data_version``), the opened tiers are dropped and reopened, so a long-lived reader
+    (a server) sees new objects and never mixes cached R-tree pages of two versions.
+    Thread-safe: snapshots are serialised.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self.conn = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self.conn.execute("PRAGMA query_only = 1")
+            self.conn.execute("PRAGMA busy_timeout = 5000")
+        except sqlite3.Error as exc:
+            raise StorageError(f"cannot open for reading: {exc}", self.path) from exc
+        self._lock = threading.Lock()
+        self._tiers: dict[str, StoredTier] = {}
+        self._version: int | None = None
+
+    def close(self) -> None:
+        with self._lock:
+            self._drop()
+            self.conn.close()
+
+    def _drop(self) -> None:
+        for tier in self._tiers.values():
+            tier.close()
+        self._tiers = {}
+
+    @contextmanager
+    def snapshot(self) -> Iterator[TierReader]:
+        with self._lock:
+            try:
+                self.conn.execute("BEGIN")
+                self.conn.execute("SELECT 1 FROM rtree_meta LIMIT 1").fetchall()  # starts the read
+                version = int(self.conn.execute("PRAGMA data_version").fetchone()[0])
+            except sqlite3.Error as exc:
+                if self.conn.in_transaction:
+                    self.conn.execute("ROLLBACK")
+                raise StorageError(f"database error: {exc}", self.path) from exc
+            if version != self._version:
+                self._drop()
+                self._version = version
+            try:
+                yield self
+            except sqlite3.Error as exc:
+                raise StorageError(f"database error: {exc}", self.path) from exc
+            finally:
+                self.conn.execute("ROLLBACK")
+
+    def tier(self, name: str) -> StoredTier:
+        """Tier ``name`` (call inside :meth:`snapshot`)."""
+        tier = self._tiers.get(name)
+        if tier is None:
+            tier = self._tiers[name] = StoredTier(self.conn, name)
+        return tier
+
+    def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
+        """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`)."""
+        ids = [int(i) for i in view_ids]
+        if not ids:
+            return {}
+        marks = ",".join("?" * len(ids))
+        rows = self.conn.execute(
+            f"SELECT id, azimuth, elevation FROM views WHERE id IN ({marks})", ids
+        ).fetchall()
+        return {int(i): (float(a), float(e)) for i, a, e in rows}
+
+    def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:
+        """Every view of tier ``name`` in memory (the brute-force reference and the flat
+        scan), with ``(view id, azimuth, elevation)`` per row; inside :meth:`snapshot`."""
+        rows = self.conn.execute(
+            "SELECT o.name, g.view_ids, g.curves FROM index_groups g"
+            " JOIN objects o ON o.id = g.object_id WHERE g.tier = ? ORDER BY o.name, g.id",
+            (name,),
+        ).fetchall()
+        names: list[str] = []
+        owner: list[int] = []
+        ids: list[int] = []
+        curves = []
+        for object_name, blob_ids, blob_curves in rows:
+            if not names or names[-1] != object_name:
+                names.append(object_name)
+            views = decode_array(blob_ids, np.int64, (None,))
+            curves.append(decode_array(blob_curves, np.float32, (len(views), None)))
+            ids.extend(views.tolist())
+            owner.extend([len(names) - 1] * len(views))
+        if not ids:
+            raise QueryError(f"the {name} tier holds no views", self.path)
+        angles = self.view_angles(ids)
+        arrays = TierArrays(names, np.array(owner, np.int64), np.concatenate(curves))
+        return arrays, [(i, *angles[i]) for i in ids]
