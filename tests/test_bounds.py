@@ -399,3 +399,58 @@ def test_timing():
         for _ in range(k):
             f()
         print(f"{name}: {(time.perf_counter() - t0) / k * 1e6:.2f} us/call")
+
+
+# ------------------------------------------------------------- group-level bounds ----
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cases(), st.integers(1, 6))
+def test_group_bounds_are_the_chain_for_each_curve_and_its_mirror(case, size):
+    q, c, r, rng = case
+    n = len(q)
+    curves = np.vstack([c] + [c + rng.normal(scale=0.1, size=n) for _ in range(size - 1)])
+    m = min(4, n)
+    F = B.fourier_coordinates(m, n)
+    rows = np.r_[1:m, m + 1 : 2 * m]
+    L, U = B.envelope(q, r)
+    lo, hi = B.envelope_box(L, U, F)
+    mlo, mhi = B.mirror_box(lo, hi)
+    box, mbox = (lo[rows], hi[rows]), (mlo[rows], mhi[rows])
+    coords = np.ascontiguousarray((curves @ F.T)[:, rows])
+    keys = B.group_bounds((L, U), (mirror_curve(L), mirror_curve(U)), box, mbox, coords,
+                          np.ascontiguousarray(curves))
+    for i, cand in enumerate(curves):
+        for key, the_box, the_curve in ((keys[i], box, cand), (keys[size + i], mbox, mirror_curve(cand))):
+            expected = max(B.fourier_dist(*the_box, coords[i]), B.lb_keogh(L, U, the_curve))
+            assert key == pytest.approx(expected, rel=1e-9, abs=1e-12)
+            assert leq(key, B.dtw(q, the_curve, r))
+    # the per-sample box of the group bounds LB_Keogh of every member, both orientations
+    glo, ghi = curves.min(axis=0)[None], curves.max(axis=0)[None]
+    direct = B.curve_box_lb_many(L, U, glo, ghi)[0]
+    mirrored = B.curve_box_lb_many(mirror_curve(L), mirror_curve(U), glo, ghi)[0]
+    for cand in curves:
+        assert leq(direct, B.lb_keogh(L, U, cand))
+        assert leq(mirrored, B.lb_keogh(L, U, mirror_curve(cand)))
+
+
+@SETTINGS
+@given(cases(), st.floats(0.0, 2.0))
+def test_cascade_dtw_is_dtw_unless_beyond_the_threshold(case, frac):
+    q, c, r, _ = case
+    exact = B.dtw(q, c, r)
+    threshold = exact * frac
+    got = B.cascade_dtw(q, c, r, threshold)
+    if exact <= threshold:
+        assert got == exact
+    else:
+        assert got == math.inf or got == exact
+    assert B.cascade_dtw(q, c, r) == exact
+
+
+def test_cascade_dtw_abandons_a_far_candidate_by_its_envelope():
+    rng = np.random.default_rng(2)
+    q = smooth_curve(rng, 128)
+    far = q + 1.0  # LB_Keogh either way is sqrt(128) > 1: abandoned before any DTW row
+    assert B.cascade_dtw(q, far, 6, 1.0) == math.inf
+    assert B.cascade_dtw(q, far, 6) == pytest.approx(math.sqrt(128))

@@ -29,6 +29,8 @@ def upgrade() -> None:
         sa.Column("curves", sa.LargeBinary, nullable=False),
         sa.Column("lo", sa.LargeBinary, nullable=False),
         sa.Column("hi", sa.LargeBinary, nullable=False),
+        sa.Column("curve_lo", sa.LargeBinary, nullable=False),
+        sa.Column("curve_hi", sa.LargeBinary, nullable=False),
     )
     op.create_index("ix_index_groups_object", "index_groups", ["object_id"])
     op.create_index("ix_index_groups_tier", "index_groups", ["tier"])

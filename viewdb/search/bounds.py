@@ -68,9 +68,20 @@ Hence ``Fourier_Dist(box, F c') = Fourier_Dist(S box, F c)`` and
 therefore needs only the index of the stored views: it queries it with both ``box``
 and ``mirror_box(box)``, and, since Algorithm 2 pushes ``S`` and ``S'`` from one Fourier
 point (lines 15-19), the key of a point or node must be the *smaller* of the two
-distances to stay a lower bound for both.  ``LB_Keogh`` and ``DTW`` of the mirror must be
-computed on ``mirror_curve(c)`` itself (the mirror is not an order-preserving re-indexing,
-so there is no shortcut in the time domain).
+distances to stay a lower bound for both.  ``DTW`` of the mirror must be computed on
+``mirror_curve(c)`` itself (the mirror is not an order-preserving re-indexing, so there is
+no shortcut for a warping path).  ``LB_Keogh`` is a sum of one term per sample, so for a
+permutation ``P`` of the samples ``LB_Keogh(L, U, P c) = LB_Keogh(P^-1 L, P^-1 U, c)``;
+the mirror is an involution (``P^-1 = P``), so the mirrored bound is LB_Keogh of the
+stored curve against the *mirrored envelope* (:func:`group_bounds`).
+
+Group bounds
+------------
+A group's curves lie in their per-sample range ``[glo, ghi]`` (a box in the curve space,
+``N`` dimensions).  ``curve_box_lb = ||dist([L, U], [glo, ghi])||`` (per-sample gap between
+the two intervals) is at most ``LB_Keogh(L, U, c)`` for every curve ``c`` of the group,
+since each ``c_t`` lies in ``[glo_t, ghi_t]``; it is a second lower bound for the group
+next to ``MINDIST`` (neither dominates), and the key of a group is the larger of the two.
 
 Floating point
 --------------
@@ -92,13 +103,16 @@ from numba import njit
 from numpy.typing import NDArray
 
 __all__ = [
+    "cascade_dtw",
     "complex_to_coordinates",
+    "curve_box_lb_many",
     "dtw",
     "envelope",
     "envelope_box",
     "fourier_coordinates",
     "fourier_dist",
     "fourier_dist_many",
+    "group_bounds",
     "lb_keogh",
     "lb_keogh_many",
     "lb_keogh_reverse",
@@ -195,6 +209,71 @@ def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
             d = lower[i] - v
             s += d * d
     return math.sqrt(s)
+
+
+@njit(cache=True, nogil=True)
+def _group_bounds_kernel(  # pragma: no cover - compiled
+    lower, upper, mlower, mupper, blo, bhi, mblo, mbhi, coords, curves
+):
+    n = curves.shape[0]
+    length = curves.shape[1]
+    d = coords.shape[1]
+    out = np.empty(2 * n)
+    for i in range(n):
+        fd = 0.0
+        fdm = 0.0
+        for j in range(d):
+            p = coords[i, j]
+            g = max(blo[j] - p, 0.0) + max(p - bhi[j], 0.0)
+            fd += g * g
+            g = max(mblo[j] - p, 0.0) + max(p - mbhi[j], 0.0)
+            fdm += g * g
+        lb = 0.0
+        lbm = 0.0
+        for t in range(length):
+            v = curves[i, t]
+            if v > upper[t]:
+                e = v - upper[t]
+                lb += e * e
+            elif v < lower[t]:
+                e = lower[t] - v
+                lb += e * e
+            if v > mupper[t]:
+                e = v - mupper[t]
+                lbm += e * e
+            elif v < mlower[t]:
+                e = mlower[t] - v
+                lbm += e * e
+        out[i] = math.sqrt(max(fd, lb))
+        out[n + i] = math.sqrt(max(fdm, lbm))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _cascade_dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
+    # LB_Keogh the other way round (the candidate's envelope against the query), then DTW
+    n = q.shape[0]
+    s = 0.0
+    limit = best_so_far * best_so_far
+    for i in range(n):
+        a = max(0, i - r)
+        b = min(n - 1, i + r)
+        lo = c[a]
+        hi = c[a]
+        for t in range(a + 1, b + 1):
+            v = c[t]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        v = q[i]
+        if v > hi:
+            s += (v - hi) * (v - hi)
+        elif v < lo:
+            s += (lo - v) * (lo - v)
+        if s > limit and math.sqrt(s) > best_so_far:
+            return np.inf
+    return _dtw_kernel(q, c, r, best_so_far)
 
 
 @njit(cache=True, nogil=True)
@@ -301,6 +380,49 @@ def dtw(q: np.ndarray, c: np.ndarray, r: int, best_so_far: float = math.inf) -> 
     if math.isnan(bsf) or bsf < 0:
         raise ValueError(f"best_so_far must be >= 0, got {best_so_far!r}")
     return float(_dtw_kernel(qa, ca, rr, bsf))
+
+
+def cascade_dtw(q: np.ndarray, c: np.ndarray, r: int, best_so_far: float = math.inf) -> float:
+    """:func:`dtw` after the UCR suite's second filter: ``inf`` as soon as LB_Keogh of the
+    query against the *candidate's* envelope exceeds ``best_so_far``, else :func:`dtw`
+    with early abandoning. Equal to ``dtw(q, c, r)`` whenever that is ``<= best_so_far``."""
+    qa = _seq(q, "q")
+    ca = _seq(c, "c")
+    _same_shape(("q", qa), ("c", ca))
+    rr = _band(r, qa.shape[0])
+    bsf = float(best_so_far)
+    if math.isnan(bsf) or bsf < 0:
+        raise ValueError(f"best_so_far must be >= 0, got {best_so_far!r}")
+    return float(_cascade_dtw_kernel(qa, ca, rr, bsf))
+
+
+def group_bounds(
+    envelope: tuple[np.ndarray, np.ndarray], mirrored_envelope: tuple[np.ndarray, np.ndarray],
+    box: tuple[np.ndarray, np.ndarray], mirrored_box: tuple[np.ndarray, np.ndarray],
+    coords: np.ndarray, curves: np.ndarray,
+) -> NDArray[np.float64]:
+    """Keys of a group's curves and their mirrors, in one pass: ``(2n,)`` with
+    ``max(Fourier_Dist(box, p_i), LB_Keogh(L, U, c_i))`` then the same for the mirrors
+    (``mirrored_box``, and LB_Keogh against the mirrored envelope ``(P L, P U)``, ``P`` =
+    :func:`viewdb.features.mirror_curve`: see the module doc).
+
+    Inputs are the query's envelopes ``(N,)``, its boxes in the indexed coordinates ``(d,)``,
+    the curves' coordinates ``(n, d)`` and the curves ``(n, N)``, all float64, contiguous
+    and finite (not re-validated: this is the search's inner loop).
+    """
+    return _group_bounds_kernel(
+        envelope[0], envelope[1], mirrored_envelope[0], mirrored_envelope[1], box[0], box[1],
+        mirrored_box[0], mirrored_box[1], coords, curves,
+    )
+
+
+def curve_box_lb_many(
+    lower: np.ndarray, upper: np.ndarray, glo: np.ndarray, ghi: np.ndarray
+) -> NDArray[np.float64]:
+    """Lower bound of LB_Keogh(L, U, c) for every curve ``c`` in each box ``[glo_g, ghi_g]``
+    (rows of ``(g, N)`` arrays): the per-sample gap between ``[L, U]`` and the box."""
+    gap = np.maximum(glo - upper, 0.0) + np.maximum(lower - ghi, 0.0)
+    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
 
 
 def envelope(q: np.ndarray, r: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -42,8 +42,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..features import mirror_curve
-from .bounds import dtw, envelope, envelope_box, fourier_dist_many, lb_keogh_many, mindist_many, mirror_box
-from .grouping import group_points, indexed_coordinates, indexed_rows, padded_mbr
+from .bounds import (
+    _cascade_dtw_kernel,
+    curve_box_lb_many,
+    dtw,
+    envelope,
+    envelope_box,
+    fourier_coordinates,
+    group_bounds,
+    mindist_many,
+    mirror_box,
+)
+from .grouping import INDEXED_COEFFICIENTS, group_points, indexed_coordinates, indexed_rows, padded_mbr
 
 __all__ = [
     "Group",
@@ -88,32 +98,46 @@ class SearchStats:
 
 @dataclass(frozen=True)
 class QueryBoxes:
-    """A query curve, its LB_Keogh envelope and the envelope's box (and mirror) in the
+    """A query curve, its LB_Keogh envelope (and the envelope's mirror, see
+    :func:`~viewdb.search.bounds.group_bounds`) and the envelope's box (and mirror) in the
     indexed coordinates."""
 
     curve: NDArray[np.float64]
     band: int
     lower: NDArray[np.float64]
     upper: NDArray[np.float64]
+    mirrored_lower: NDArray[np.float64]
+    mirrored_upper: NDArray[np.float64]
     box: tuple[NDArray[np.float64], NDArray[np.float64]]
     mirrored_box: tuple[NDArray[np.float64], NDArray[np.float64]]
 
     @classmethod
     def of(cls, curve: NDArray[np.floating], band: int) -> QueryBoxes:
-        from .bounds import fourier_coordinates
-        from .grouping import INDEXED_COEFFICIENTS
-
         q = np.ascontiguousarray(curve, dtype=np.float64)
         lower, upper = envelope(q, band)
         m = max(INDEXED_COEFFICIENTS) + 1
         lo, hi = envelope_box(lower, upper, fourier_coordinates(m, len(q)))
         mlo, mhi = mirror_box(lo, hi)
         rows = indexed_rows(m)
-        return cls(q, band, lower, upper, (lo[rows], hi[rows]), (mlo[rows], mhi[rows]))
+        return cls(q, band, lower, upper, mirror_curve(lower), mirror_curve(upper),
+                   (lo[rows], hi[rows]), (mlo[rows], mhi[rows]))
 
-    def mindist(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
-        """MINDIST of the query (either orientation) to MBRs given as rows of (k, d)."""
-        return np.minimum(mindist_many(*self.box, lo, hi), mindist_many(*self.mirrored_box, lo, hi))
+    def group_keys(
+        self, lo: NDArray[np.float64], hi: NDArray[np.float64],
+        curve_lo: NDArray[np.float64], curve_hi: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Lower bounds of the distance to every view of groups given by their MBRs (rows of
+        ``(g, d)``) and per-sample curve ranges (rows of ``(g, N)``), either orientation:
+        the larger of MINDIST and the curve-box bound (module doc of
+        :mod:`~viewdb.search.bounds`)."""
+        mind = np.minimum(mindist_many(*self.box, lo, hi), mindist_many(*self.mirrored_box, lo, hi))
+        if not len(curve_lo):
+            return mind
+        boxed = np.minimum(
+            curve_box_lb_many(self.lower, self.upper, curve_lo, curve_hi),
+            curve_box_lb_many(self.mirrored_lower, self.mirrored_upper, curve_lo, curve_hi),
+        )
+        return np.maximum(mind, boxed)
 
 
 @dataclass(frozen=True)
@@ -123,7 +147,7 @@ class Group:
     object: int
     #: View ids (of the source), (n,).
     views: NDArray[np.int64]
-    #: Distance curves, (n, N) float64, and their mirrors.
+    #: Distance curves, (n, N) float64 contiguous, and their mirrors.
     curves: NDArray[np.float64]
     mirrored: NDArray[np.float64]
     #: Indexed Fourier coordinates of ``curves``, (n, d).
@@ -133,7 +157,7 @@ class Group:
     def of(cls, object: int, views: NDArray[np.int64], curves: NDArray[np.floating]) -> Group:
         c = np.ascontiguousarray(curves, dtype=np.float64)
         return cls(object, views, c, np.ascontiguousarray(np.roll(c[:, ::-1], 1, axis=1)),
-                   indexed_coordinates(c))
+                   np.ascontiguousarray(indexed_coordinates(c)))
 
 
 class TierSource(Protocol):
@@ -143,7 +167,8 @@ class TierSource(Protocol):
     n_groups: int
 
     def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
-        """``(group id, MINDIST, object)`` of (at least) every group with MINDIST ``<= radius``."""
+        """``(group id, key, object)`` of (at least) every group whose MINDIST is ``<=
+        radius``; ``key`` is :meth:`QueryBoxes.group_keys` of the group."""
         ...
 
     def group(self, gid: int) -> Group: ...
@@ -168,6 +193,8 @@ class TierArrays:
     groups: list[NDArray[np.int64]] = field(init=False)
     mbr_lo: NDArray[np.float64] = field(init=False)
     mbr_hi: NDArray[np.float64] = field(init=False)
+    curve_lo: NDArray[np.float64] = field(init=False)
+    curve_hi: NDArray[np.float64] = field(init=False)
 
     def __post_init__(self) -> None:
         self.curves = np.ascontiguousarray(self.curves, dtype=np.float64)
@@ -178,17 +205,25 @@ class TierArrays:
             views = np.flatnonzero(self.owner == o)
             self.groups += [views[g] for g in group_points(coords[views], self.group_views)]
         boxes = [padded_mbr(coords[g]) for g in self.groups]
-        self.mbr_lo = np.array([b[0] for b in boxes]).reshape(len(boxes), -1)
-        self.mbr_hi = np.array([b[1] for b in boxes]).reshape(len(boxes), -1)
+        g, d, n = len(self.groups), coords.shape[1], self.curves.shape[1]
+        self.mbr_lo = np.array([b[0] for b in boxes]).reshape(g, d)
+        self.mbr_hi = np.array([b[1] for b in boxes]).reshape(g, d)
+        self.curve_lo = np.array([self.curves[v].min(axis=0) for v in self.groups]).reshape(g, n)
+        self.curve_hi = np.array([self.curves[v].max(axis=0) for v in self.groups]).reshape(g, n)
 
     @property
     def n_groups(self) -> int:
         return len(self.groups)
 
     def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
-        keys = query.mindist(self.mbr_lo, self.mbr_hi)
-        hits = np.flatnonzero(keys <= radius)
-        return [(int(g), float(keys[g]), int(self.owner[self.groups[g][0]])) for g in hits]
+        mind = query.group_keys(self.mbr_lo, self.mbr_hi, self.curve_lo[:0], self.curve_hi[:0])
+        hits = np.flatnonzero(mind <= radius)
+        if not len(hits):
+            return []
+        keys = query.group_keys(self.mbr_lo[hits], self.mbr_hi[hits], self.curve_lo[hits],
+                                self.curve_hi[hits])
+        return [(int(g), float(key), int(self.owner[self.groups[g][0]]))
+                for g, key in zip(hits.tolist(), keys.tolist(), strict=True)]
 
     def group(self, gid: int) -> Group:
         views = self.groups[gid]
@@ -217,11 +252,18 @@ _GROUP, _CURSOR, _EXACT = 0, 1, 2
 def knn(
     query: NDArray[np.floating], source: TierSource, k: int, r: int
 ) -> tuple[list[Neighbour], SearchStats]:
-    """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`."""
+    """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`.
+
+    DTW runs after the UCR cascade (LB_Keogh against the candidate's envelope) and
+    abandons early past ``min(U, b_o)``: ``U`` the k-th smallest of the best distances
+    found so far of distinct objects (the final k-th distance is at most ``U``) and
+    ``b_o`` the best found so far for the candidate's object. A curve beyond that can
+    neither enter the result nor improve its object, so it is dropped.
+    """
     start = time.perf_counter()
     stats = SearchStats()
     qb = QueryBoxes.of(query, r)
-    q = qb.curve
+    q, envelope_pair, mirrored_pair = qb.curve, (qb.lower, qb.upper), (qb.mirrored_lower, qb.mirrored_upper)
     # entries: (key, tiebreak, kind, gid, x): x is the object of a group entry and the
     # position in the group's sorted bounds of a cursor or exact entry
     heap: list[tuple[float, int, int, int, int]] = []
@@ -232,6 +274,8 @@ def knn(
     exhausted = source.n_groups == 0
     result: list[Neighbour] = []
     done: set[int] = set()
+    found: dict[int, float] = {}  # best exact distance computed so far, per object
+    bound = math.inf  # U: the k-th smallest of found
     while len(result) < k:
         while not exhausted and (not heap or heap[0][0] > radius):
             radius = max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS)
@@ -254,36 +298,43 @@ def knn(
             n = len(group.views)
             stats.points_visited += n
             stats.lb_keogh += 2 * n
-            keys = np.concatenate([
-                np.maximum(fourier_dist_many(*qb.box, group.coords),
-                           lb_keogh_many(qb.lower, qb.upper, group.curves)),
-                np.maximum(fourier_dist_many(*qb.mirrored_box, group.coords),
-                           lb_keogh_many(qb.lower, qb.upper, group.mirrored)),
-            ])
+            keys = group_bounds(envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
+                                group.coords, group.curves)
             order = np.argsort(keys, kind="stable")
-            opened[gid] = (group, keys[order], order)
-            heapq.heappush(heap, (float(keys[order[0]]), counter, _CURSOR, gid, 0))
+            keys = keys[order]
+            opened[gid] = (group, keys, order)
+            heapq.heappush(heap, (float(keys[0]), counter, _CURSOR, gid, 0))
             counter += 1
             continue
         group, keys, order = opened[gid]
-        if group.object in done:
+        owner = group.object
+        if owner in done:
             continue
         n = len(group.views)
         slot = int(order[position])
         view, mirrored = slot % n, slot >= n
         if kind == _EXACT:
-            done.add(group.object)
-            result.append(Neighbour(source.object_name(group.object), int(group.views[view]),
-                                    key, mirrored))
+            done.add(owner)
+            result.append(Neighbour(source.object_name(owner), int(group.views[view]), key, mirrored))
             continue
         # a cursor: refine its curve exactly, move on to the group's next curve
-        stats.dtw += 1
-        curve = group.mirrored[view] if mirrored else group.curves[view]
-        heapq.heappush(heap, (dtw(q, curve, r), counter, _EXACT, gid, position))
-        counter += 1
+        limit = min(bound, found.get(owner, math.inf))
+        if key > limit:  # so are the group's later curves (sorted), and limits only shrink
+            continue
         if position + 1 < len(keys):
             heapq.heappush(heap, (float(keys[position + 1]), counter, _CURSOR, gid, position + 1))
             counter += 1
+        stats.dtw += 1
+        curve = group.mirrored[view] if mirrored else group.curves[view]
+        distance = float(_cascade_dtw_kernel(q, curve, r, limit))
+        if distance > limit:  # abandoned (inf): it can neither enter the result nor improve
+            continue
+        heapq.heappush(heap, (distance, counter, _EXACT, gid, position))
+        counter += 1
+        if distance < found.get(owner, math.inf):
+            found[owner] = distance
+            if len(found) >= k and distance < bound:
+                bound = sorted(found.values())[k - 1]
     stats.seconds = time.perf_counter() - start
     return result, stats
 

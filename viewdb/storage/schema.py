@@ -14,8 +14,9 @@ curves          the view's centroid distance curve (float32 blob)
 fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob)
 sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
 index_groups    R-tree entries: a few views of one object in one tier (``full`` or
-                ``sparse``), with their MBR in the indexed Fourier coordinates and a
-                copy of their curves (one read per group at search time)
+                ``sparse``), with their MBR in the indexed Fourier coordinates, the
+                per-sample range of their curves and a copy of the curves (one read
+                per group at search time)
 rtree_pages     the libspatialindex pages of each tier's R-tree (one BLOB per page)
 rtree_meta      each tier's R-tree: dimension and header page
 """
@@ -129,11 +130,14 @@ index_groups = Table(
     Column("id", Integer, primary_key=True),
     Column("tier", String, nullable=False),
     Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
-    #: int64 (n,) view ids; float32 (n, N) curves; float64 (d,) MBR corners
+    #: int64 (n,) view ids; float32 (n, N) curves; float64 (d,) MBR corners; float32 (N,)
+    #: per-sample range of the curves
     Column("view_ids", LargeBinary, nullable=False),
     Column("curves", LargeBinary, nullable=False),
     Column("lo", LargeBinary, nullable=False),
     Column("hi", LargeBinary, nullable=False),
+    Column("curve_lo", LargeBinary, nullable=False),
+    Column("curve_hi", LargeBinary, nullable=False),
 )
 Index("ix_index_groups_object", index_groups.c.object_id)
 Index("ix_index_groups_tier", index_groups.c.tier)

@@ -89,11 +89,13 @@ def write_groups(
         try:
             for group in group_points(coords, group_views):
                 lo, hi = padded_mbr(coords[group])
+                grouped = tier_curves[group]
                 gid = raw.execute(
-                    "INSERT INTO index_groups (tier, object_id, view_ids, curves, lo, hi)"
-                    " VALUES (?, ?, ?, ?, ?, ?)",
-                    (tier, int(object_id), encode_array(ids[sel][group]),
-                     encode_array(tier_curves[group]), encode_array(lo), encode_array(hi)),
+                    "INSERT INTO index_groups (tier, object_id, view_ids, curves, lo, hi,"
+                    " curve_lo, curve_hi) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                    (tier, int(object_id), encode_array(ids[sel][group]), encode_array(grouped),
+                     encode_array(lo), encode_array(hi), encode_array(grouped.min(axis=0)),
+                     encode_array(grouped.max(axis=0))),
                 ).lastrowid
                 index.insert_box(int(gid), lo, hi)
                 counts[tier] += 1
@@ -142,26 +144,33 @@ class StoredTier:
         self.conn = conn
         self.tier = tier
         self.index = FourierIndex.open(conn, tier)
-        self._owner: dict[int, int] = dict(
-            conn.execute("SELECT id, object_id FROM index_groups WHERE tier = ?", (tier,))
+        rows = conn.execute(
+            "SELECT id, object_id, lo, hi, curve_lo, curve_hi FROM index_groups WHERE tier = ?"
+            " ORDER BY id",
+            (tier,),
+        ).fetchall()
+        self.n_groups = len(rows)
+        self._owner = np.array([r[1] for r in rows], dtype=np.int64)
+        self._ids = np.array([r[0] for r in rows], dtype=np.int64)
+        self._lo, self._hi, self._curve_lo, self._curve_hi = (
+            np.array([decode_array(r[i], dtype, (None,)) for r in rows], dtype=np.float64)
+            for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
         )
         self._names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
         self._groups: OrderedDict[int, Group] = OrderedDict()
-        self.n_groups = len(self._owner)
 
     def close(self) -> None:
         self.index.discard()
 
     def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
-        found: dict[int, float] = {}
-        for lo, hi in (query.box, query.mirrored_box):
-            gids, glo, ghi = self.index.intersection_boxes(lo - radius, hi + radius)
-            if not len(gids):
-                continue
-            keys = query.mindist(glo, ghi)
-            for gid, key in zip(gids.tolist(), keys.tolist(), strict=True):
-                found[gid] = key
-        return [(gid, key, self._owner[gid]) for gid, key in found.items()]
+        hits = [self.index.intersection(lo - radius, hi + radius)
+                for lo, hi in (query.box, query.mirrored_box)]
+        gids = np.union1d(*hits)
+        if not len(gids):
+            return []
+        at = np.searchsorted(self._ids, gids)
+        keys = query.group_keys(self._lo[at], self._hi[at], self._curve_lo[at], self._curve_hi[at])
+        return list(zip(gids.tolist(), keys.tolist(), self._owner[at].tolist(), strict=True))
 
     def group(self, gid: int) -> Group:
         group = self._groups.get(gid)
