@@ -79,6 +79,10 @@ def ingest(
     db: DbOption,
     gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).")] = None,
     image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).")] = None,
+    client_gap: Annotated[
+        float | None,
+        typer.Option(help="Sparse (client) tier grid gap, a multiple of --gap (new db; default 30)."),
+    ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 1,
     no_skim: Annotated[
         bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
@@ -92,7 +96,8 @@ def ingest(
     --no-skim.
     """
     files = viewdb.describe_paths(paths)
-    with viewdb.open(db, gap=gap, image_size=image_size) as vdb, _progress() as bar:
+    with viewdb.open(db, gap=gap, image_size=image_size, client_gap=client_gap) as vdb, \
+            _progress() as bar:
         task = bar.add_task("ingest", total=None)
 
         def on_progress(p: viewdb.IngestProgress) -> None:
@@ -136,6 +141,9 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
+    for tier, t in data.tiers.items():
+        out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
+                  f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")
     table = Table("object", "faces", "type", "periods", "views", "grid", "no silhouette", "ingest s")
     for o in data.objects:
         sym = o.symmetry

@@ -137,3 +137,25 @@ def test_an_upgraded_file_is_searched_through_its_new_r_trees(tmp_path):
         hits, _ = db.search(q, k=2)
         expected = brute_force_knn(q, arrays, 2, 6)
         assert [h.object for h in hits] == [e.object for e in expected] and hits[0].object == "cone"
+
+
+@pytest.mark.parametrize("gap, client_gap", [(20, 50), (30, 20), (30, 75)])
+def test_a_client_gap_off_the_server_grid_is_refused_before_any_file_is_made(tmp_path, gap, client_gap):
+    path = tmp_path / "new.db"
+    with pytest.raises(viewdb.ViewDBError, match="client gap must be a multiple"):
+        viewdb.open(path, gap=gap, client_gap=client_gap)
+    assert not path.exists()
+
+
+def test_info_reports_both_tiers(tiered_db, capsys):
+    from viewdb_cli.main import main
+
+    with viewdb.open(tiered_db, create=False) as db:
+        tiers = db.info().tiers
+        full, _ = db.search_tier("full")
+        sparse, _ = db.search_tier("sparse")
+    assert tiers["full"]["views"] == len(full.curves) and tiers["sparse"]["views"] == len(sparse.curves)
+    assert tiers["full"]["gap"] == 30 and tiers["sparse"]["gap"] == 90
+    assert tiers["sparse"]["groups"] <= tiers["full"]["groups"] and tiers["full"]["rtree_bytes"] > 0
+    assert main(["info", "--db", str(tiered_db)]) == 0
+    assert "sparse tier: 90° grid" in capsys.readouterr().out

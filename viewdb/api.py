@@ -136,11 +136,14 @@ class DatabaseInfo:
     config: BuildConfig
     objects: list[ObjectInfo]
     rows: dict[str, int]
+    #: Per tier (``full``, ``sparse``): its grid gap, views, groups and R-tree bytes.
+    tiers: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "path": self.path, "file_bytes": self.file_bytes,
             "schema_version": self.schema_revision, "gap": self.config.gap,
+            "client_gap": self.config.client_gap, "tiers": self.tiers,
             "image_size": self.config.render.image_size,
             "curve_samples": self.config.features.curve_samples,
             "fourier_coefficients": self.config.features.fourier_coefficients,
@@ -394,6 +397,11 @@ class ViewDB:
             path=str(self.path), file_bytes=_file_bytes(self.path),
             schema_revision=self._store.revision() or SCHEMA_REVISION, config=self.config,
             objects=self.objects(), rows=self._store.table_counts(),
+            tiers={
+                tier: {"gap": self.config.gap if tier == "full" else self.config.client_gap,
+                       **self._store.tier_sizes().get(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})}
+                for tier in TIERS
+            },
         )
 
 
@@ -412,25 +420,32 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     create: bool = True,
     gap: float | None = None,
     image_size: int | None = None,
+    client_gap: float | None = None,
     config: BuildConfig | None = None,
 ) -> ViewDB:
     """Open (or create) a view database file.
 
     A new file takes its build configuration from ``config`` (default
-    :class:`~viewdb.config.BuildConfig`), with ``gap`` and ``image_size`` overriding it. An
-    existing file keeps the configuration it was built with; asking for a different
-    ``gap`` or ``image_size`` raises :class:`~viewdb.errors.ViewDBError`.
+    :class:`~viewdb.config.BuildConfig`), with ``gap``, ``image_size`` and ``client_gap``
+    (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°)
+    overriding it. An existing file keeps the configuration it was built with; asking for
+    a different one raises :class:`~viewdb.errors.ViewDBError`.
     """
+    try:  # a bad configuration is refused before any file is touched
+        wanted = config or BuildConfig()
+        if gap is not None:
+            wanted = replace(wanted, gap=float(gap))
+        if image_size is not None:
+            wanted = replace(wanted, render=replace(wanted.render, image_size=image_size))
+        if client_gap is not None:
+            wanted = replace(wanted, index=replace(wanted.index, client_gap=float(client_gap)))
+        wanted = wanted.resolved()
+    except ValueError as exc:
+        raise ViewDBError(str(exc), path) from exc
     store = Store(path, create=create)
     try:
         stored = store.build_config()
         if stored is None:
-            wanted = config or BuildConfig()
-            if gap is not None:
-                wanted = replace(wanted, gap=float(gap))
-            if image_size is not None:
-                wanted = replace(wanted, render=replace(wanted.render, image_size=image_size))
-            wanted = wanted.resolved()
             store.set_build_config(wanted)
             stored = wanted
         else:
@@ -443,6 +458,10 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
                 raise ViewDBError(
                     f"was built with --image-size {stored.render.image_size}, not {image_size}",
                     path,
+                )
+            if client_gap is not None and float(client_gap) != stored.client_gap:
+                raise ViewDBError(
+                    f"was built with --client-gap {stored.client_gap:g}, not {client_gap:g}", path
                 )
         return ViewDB(store, stored)
     except BaseException:

@@ -404,4 +404,26 @@ class Store:
                 )
             keypoints = sa.func.coalesce(sa.func.sum(s.sift_features.c.count), 0)
             out["sift_keypoints"] = int(conn.execute(sa.select(keypoints)).scalar_one())
+            out["index_groups"] = int(
+                conn.execute(sa.select(sa.func.count()).select_from(s.index_groups)).scalar_one()
+            )
+            out["rtree_pages"] = int(
+                conn.execute(sa.select(sa.func.count()).select_from(s.rtree_pages)).scalar_one()
+            )
+        return out
+
+    def tier_sizes(self) -> dict[str, dict[str, int]]:
+        """Per tier: views, groups (R-tree entries) and bytes of R-tree pages."""
+        g, p = s.index_groups, s.rtree_pages
+        out: dict[str, dict[str, int]] = {}
+        with self.read() as conn:
+            for tier, blob in conn.execute(sa.select(g.c.tier, g.c.view_ids)):
+                entry = out.setdefault(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})
+                entry["views"] += len(decode_array(blob, np.int64, (None,)))
+                entry["groups"] += 1
+            for tier, size in conn.execute(
+                sa.select(p.c.tier, sa.func.sum(sa.func.length(p.c.data))).group_by(p.c.tier)
+            ):
+                out.setdefault(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})
+                out[tier]["rtree_bytes"] = int(size or 0)
         return out
