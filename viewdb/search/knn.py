@@ -35,6 +35,7 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -166,9 +167,12 @@ class TierSource(Protocol):
     #: Number of groups in the tier.
     n_groups: int
 
-    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+    def groups_within(
+        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
+    ) -> list[tuple[int, float, int]]:
         """``(group id, key, object)`` of (at least) every group whose MINDIST is ``<=
-        radius``; ``key`` is :meth:`QueryBoxes.group_keys` of the group."""
+        radius``, except those in ``skip``; ``key`` is :meth:`QueryBoxes.group_keys` of the
+        group."""
         ...
 
     def group(self, gid: int) -> Group: ...
@@ -215,9 +219,12 @@ class TierArrays:
     def n_groups(self) -> int:
         return len(self.groups)
 
-    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+    def groups_within(
+        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
+    ) -> list[tuple[int, float, int]]:
         mind = query.group_keys(self.mbr_lo, self.mbr_hi, self.curve_lo[:0], self.curve_hi[:0])
-        hits = np.flatnonzero(mind <= radius)
+        hits = np.array([g for g in np.flatnonzero(mind <= radius).tolist() if g not in skip],
+                        dtype=np.int64)
         if not len(hits):
             return []
         keys = query.group_keys(self.mbr_lo[hits], self.mbr_hi[hits], self.curve_lo[hits],
@@ -280,11 +287,10 @@ def knn(
         while not exhausted and (not heap or heap[0][0] > radius):
             radius = max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS)
             stats.expansions += 1
-            for gid, key, owner in source.groups_within(qb, radius):
-                if gid not in seen:
-                    seen.add(gid)
-                    heap.append((key, counter, _GROUP, gid, owner))
-                    counter += 1
+            for gid, key, owner in source.groups_within(qb, radius, seen):
+                seen.add(gid)
+                heap.append((key, counter, _GROUP, gid, owner))
+                counter += 1
             heapq.heapify(heap)
             exhausted = len(seen) >= source.n_groups
         if not heap:

@@ -18,6 +18,7 @@ import sqlite3
 import threading
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -162,10 +163,14 @@ class StoredTier:
     def close(self) -> None:
         self.index.discard()
 
-    def groups_within(self, query: QueryBoxes, radius: float) -> list[tuple[int, float, int]]:
+    def groups_within(
+        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
+    ) -> list[tuple[int, float, int]]:
         hits = [self.index.intersection(lo - radius, hi + radius)
                 for lo, hi in (query.box, query.mirrored_box)]
         gids = np.union1d(*hits)
+        if skip:
+            gids = gids[[g not in skip for g in gids.tolist()]]
         if not len(gids):
             return []
         at = np.searchsorted(self._ids, gids)
