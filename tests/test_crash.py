@@ -25,9 +25,9 @@ from tests.conftest import sample_files
 INGEST = [sys.executable, "-m", "viewdb_cli.main", "ingest"]
 
 
-def _ingest_cmd(db, files, jobs=1):
+def _ingest_cmd(db, files, jobs=1, extra=()):
     return [*INGEST, *map(str, files), "--db", str(db), "--gap", "45", "--image-size", "64",
-            "--jobs", str(jobs)]
+            "--jobs", str(jobs), *extra]
 
 
 def _assert_whole(db):
@@ -42,20 +42,29 @@ def _assert_whole(db):
 
 
 def _kill_runs(tmp_path, runs, seed):
+    """Kill ``runs`` ingests at random moments; a catalogue that gets complete is set aside
+    and the next kills hit a fresh file. Returns the objects present after each kill."""
     rng = np.random.default_rng(seed)
-    db = tmp_path / "killed.db"
     files = sample_files()
+    generation = 0
     counts = []
     for i in range(runs):
-        proc = subprocess.Popen(_ingest_cmd(db, files, jobs=1 + i % 2), stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, start_new_session=True)
-        time.sleep(rng.uniform(0.5, 8.0))
+        db = tmp_path / f"killed{generation}.db"
+        # the whole grid at 30° (144 views per object): long enough that kills land mid-ingest
+        cmd = _ingest_cmd(db, files, jobs=1 + i % 2, extra=("--no-skim",))
+        cmd[cmd.index("--gap") + 1] = "30"
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True)
+        time.sleep(rng.uniform(0.5, 6.0))
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
         if db.exists():
             counts.append(_assert_whole(db))
+            if counts[-1] == len(files):
+                generation += 1
     # re-running completes the catalogue
-    done = subprocess.run(_ingest_cmd(db, files), capture_output=True, text=True, timeout=600)
+    cmd[cmd.index("--jobs") + 1] = "2"
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert _assert_whole(db) == len(files)
     return counts
@@ -64,6 +73,7 @@ def _kill_runs(tmp_path, runs, seed):
 def test_sigkill_at_random_moments_leaves_whole_objects(tmp_path):
     counts = _kill_runs(tmp_path, runs=4, seed=1)
     assert counts and counts == sorted(counts)  # progress is kept between kills
+    assert counts[-1] < len(sample_files())  # the kills landed mid-ingest
 
 
 @pytest.mark.slow
