@@ -12,6 +12,7 @@ from .api import (
     CandidatePose,
     DatabaseInfo,
     ObjectInfo,
+    Recognition,
     SearchHit,
     StoredView,
     ViewDB,
@@ -19,7 +20,7 @@ from .api import (
     open,
     render_model,
 )
-from .config import BuildConfig, FeatureConfig, RenderConfig, SiftConfig, SkimConfig
+from .config import BuildConfig, FeatureConfig, IndexConfig, RenderConfig, SiftConfig, SkimConfig
 from .errors import (
     FeatureError,
     ImageError,
@@ -34,18 +35,21 @@ from .errors import (
 )
 from .ingest import FileOutcome, IngestProgress, IngestReport
 from .render import RenderedView
+from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .symmetry import SymmetryType
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BuildConfig",
+    "Candidate",
     "CandidatePose",
     "DatabaseInfo",
     "FeatureConfig",
     "FeatureError",
     "FileOutcome",
     "ImageError",
+    "IndexConfig",
     "IngestProgress",
     "IngestReport",
     "MeshError",
@@ -53,11 +57,14 @@ __all__ = [
     "ObjectInfo",
     "PoseError",
     "QueryError",
+    "Recognition",
+    "RefineRequest",
     "RenderConfig",
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
     "SearchHit",
+    "ServerReply",
     "SiftConfig",
     "SkimConfig",
     "StorageError",
@@ -65,6 +72,7 @@ __all__ = [
     "SymmetryType",
     "ViewDB",
     "ViewDBError",
+    "WalkRequest",
     "__version__",
     "describe_paths",
     "open",

@@ -5,6 +5,8 @@ It takes progress callbacks and never prints; the CLI (``cli/``) is a thin shell
 
 from __future__ import annotations
 
+import json
+import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -22,6 +24,17 @@ from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .render import RenderedView, get_renderer
 from .search.knn import SearchStats, TierArrays, knn, objects_within
+from .search.plans import (
+    PLANS,
+    Candidate,
+    RefineRequest,
+    ServerReply,
+    WalkRequest,
+    neighbours_to_candidates,
+    refine,
+    walk,
+)
+from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
@@ -31,6 +44,7 @@ from .symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_pla
 __all__ = [
     "CandidatePose",
     "DatabaseInfo",
+    "Recognition",
     "ObjectInfo",
     "SearchHit",
     "StoredView",
@@ -43,6 +57,24 @@ __all__ = [
 MESH_CACHE_SIZE = 8
 #: How many regenerated (pruned or off-grid) views a database keeps in memory.
 VIEW_CACHE_SIZE = 256
+#: How many grid-view curves a database keeps in memory for CS2 walks.
+CURVE_CACHE_SIZE = 65536
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """What :meth:`ViewDB.recognise` found: the objects, best first, and what it cost."""
+
+    plan: str
+    results: list[Candidate]
+    #: The client half's answer (CS1/CS2; empty for ``server``).
+    client_results: list[Candidate]
+    client_ms: float
+    server_ms: float
+    server_stats: dict[str, float]
+    #: JSON bytes the client would send and receive (CS1/CS2).
+    bytes_sent: int
+    bytes_received: int
 
 
 @dataclass(frozen=True)
@@ -163,6 +195,8 @@ class ViewDB:
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._plans: dict[str, ViewClasses] = {}
         self._reader: TierReader | None = None
+        self._role: str | None = None
+        self._curves: OrderedDict[tuple[str, float, float], NDArray[np.float64] | None] = OrderedDict()
 
     @property
     def path(self) -> Path:
@@ -198,6 +232,12 @@ class ViewDB:
         transaction. Files that fail are listed in the report's ``failed`` and the rest
         still go in.
         """
+        if self.role == "client":
+            raise ViewDBError(
+                "is a client database (export-client): ingest into the full database and "
+                "export again", self.path,
+            )
+
         def write(desc: ObjectDescription) -> None:
             self._store.write_object(desc, self.config)
             self._forget(desc.name)
@@ -207,7 +247,113 @@ class ViewDB:
             jobs=jobs, skim=skim, progress=progress,
         )
 
+    @property
+    def role(self) -> str:
+        """``"full"`` (meshes, SIFT, both tiers) or ``"client"`` (from :meth:`export_client`)."""
+        if self._role is None:
+            self._role = self._store.role()
+        return self._role
+
+    def export_client(
+        self, out: str | Path, *, client_gap: float | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> BuildConfig:
+        """Write the small client file (sparse tier only, at ``client_gap``; default this
+        file's client gap) to ``out``, which must not exist. Returns its configuration."""
+        return export_client(self._store, out, client_gap, progress)
+
+    # ------------------------------------------------------------------ plans
+    def client_candidates(
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
+    ) -> tuple[list[Candidate], SearchStats]:
+        """The client half of CS1/CS2: the k nearest objects on this file's sparse tier."""
+        q = self._query_curve(curve, k, "sparse")
+        with self._tier_reader().snapshot() as reader:
+            source = reader.tier("sparse")
+            if source.n_groups == 0:
+                raise QueryError("the database holds no views", self.path)
+            found, stats = knn(q, source, k, band)
+            angles = reader.view_angles([n.view for n in found])
+        return neighbours_to_candidates(found, angles), stats
+
+    def refine(self, request: RefineRequest) -> ServerReply:
+        """The server half of CS1 (Algorithm 3): exact, the same answer as ``plan="server"``
+        whenever the client's candidates come from this file's sparse tier (or a client
+        file exported from it)."""
+        self._full_tier_only()
+        q = self._query_curve(request.curve, request.k, "full")
+        with self._tier_reader().snapshot() as reader:
+            found, stats = refine(reader.tier("full"), replace(request, curve=q))
+            angles = reader.view_angles([n.view for n in found])
+        return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
+
+    def walk(self, request: WalkRequest) -> ServerReply:
+        """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views."""
+        self._full_tier_only()
+        q = self._query_curve(request.curve, request.k, "full")
+        found, stats = walk(replace(request, curve=q), self._grid_curve, self.config.gap)
+        return ServerReply(found, stats)
+
+    def _full_tier_only(self) -> None:
+        if self.role == "client":
+            raise QueryError("a client database has no full tier; ask the server", self.path)
+
+    def _grid_curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float64] | None:
+        """The curve of grid view (h, v) of ``name`` from the stored views (a pruned view is
+        its stand-in's curve, reversed if mirrored); None where there is no silhouette."""
+        key = (name, azimuth, elevation)
+        if key in self._curves:
+            return self._curves[key]
+        try:
+            stored, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
+        except KeyError:
+            stored, mirrored = (azimuth, elevation), False
+        curve = self._store.curve(name, *stored)
+        out = None
+        if curve is not None:
+            out = np.asarray(curve, np.float64)
+            if mirrored:
+                out = np.ascontiguousarray(np.roll(out[::-1], 1))
+        self._curves[key] = out
+        while len(self._curves) > CURVE_CACHE_SIZE:
+            self._curves.popitem(last=False)
+        return out
+
+    def recognise(
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
+        client: ViewDB | None = None,
+    ) -> Recognition:
+        """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``).
+
+        ``client`` is the file the client half runs on (a client file from
+        :meth:`export_client`, or any full file); default this file.
+        """
+        if plan not in PLANS:
+            raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+        q = self._query_curve(curve, k, "full")
+        start = time.perf_counter()
+        if plan == "server":
+            hits, stats = self.search(q, k, band=band, tier="full")
+            found = [Candidate(h.object, h.distance, h.azimuth, h.elevation, h.mirrored) for h in hits]
+            return Recognition(plan, found, [], 0.0, (time.perf_counter() - start) * 1e3,
+                               stats.to_dict(), 0, 0)
+        side = client or self
+        mine, _ = side.client_candidates(q, k, band=band)
+        middle = time.perf_counter()
+        if plan == "cs1":
+            request: RefineRequest | WalkRequest = RefineRequest(q, band, k, mine)
+            reply = self.refine(request)
+        else:
+            request = WalkRequest(q, band, k, side.config.client_gap, mine)
+            reply = self.walk(request)
+        end = time.perf_counter()
+        sent = len(json.dumps(request.to_dict()))
+        received = len(json.dumps(reply.to_dict()))
+        return Recognition(plan, reply.results, mine, (middle - start) * 1e3, (end - middle) * 1e3,
+                           reply.stats, sent, received)
+
     def _forget(self, name: str) -> None:
+        self._curves.clear()
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         for key in [k for k in self._regenerated if k[0] == name]:

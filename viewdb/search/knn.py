@@ -35,6 +35,7 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Mapping
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -179,6 +180,8 @@ class TierSource(Protocol):
 
     def object_name(self, index: int) -> str: ...
 
+    def object_index(self, name: str) -> int | None: ...
+
 
 @dataclass
 class TierArrays:
@@ -239,6 +242,9 @@ class TierArrays:
     def object_name(self, index: int) -> str:
         return self.names[index]
 
+    def object_index(self, name: str) -> int | None:
+        return self.names.index(name) if name in self.names else None
+
 
 def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: int) -> list[Neighbour]:
     """The reference: exact distance to every view, best view per object, top k objects."""
@@ -257,9 +263,21 @@ _GROUP, _CURSOR, _EXACT = 0, 1, 2
 
 
 def knn(
-    query: NDArray[np.floating], source: TierSource, k: int, r: int
+    query: NDArray[np.floating],
+    source: TierSource,
+    k: int,
+    r: int,
+    *,
+    upper: float = math.inf,
+    known: Mapping[int, float] | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`.
+
+    ``upper`` and ``known`` are what a CS1 client hands the server (Algorithm 3): an upper
+    bound of the k-th distance (the client's k-th distance on the sparse tier, whose views
+    are all in the full tier), and upper bounds of some objects' distances (object index
+    → the client's distance). Groups whose key exceeds ``upper`` are never fetched; the
+    result is unchanged as long as the bounds hold.
 
     DTW runs after the UCR cascade (LB_Keogh against the candidate's envelope) and
     abandons early past ``min(U, b_o)``: ``U`` the k-th smallest of the best distances
@@ -281,18 +299,23 @@ def knn(
     exhausted = source.n_groups == 0
     result: list[Neighbour] = []
     done: set[int] = set()
-    found: dict[int, float] = {}  # best exact distance computed so far, per object
-    bound = math.inf  # U: the k-th smallest of found
+    # best distance known so far per object (computed here, or an upper bound handed in)
+    found: dict[int, float] = dict(known or {})
+    bound = sorted(found.values())[k - 1] if len(found) >= k else math.inf  # U: k-th of found
+    if math.isfinite(upper):  # widened by a hair, like the limits below
+        upper = upper * (1.0 + 1e-9) + 1e-12
+    bound = min(bound, upper)
     while len(result) < k:
         while not exhausted and (not heap or heap[0][0] > radius):
-            radius = max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS)
+            radius = min(max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS), upper)
             stats.expansions += 1
             for gid, key, owner in source.groups_within(qb, radius, seen):
                 seen.add(gid)
-                heap.append((key, counter, _GROUP, gid, owner))
-                counter += 1
+                if key <= upper:
+                    heap.append((key, counter, _GROUP, gid, owner))
+                    counter += 1
             heapq.heapify(heap)
-            exhausted = len(seen) >= source.n_groups
+            exhausted = len(seen) >= source.n_groups or radius >= upper
         if not heap:
             break
         key, _, kind, gid, position = heapq.heappop(heap)
@@ -324,7 +347,10 @@ def knn(
             result.append(Neighbour(source.object_name(owner), int(group.views[view]), key, mirrored))
             continue
         # a cursor: refine its curve exactly, move on to the group's next curve
-        limit = min(bound, found.get(owner, math.inf))
+        # bounds and DTW sum the same squares in different orders: a bound may exceed the
+        # distance it bounds by a few ulps, so a limit that *equals* a distance (an upper
+        # bound handed in, or a tie) is widened by a hair before anything is dropped
+        limit = min(bound, found.get(owner, math.inf)) * (1.0 + 1e-9) + 1e-12
         if key > limit:  # so are the group's later curves (sorted), and limits only shrink
             continue
         if position + 1 < len(keys):
@@ -340,7 +366,7 @@ def knn(
         if distance < found.get(owner, math.inf):
             found[owner] = distance
             if len(found) >= k and distance < bound:
-                bound = sorted(found.values())[k - 1]
+                bound = min(bound, sorted(found.values())[k - 1])
     stats.seconds = time.perf_counter() - start
     return result, stats
 

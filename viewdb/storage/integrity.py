@@ -74,13 +74,14 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
             report.add("sqlite integrity_check: " + "; ".join(result[:5]))
         for row in conn.exec_driver_sql("PRAGMA foreign_key_check").all()[:MAX_LISTED]:
             report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
-        _check_objects(conn, config.gap, report)
-        _check_views(conn, config, report, progress)
-        _check_tiers(conn.connection.driver_connection, config, report)
+        client = store.role() == "client"
+        _check_objects(conn, config.gap, report, client)
+        _check_views(conn, config, report, progress, client)
+        _check_tiers(conn.connection.driver_connection, config, report, client)
     return report
 
 
-def _check_objects(conn: sa.Connection, gap: float, report: CheckReport) -> None:
+def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client: bool) -> None:
     o, v = s.objects, s.views
     grid = len(grid_views(gap))
     count = sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
@@ -107,6 +108,8 @@ def _check_objects(conn: sa.Connection, gap: float, report: CheckReport) -> None
             decode_array(centre, np.float64, (3,))
         except StorageError as exc:
             report.add(f"object {name!r}: centre: {exc.message}")
+        if client:
+            continue  # a client file has no meshes and only the client grid's views
         if bytes(magic) != b"glTF":
             report.add(f"object {name!r}: stored mesh is not a GLB")
         if n_views + empty != expected:
@@ -116,7 +119,7 @@ def _check_objects(conn: sa.Connection, gap: float, report: CheckReport) -> None
             )
 
 
-def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: ignore[no-untyped-def]
+def _check_views(conn, config, report: CheckReport, progress, client) -> None:  # type: ignore[no-untyped-def]
     v, c, f, k = s.views, s.curves, s.fourier_points, s.sift_features
     n_curve, m = config.features.curve_samples, config.features.fourier_coefficients
     total = conn.execute(sa.select(sa.func.count()).select_from(v)).scalar_one()
@@ -136,15 +139,18 @@ def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: 
     for row in conn.execute(query):
         vid, az, el, curve_blob, fourier_blob, count, kp, desc, pts = row
         where = f"view {vid} ({az:g}, {el:g})"
-        if curve_blob is None or fourier_blob is None or kp is None:
+        if client and kp is not None:
+            report.add(f"{where}: a client file holds no SIFT features")
+        elif curve_blob is None or fourier_blob is None or (kp is None and not client):
             report.add(f"{where}: missing curve, Fourier point or SIFT row")
         else:
             try:
                 curve = decode_array(curve_blob, np.float32, (n_curve,))
                 fourier = decode_array(fourier_blob, np.complex128, (m,))
-                decode_array(kp, np.float32, (count, 5))
-                decode_array(desc, np.uint8, (count, 128))
-                decode_array(pts, np.float32, (count, 3))
+                if not client:
+                    decode_array(kp, np.float32, (count, 5))
+                    decode_array(desc, np.uint8, (count, 128))
+                    decode_array(pts, np.float32, (count, 3))
             except StorageError as exc:
                 report.add(f"{where}: {exc.message}")
             else:
@@ -165,7 +171,7 @@ def _check_views(conn, config, report: CheckReport, progress) -> None:  # type: 
     report.checked["views"] = done
 
 
-def _check_tiers(raw, config, report: CheckReport) -> None:  # type: ignore[no-untyped-def]
+def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
     n = config.features.curve_samples
     curves = {}
     for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
@@ -237,8 +243,11 @@ def _check_tiers(raw, config, report: CheckReport) -> None:  # type: ignore[no-u
                         sym = SymmetryType.from_dict(json.loads(symmetry))
                     except (ValueError, KeyError, TypeError):
                         continue  # reported with the objects
-                members = tier_members([(a, e) for _, a, e in stored], config.gap,
-                                       config.client_gap, sym, bool(skimmed))[tier]
+                if client:  # the client file holds the sparse tier's views only
+                    members = range(len(stored)) if tier == "sparse" else range(0)
+                else:
+                    members = tier_members([(a, e) for _, a, e in stored], config.gap,
+                                           config.client_gap, sym, bool(skimmed))[tier]
                 expected = {stored[i][0] for i in members}
                 if in_tier.get(int(oid), set()) != expected:
                     report.add(

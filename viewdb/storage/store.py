@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
+from numpy.typing import NDArray
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
 
@@ -212,12 +213,37 @@ class Store:
             ).first()
         return None if row is None else BuildConfig.from_dict(json.loads(row[0]))
 
-    def set_build_config(self, config: BuildConfig) -> None:
+    def set_build_config(self, config: BuildConfig, role: str = "full") -> None:
         with self.transaction() as conn:
-            conn.execute(sa.delete(s.settings).where(s.settings.c.key == "build"))
+            conn.execute(sa.delete(s.settings).where(s.settings.c.key.in_(("build", "role"))))
             conn.execute(
                 sa.insert(s.settings).values(key="build", value=json.dumps(config.to_dict()))
             )
+            conn.execute(sa.insert(s.settings).values(key="role", value=json.dumps(role)))
+
+    def role(self) -> str:
+        """``"full"`` (built by ingest: meshes, SIFT, both tiers) or ``"client"`` (written by
+        ``export-client``: the sparse tier's curves only, the file that ships to devices)."""
+        with self.read() as conn:
+            row = conn.execute(
+                sa.select(s.settings.c.value).where(s.settings.c.key == "role")
+            ).first()
+        return "full" if row is None else str(json.loads(row[0]))
+
+    def curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
+        """The stored curve of one view (None if that view is not stored)."""
+        v = s.views
+        with self.read() as conn:
+            row = conn.execute(
+                sa.select(s.curves.c.samples)
+                .select_from(
+                    v.join(s.curves, s.curves.c.view_id == v.c.id).join(
+                        s.objects, s.objects.c.id == v.c.object_id)
+                )
+                .where(s.objects.c.name == name, v.c.azimuth == float(azimuth),
+                       v.c.elevation == float(elevation))
+            ).first()
+        return None if row is None else decode_array(row[0], np.float32, (None,))
 
     # ----------------------------------------------------------------- objects
     def object_hashes(self) -> dict[str, str]:

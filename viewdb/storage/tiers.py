@@ -196,6 +196,13 @@ class StoredTier:
     def object_name(self, index: int) -> str:
         return self._names[index]
 
+    def object_index(self, name: str) -> int | None:
+        """The source's index of object ``name`` (None if it has none)."""
+        for index, known in self._names.items():
+            if known == name:
+                return index
+        return None
+
 
 def index_stored_objects(conn: Any, config: BuildConfig) -> int:
     """Index every stored object's views in both tiers (for files from before the

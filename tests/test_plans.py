@@ -1,0 +1,155 @@
+"""The three query plans: CS1 equals server exactly; CS2 walks to real views; the client
+file holds the sparse tier only and is enough for the client half."""
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import viewdb
+from viewdb.features import distance_curve, mirror_curve
+from viewdb.search.bounds import dtw
+from viewdb.search.knn import brute_force_knn
+
+
+@pytest.fixture(scope="module")
+def client_file(tiered_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("client") / "client.db"
+    with viewdb.open(tiered_db, create=False) as db:
+        db.export_client(out, client_gap=60)
+    return out
+
+
+def _queries(db, rng, count):
+    arrays, _ = db.search_tier("full")
+    out = []
+    for i in range(count):
+        if i % 2:
+            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
+            out.append(mirror_curve(q) if rng.random() < 0.5 else q)
+        else:
+            name = arrays.names[rng.integers(len(arrays.names))]
+            out.append(distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128))
+    return out
+
+
+def _same(a, b):
+    assert [c.object for c in a] == [c.object for c in b]
+    np.testing.assert_allclose([c.distance for c in a], [c.distance for c in b], rtol=0, atol=1e-9)
+
+
+def test_cs1_equals_server_with_its_own_sparse_tier_and_with_a_client_file(tiered_db, client_file):
+    rng = np.random.default_rng(11)
+    with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
+        arrays, _ = db.search_tier("full")
+        for q in _queries(db, rng, 16):
+            for k, band in ((1, 6), (3, 2), (5, 0)):
+                server = db.recognise(q, k, band=band, plan="server")
+                _same(server.results, brute_force_knn(q, arrays, k, band))
+                for side in (None, client):
+                    cs1 = db.recognise(q, k, band=band, plan="cs1", client=side)
+                    _same(cs1.results, server.results)
+                    assert cs1.bytes_sent > 0 and cs1.bytes_received > 0
+
+
+@settings(max_examples=40)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 8))
+def test_cs1_equals_server_on_random_perturbations(tiered_db, client_file, seed, k, band):
+    rng = np.random.default_rng(seed)
+    with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
+        arrays, _ = db.search_tier("full")
+        q = arrays.curves[rng.integers(len(arrays.curves))]
+        q = q * rng.uniform(0.9, 1.1) + rng.normal(0, rng.choice([0.0, 0.02, 0.2]), 128)
+        server = db.recognise(q, k, band=band, plan="server")
+        _same(db.recognise(q, k, band=band, plan="cs1", client=client).results, server.results)
+
+
+def test_cs2_walks_to_real_views_never_better_than_exact(tiered_db, client_file):
+    rng = np.random.default_rng(12)
+    with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
+        agree = 0
+        queries = _queries(db, rng, 12)
+        for q in queries:
+            server = {c.object: c.distance for c in db.recognise(q, 6, plan="server").results}
+            cs2 = db.recognise(q, 3, plan="cs2", client=client)
+            assert cs2.client_results and len(cs2.results) <= 3
+            assert {c.object for c in cs2.results} <= {c.object for c in cs2.client_results}
+            for c in cs2.results:
+                # a real view of the full grid at the reported distance, never below the exact
+                curve = db.view(c.object, c.azimuth, c.elevation).curve
+                target = mirror_curve(curve) if c.mirrored else curve
+                assert dtw(q, target, 6) == pytest.approx(c.distance, abs=1e-5)
+                assert c.object not in server or c.distance >= server[c.object] - 1e-9
+            top = db.recognise(q, 1, plan="server").results[0].object
+            agree += cs2.results[0].object == top
+        assert agree >= len(queries) // 2  # a heuristic, but not a coin toss
+
+
+def test_client_file_holds_the_sparse_tier_only(tiered_db, client_file):
+    with viewdb.open(client_file, create=False) as client, viewdb.open(tiered_db, create=False) as db:
+        assert client.role == "client" and client.config.client_gap == 60
+        assert client.check().ok, client.check().problems
+        info = client.info()
+        assert info.rows["sift_features"] == 0 and info.tiers["full"]["views"] == 0
+        assert info.tiers["sparse"]["views"] == info.rows["views"] > 0
+        assert [o.name for o in client.objects()] == [o.name for o in db.objects()]
+        assert client_file.stat().st_size < 0.25 * db.info().file_bytes
+        # its sparse tier is the 60° client grid of the full file
+        from viewdb.search.grouping import tier_members
+
+        for o in db.objects():
+            stored = db.views(o.name)
+            want = tier_members(stored, db.config.gap, 60, o.symmetry, o.skimmed)["sparse"]
+            assert sorted(client.views(o.name)) == sorted(stored[i] for i in want)
+        with pytest.raises(viewdb.ViewDBError, match="client database"):
+            client.ingest([])
+        with pytest.raises(viewdb.QueryError, match="no full tier"):
+            client.refine(viewdb.RefineRequest(np.ones(128), 6, 1, []))
+
+
+def test_export_refuses_to_overwrite_and_leaves_nothing_when_it_fails(tiered_db, tmp_path, monkeypatch):
+    out = tmp_path / "c.db"
+    out.write_bytes(b"precious")
+    with viewdb.open(tiered_db, create=False) as db:
+        with pytest.raises(viewdb.ViewDBError, match="already exists"):
+            db.export_client(out)
+        assert out.read_bytes() == b"precious"
+        with pytest.raises(viewdb.ViewDBError, match="client gap must be a multiple"):
+            db.export_client(tmp_path / "d.db", client_gap=45)
+        from viewdb.storage import export as export_module
+
+        def boom(*args, **kwargs):
+            raise viewdb.StorageError("disk on fire")
+
+        monkeypatch.setattr(export_module, "write_groups", boom)
+        with pytest.raises(viewdb.StorageError):
+            db.export_client(tmp_path / "e.db")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.db"]
+
+
+@settings(max_examples=80)
+@given(st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
+    max_leaves=20,
+))
+def test_malformed_requests_get_a_query_error(data):
+    for cls in (viewdb.RefineRequest, viewdb.WalkRequest):
+        try:
+            cls.from_dict(data)
+        except viewdb.QueryError:
+            pass
+
+
+def test_requests_round_trip_through_json():
+    req = viewdb.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3,
+                               [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True)])
+    back = viewdb.RefineRequest.from_dict(json.loads(json.dumps(req.to_dict())))
+    assert back.client == req.client and back.k == 3 and np.array_equal(back.curve, req.curve)
+    for bad in ({**req.to_dict(), "curve": [1.0] * 127 + [float("nan")]},
+                {**req.to_dict(), "k": 0}, {**req.to_dict(), "band": -1},
+                {**req.to_dict(), "client": [{"object": "", "distance": 1, "azimuth": 0, "elevation": 0}]}):
+        with pytest.raises(viewdb.QueryError):
+            viewdb.RefineRequest.from_dict(json.loads(json.dumps(bad)))

@@ -1,0 +1,279 @@
+"""Query plans and the narrow interface between a client and a server (paper III.B–III.D).
+
+Three plans answer "which k objects does this distance curve show":
+
+``server``
+    Algorithm 2 on the full tier alone (the paper's S1/S4).
+``cs1``
+    The client runs Algorithm 2 on its sparse tier and sends its result R; the server
+    refines (Algorithm 3) with R's k-th distance as the upper bound and each object's
+    client distance as that object's upper bound. The sparse tier's views are views of
+    the full tier (same curves), so both bounds hold and the answer is exactly the
+    ``server`` answer (:func:`refine`; tests compare them on many queries).
+``cs2``
+    The heuristic neighbour walk of Algorithm 4: from each object's best client view the
+    server evaluates the neighbouring views on ever finer grids, halving the gap from the
+    client grid down to the server grid, and keeps the best (:func:`walk`). Fewer
+    distances computed; it may miss the best view or object.
+
+Everything a client sends or receives is a plain dataclass with ``to_dict``/``from_dict``
+(JSON-able), so putting HTTP between the halves is only transport.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import QueryError
+from .bounds import dtw
+from .knn import Neighbour, SearchStats, TierSource, knn
+
+__all__ = [
+    "PLANS",
+    "Candidate",
+    "RefineRequest",
+    "ServerReply",
+    "WalkRequest",
+    "next_gap",
+    "refine",
+    "walk",
+]
+
+PLANS = ("server", "cs1", "cs2")
+
+
+def _finite(x: Any, what: str) -> float:
+    try:
+        value = float(x)
+    except (TypeError, ValueError) as exc:
+        raise QueryError(f"{what} must be a number, got {x!r}") from exc
+    if not math.isfinite(value):
+        raise QueryError(f"{what} must be finite, got {x!r}")
+    return value
+
+
+def _int(x: Any, what: str, low: int, high: int) -> int:
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
+        raise QueryError(f"{what} must be an integer, got {x!r}")
+    if not low <= int(x) <= high:
+        raise QueryError(f"{what} must be in [{low}, {high}], got {x}")
+    return int(x)
+
+
+def _curve(x: Any, samples: int | None = None) -> NDArray[np.float64]:
+    try:
+        curve = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise QueryError("curve must be a list of numbers") from exc
+    if curve.ndim != 1 or len(curve) < 8 or (samples is not None and len(curve) != samples):
+        raise QueryError(f"curve must have {samples or 'at least 8'} samples, got shape {curve.shape}")
+    if not np.all(np.isfinite(curve)):
+        raise QueryError("curve must contain only finite numbers")
+    return curve
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """An object with its best view found so far and that view's exact distance."""
+
+    object: str
+    distance: float
+    azimuth: float
+    elevation: float
+    mirrored: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
+                "elevation": self.elevation, "mirrored": self.mirrored}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Candidate:
+        if not isinstance(data, dict):
+            raise QueryError("a candidate must be an object")
+        try:
+            name = data["object"]
+            if not isinstance(name, str) or not name:
+                raise QueryError("candidate object must be a non-empty string")
+            mirrored = data.get("mirrored", False)
+            if not isinstance(mirrored, bool):
+                raise QueryError("candidate mirrored must be true or false")
+            distance = _finite(data["distance"], "candidate distance")
+            if distance < 0:
+                raise QueryError("candidate distance must be >= 0")
+            return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
+                       _finite(data["elevation"], "candidate elevation"), mirrored)
+        except KeyError as exc:
+            raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
+
+
+def _candidates(data: Any, limit: int) -> list[Candidate]:
+    if not isinstance(data, list):
+        raise QueryError("candidates must be a list")
+    if len(data) > limit:
+        raise QueryError(f"at most {limit} candidates, got {len(data)}")
+    return [Candidate.from_dict(c) for c in data]
+
+
+#: Largest k a request may ask for (and candidates it may carry).
+MAX_K = 100
+#: Widest Sakoe–Chiba band a request may ask for.
+MAX_BAND = 64
+
+
+@dataclass(frozen=True)
+class RefineRequest:
+    """CS1, client → server: the query curve and the client's top-k on its sparse tier."""
+
+    curve: NDArray[np.float64] = field(repr=False)
+    band: int
+    k: int
+    client: list[Candidate]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"curve": [float(x) for x in self.curve], "band": self.band, "k": self.k,
+                "client": [c.to_dict() for c in self.client]}
+
+    @classmethod
+    def from_dict(cls, data: Any, samples: int | None = None) -> RefineRequest:
+        if not isinstance(data, dict):
+            raise QueryError("request must be an object")
+        try:
+            return cls(_curve(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
+                       _int(data["k"], "k", 1, MAX_K), _candidates(data["client"], MAX_K))
+        except KeyError as exc:
+            raise QueryError(f"request lacks {exc.args[0]!r}") from exc
+
+
+@dataclass(frozen=True)
+class WalkRequest:
+    """CS2, client → server: the query curve, the client grid and the client's top-k."""
+
+    curve: NDArray[np.float64] = field(repr=False)
+    band: int
+    k: int
+    client_gap: float
+    client: list[Candidate]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"curve": [float(x) for x in self.curve], "band": self.band, "k": self.k,
+                "client_gap": self.client_gap, "client": [c.to_dict() for c in self.client]}
+
+    @classmethod
+    def from_dict(cls, data: Any, samples: int | None = None) -> WalkRequest:
+        if not isinstance(data, dict):
+            raise QueryError("request must be an object")
+        try:
+            gap = _finite(data["client_gap"], "client_gap")
+            if not 0 < gap <= 180:
+                raise QueryError(f"client_gap must be in (0, 180], got {gap}")
+            return cls(_curve(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
+                       _int(data["k"], "k", 1, MAX_K), gap, _candidates(data["client"], MAX_K))
+        except KeyError as exc:
+            raise QueryError(f"request lacks {exc.args[0]!r}") from exc
+
+
+@dataclass(frozen=True)
+class ServerReply:
+    """Server → client: the answer, best first, and what it cost."""
+
+    results: list[Candidate]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"results": [c.to_dict() for c in self.results], "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ServerReply:
+        if not isinstance(data, dict) or not isinstance(data.get("results"), list):
+            raise QueryError("reply must be an object with a results list")
+        stats = data.get("stats", {})
+        return cls(_candidates(data["results"], MAX_K),
+                   {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+
+
+def refine(
+    source: TierSource, request: RefineRequest
+) -> tuple[list[Neighbour], SearchStats]:
+    """CS1's server half (Algorithm 3): exact k-NN on ``source`` (the full tier) bounded by
+    the client's k-th distance and its per-object distances."""
+    client = sorted(request.client, key=lambda c: c.distance)
+    upper = client[request.k - 1].distance if len(client) >= request.k else math.inf
+    known: dict[int, float] = {}
+    for c in client:
+        index = source.object_index(c.object)
+        if index is not None:
+            known[index] = min(c.distance, known.get(index, math.inf))
+    return knn(request.curve, source, request.k, request.band, upper=upper, known=known)
+
+
+def next_gap(gap: float, server_gap: float) -> float:
+    """Half of ``gap``, snapped down to a multiple of the server grid (at least one step)."""
+    steps = max(1, math.floor(gap / 2.0 / server_gap + 1e-9))
+    return steps * server_gap
+
+
+def _norm(angle: float) -> float:
+    a = angle % 360.0
+    return 0.0 if abs(a - 360.0) < 1e-9 else a
+
+
+def walk(
+    request: WalkRequest,
+    curve_at: Callable[[str, float, float], NDArray[np.float64] | None],
+    server_gap: float,
+    max_steps: int = 16,
+) -> tuple[list[Candidate], dict[str, float]]:
+    """CS2's server half (Algorithm 4): a neighbour walk per client candidate.
+
+    ``curve_at(object, h, v)`` gives the curve of a server-grid view (None for a view
+    without a silhouette). At each grid gap, from the client's gap halved down to
+    ``server_gap``, the walk moves to the best of the current view's 8 neighbours until
+    none is better, then halves the gap. Returns the top-k objects by their best view.
+    """
+    q = request.curve
+    evaluated: dict[tuple[str, float, float], tuple[float, bool]] = {}
+
+    def distance(name: str, h: float, v: float) -> tuple[float, bool]:
+        key = (name, _norm(h), _norm(v))
+        if key not in evaluated:
+            curve = curve_at(*key)
+            if curve is None:
+                evaluated[key] = (math.inf, False)
+            else:
+                d = dtw(q, curve, request.band)
+                dm = dtw(q, np.roll(curve[::-1], 1), request.band)
+                evaluated[key] = (dm, True) if dm < d else (d, False)
+        return evaluated[key]
+
+    results = []
+    for cand in request.client:
+        h, v = _norm(round(cand.azimuth / server_gap) * server_gap), _norm(
+            round(cand.elevation / server_gap) * server_gap)
+        best, mirrored = distance(cand.object, h, v)
+        gap = max(request.client_gap, server_gap)
+        while gap > server_gap + 1e-9:
+            gap = next_gap(gap, server_gap)
+            for _ in range(max_steps):
+                moves = [(distance(cand.object, h + dh, v + dv), h + dh, v + dv)
+                         for dh in (-gap, 0.0, gap) for dv in (-gap, 0.0, gap) if dh or dv]
+                (d, m), nh, nv = min(moves, key=lambda x: x[0][0])
+                if d >= best:
+                    break
+                best, mirrored, h, v = d, m, _norm(nh), _norm(nv)
+        if math.isfinite(best):
+            results.append(Candidate(cand.object, best, h, v, mirrored))
+    results.sort(key=lambda c: (c.distance, c.object))
+    return results[: request.k], {"dtw": float(2 * len(evaluated))}
+
+
+def neighbours_to_candidates(
+    found: Sequence[Neighbour], angles: dict[int, tuple[float, float]]
+) -> list[Candidate]:
+    """k-NN results as candidates, given ``view id -> (azimuth, elevation)``."""
+    return [Candidate(n.object, n.distance, *angles[n.view], n.mirrored) for n in found]

@@ -1,0 +1,125 @@
+"""``export-client``: the small one-file database that ships to devices.
+
+It holds what a client needs to run its half of CS1/CS2 and nothing else: the objects'
+names and symmetry types, the views of the sparse tier (the client grid, possibly coarser
+than the full file's) with their curves and Fourier points, and the sparse tier's
+R-tree. No meshes, no SIFT features, no full tier. The file is written under a temporary
+name next to the target and renamed into place when complete, so a failed or interrupted
+export leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..config import BuildConfig
+from ..errors import StorageError, ViewDBError
+from ..search.grouping import tier_members
+from ..symmetry import SymmetryType
+from .codecs import decode_array
+from .store import Store
+from .tiers import write_groups
+
+__all__ = ["export_client"]
+
+
+def export_client(
+    source: Store,
+    out: str | Path,
+    client_gap: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> BuildConfig:
+    """Write the client file of ``source`` to ``out``; returns the client's configuration.
+
+    ``client_gap`` (default: the source's client gap) must be a multiple of the source's
+    grid gap. ``out`` must not exist.
+    """
+    out = Path(out)
+    config = source.build_config()
+    if config is None:
+        raise StorageError("has no build configuration", source.path)
+    if source.role() != "full":
+        raise ViewDBError("is a client database; export from the full database", source.path)
+    if out.exists():
+        raise ViewDBError("already exists; remove it or choose another --out", out)
+    try:
+        client = replace(config, index=replace(
+            config.index, client_gap=float(client_gap) if client_gap is not None else config.client_gap))
+    except ValueError as exc:
+        raise ViewDBError(str(exc), source.path) from exc
+    partial = out.with_name(out.name + ".partial")
+    for stale in (partial, Path(f"{partial}-wal"), Path(f"{partial}-shm")):
+        stale.unlink(missing_ok=True)
+    try:
+        target = Store(partial)
+        try:
+            target.set_build_config(client, role="client")
+            _copy(source, target, client, progress)
+        finally:
+            target.close()
+        with sqlite3.connect(partial) as conn:  # fold the WAL in: one self-contained file
+            conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            conn.execute("PRAGMA journal_mode=DELETE")
+            conn.execute("VACUUM")
+        os.replace(partial, out)
+    except BaseException:
+        for stale in (partial, Path(f"{partial}-wal"), Path(f"{partial}-shm")):
+            stale.unlink(missing_ok=True)
+        raise
+    return client
+
+
+def _copy(source: Store, target: Store, client: BuildConfig, progress) -> None:  # type: ignore[no-untyped-def]
+    with source.read() as sconn:
+        src = sconn.connection.driver_connection
+        objects = src.execute(
+            "SELECT id, name, source, content_hash, n_faces, n_vertices, centre, scale,"
+            " empty_views, ingest_seconds, created_at, skimmed, h_type, v_type, h_period,"
+            " v_period, symmetry FROM objects ORDER BY name"
+        ).fetchall()
+        for done, row in enumerate(objects, 1):
+            (oid, name, path, digest, faces, vertices, centre, scale, empty, seconds, created,
+             skimmed, h_type, v_type, h_period, v_period, symmetry) = row
+            views = src.execute(
+                "SELECT v.id, v.azimuth, v.elevation, v.grid_gap, c.samples, f.coefficients"
+                " FROM views v JOIN curves c ON c.view_id = v.id"
+                " JOIN fourier_points f ON f.view_id = v.id WHERE v.object_id = ? ORDER BY v.id",
+                (oid,),
+            ).fetchall()
+            sym = None if symmetry is None else SymmetryType.from_dict(json.loads(symmetry))
+            positions = [(float(v[1]), float(v[2])) for v in views]
+            keep = tier_members(positions, client.gap, client.client_gap, sym, bool(skimmed))["sparse"]
+            with target.transaction() as tconn:
+                dst = tconn.connection.driver_connection
+                new_id = dst.execute(
+                    "INSERT INTO objects (name, source, content_hash, n_faces, n_vertices, centre,"
+                    " scale, mesh_glb, empty_views, ingest_seconds, created_at, skimmed, h_type,"
+                    " v_type, h_period, v_period, symmetry)"
+                    " VALUES (?, ?, ?, ?, ?, ?, ?, x'', ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (name, path, digest, faces, vertices, centre, scale, empty, seconds, created,
+                     skimmed, h_type, v_type, h_period, v_period, symmetry),
+                ).lastrowid
+                ids, curves = [], []
+                for i in keep:
+                    _, az, el, gap, samples, coefficients = views[i]
+                    vid = dst.execute(
+                        "INSERT INTO views (object_id, azimuth, elevation, grid_gap) VALUES (?, ?, ?, ?)",
+                        (new_id, az, el, gap),
+                    ).lastrowid
+                    dst.execute("INSERT INTO curves (view_id, samples) VALUES (?, ?)", (vid, samples))
+                    dst.execute("INSERT INTO fourier_points (view_id, coefficients) VALUES (?, ?)",
+                                (vid, coefficients))
+                    ids.append(vid)
+                    curves.append(decode_array(samples, np.float32, (None,)))
+                if ids:
+                    write_groups(dst, new_id, ids, np.stack(curves), {"sparse": range(len(ids))},
+                                 client.index.group_views)
+            if progress is not None:
+                progress(done, len(objects))
