@@ -208,6 +208,31 @@ def render(
     out.print(f"wrote {out_path}")
 
 
+@app.command("export-client")
+def export_client(
+    db: DbOption,
+    out_path: Annotated[Path, typer.Option("--out", help="Client file to write (must not exist).",
+                                           dir_okay=False)],
+    gap: Annotated[
+        float | None,
+        typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap)."),
+    ] = None,
+) -> None:
+    """Write the small file that ships to devices: the sparse tier only (no meshes, no SIFT)."""
+    with viewdb.open(db, create=False) as vdb, _progress() as bar:
+        task = bar.add_task("export", total=None)
+        config = vdb.export_client(out_path, client_gap=gap,
+                                   progress=lambda done, total: bar.update(task, completed=done, total=total))
+        full = vdb.info()
+    with viewdb.open(out_path, create=False) as client:
+        small = client.info()
+    out.print(
+        f"wrote {out_path}: {len(small.objects)} objects, {small.rows['views']} views on the "
+        f"{config.client_gap:g}° client grid, {small.file_bytes / 1e6:.2f} MB "
+        f"({small.file_bytes / max(full.file_bytes, 1):.1%} of {full.file_bytes / 1e6:.1f} MB)"
+    )
+
+
 @app.command()
 def demo(
     out_dir: Annotated[

@@ -6,12 +6,13 @@ import subprocess
 
 import cv2
 import pytest
+import typer
 from typer.testing import CliRunner
 
 from tests.conftest import ROOT, sample
 from viewdb_cli.main import app, main
 
-COMMANDS = ["ingest", "info", "render", "check", "demo"]
+COMMANDS = sorted(typer.main.get_command(app).commands)
 
 
 def run(capsys, *args):
@@ -93,3 +94,16 @@ def test_every_command_has_help_and_is_in_the_readme(command):
     assert result.exit_code == 0 and "Usage" in result.output
     readme = (ROOT / "README.md").read_text()
     assert re.search(rf"viewdb {command}\b", readme), f"README does not document `viewdb {command}`"
+
+
+def test_export_client_writes_a_small_checked_file(tmp_path, small_db, capsys):
+    out = tmp_path / "client.db"
+    assert main(["export-client", "--db", str(small_db), "--out", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["check", "--db", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["export-client", "--db", str(small_db), "--out", str(out)]) == 1  # exists
+    assert capsys.readouterr().err.strip().endswith("already exists; remove it or choose another --out")
+    assert main(["export-client", "--db", str(small_db), "--out", str(tmp_path / "x.db"), "--gap", "45"]) == 1
+    assert not (tmp_path / "x.db").exists()
+    assert main(["ingest", str(sample("cone")), "--db", str(out)]) == 1  # a client file takes no ingest
