@@ -208,6 +208,72 @@ def render(
     out.print(f"wrote {out_path}")
 
 
+def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
+    if text is None:
+        return None
+    try:
+        values = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        raise typer.BadParameter("must be fx,fy,cx,cy (four numbers)", param_hint="--intrinsics")
+    return values  # type: ignore[return-value]
+
+
+@app.command()
+def query(
+    image: Annotated[Path, typer.Argument(help="Query photo (PNG, JPEG, ...).", dir_okay=False)],
+    db: DbOption,
+    k: Annotated[int, typer.Option("-k", help="How many objects.", min=1, max=100)] = 5,
+    plan: Annotated[str, typer.Option(help="server, cs1 or cs2.")] = "server",
+    client: Annotated[
+        Path | None, typer.Option(help="Client file for the client half of cs1/cs2 (default: --db).",
+                                  dir_okay=False)
+    ] = None,
+    mask: Annotated[
+        Path | None, typer.Option(help="Object mask image (non-zero = object).", dir_okay=False)
+    ] = None,
+    rotations: Annotated[
+        int, typer.Option(help="In-plane turns of the silhouette tried (1 = upright only).", min=1, max=72)
+    ] = 12,
+    band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
+    no_pose: Annotated[bool, typer.Option("--no-pose", help="Skip pose estimation.")] = False,
+    intrinsics: Annotated[
+        str | None, typer.Option(help="Camera intrinsics fx,fy,cx,cy (pose in that camera's frame).")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Recognise the object a photo shows and estimate its pose."""
+    if plan not in ("server", "cs1", "cs2"):
+        raise typer.BadParameter("must be server, cs1 or cs2", param_hint="--plan")
+    cam = _intrinsics(intrinsics)
+    with viewdb.open(db, create=False) as vdb:
+        side = viewdb.open(client, create=False) if client is not None else None
+        try:
+            result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
+                               rotations=rotations, pose=not no_pose, intrinsics=cam)
+        finally:
+            if side is not None:
+                side.close()
+    if as_json:
+        _echo_json(result.to_dict())
+        return
+    t = result.timing_ms
+    out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
+              f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
+              f"server {t['server']:.0f}, pose {t['pose']:.0f})")
+    table = Table("rank", "object", "distance", "view h/v", "pose h/v/in-plane", "method", "inliers")
+    for r in result.results:
+        p = r.pose
+        table.add_row(
+            str(r.rank), r.object, f"{r.distance:.3f}",
+            f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}",
+            f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
+            p.method if p else "-", str(p.inliers) if p else "-",
+        )
+    out.print(table)
+
+
 @app.command("export-client")
 def export_client(
     db: DbOption,
@@ -256,6 +322,30 @@ def demo(
     first = models[0].stem
     png = folder / f"{first}_30_20.png"
     render(first, 30.0, 20.0, png, db=db_path, image_size=256, what="color")
+    photo = folder / "query.png"
+    _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
+    out.print(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
+    query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
+          no_pose=False, intrinsics=None, as_json=False)
+
+
+def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:
+    """A synthetic photo: the object at an off-grid view, turned 20° in the image plane,
+    scaled 0.8 and off-centre, on a light grey background."""
+    import cv2
+    import numpy as np
+
+    with viewdb.open(db_path, create=False) as vdb:
+        view = vdb.render(name, 37.0, 22.0)
+    size = view.mask.shape[0]
+    m = cv2.getRotationMatrix2D((size / 2, size / 2), 20.0, 0.8)
+    m[:, 2] += (12, -8)
+    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
+    photo = np.full((size, size, 3), 200, np.uint8)
+    photo[mask] = color[mask]
+    if not cv2.imwrite(str(out_path), cv2.cvtColor(photo, cv2.COLOR_RGB2BGR)):
+        raise viewdb.ViewDBError("cannot write the image", out_path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -48,6 +48,7 @@ def _kill_runs(tmp_path, runs, seed):
     files = sample_files()
     generation = 0
     counts = []
+    previous = 0
     for i in range(runs):
         db = tmp_path / f"killed{generation}.db"
         # the whole grid at 30° (144 views per object): long enough that kills land mid-ingest
@@ -60,8 +61,10 @@ def _kill_runs(tmp_path, runs, seed):
         proc.wait(timeout=60)
         if db.exists():
             counts.append(_assert_whole(db))
+            assert counts[-1] >= previous  # progress is kept between kills
+            previous = counts[-1]
             if counts[-1] == len(files):
-                generation += 1
+                generation, previous = generation + 1, 0
     # re-running completes the catalogue
     cmd[cmd.index("--jobs") + 1] = "2"
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
@@ -72,8 +75,7 @@ def _kill_runs(tmp_path, runs, seed):
 
 def test_sigkill_at_random_moments_leaves_whole_objects(tmp_path):
     counts = _kill_runs(tmp_path, runs=4, seed=1)
-    assert counts and counts == sorted(counts)  # progress is kept between kills
-    assert counts[-1] < len(sample_files())  # the kills landed mid-ingest
+    assert counts and min(counts) < len(sample_files())  # kills landed mid-ingest
 
 
 @pytest.mark.slow

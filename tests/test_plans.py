@@ -105,7 +105,7 @@ def test_client_file_holds_the_sparse_tier_only(tiered_db, client_file):
             assert sorted(client.views(o.name)) == sorted(stored[i] for i in want)
         with pytest.raises(viewdb.ViewDBError, match="client database"):
             client.ingest([])
-        with pytest.raises(viewdb.QueryError, match="no full tier"):
+        with pytest.raises(viewdb.QueryError, match="client database"):
             client.refine(viewdb.RefineRequest(np.ones(128), 6, 1, []))
 
 

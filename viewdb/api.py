@@ -22,6 +22,7 @@ from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, QueryError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
+from .query import QueryResult, run_query
 from .render import RenderedView, get_renderer
 from .search.knn import SearchStats, TierArrays, knn, objects_within
 from .search.plans import (
@@ -44,6 +45,7 @@ from .symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_pla
 __all__ = [
     "CandidatePose",
     "DatabaseInfo",
+    "QueryResult",
     "Recognition",
     "ObjectInfo",
     "SearchHit",
@@ -57,8 +59,8 @@ __all__ = [
 MESH_CACHE_SIZE = 8
 #: How many regenerated (pruned or off-grid) views a database keeps in memory.
 VIEW_CACHE_SIZE = 256
-#: How many grid-view curves a database keeps in memory for CS2 walks.
-CURVE_CACHE_SIZE = 65536
+#: How many objects' stored curves a database keeps in memory for CS2 walks.
+CURVE_CACHE_OBJECTS = 64
 
 
 @dataclass(frozen=True)
@@ -196,7 +198,7 @@ class ViewDB:
         self._plans: dict[str, ViewClasses] = {}
         self._reader: TierReader | None = None
         self._role: str | None = None
-        self._curves: OrderedDict[tuple[str, float, float], NDArray[np.float64] | None] = OrderedDict()
+        self._curves: OrderedDict[str, dict[tuple[float, float], NDArray[np.float32]]] = OrderedDict()
 
     @property
     def path(self) -> Path:
@@ -296,28 +298,30 @@ class ViewDB:
 
     def _full_tier_only(self) -> None:
         if self.role == "client":
-            raise QueryError("a client database has no full tier; ask the server", self.path)
+            raise QueryError(
+                "is a client database (no full tier): give the full database as --db, or a "
+                "server", self.path,
+            )
 
     def _grid_curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float64] | None:
         """The curve of grid view (h, v) of ``name`` from the stored views (a pruned view is
         its stand-in's curve, reversed if mirrored); None where there is no silhouette."""
-        key = (name, azimuth, elevation)
-        if key in self._curves:
-            return self._curves[key]
+        curves = self._curves.get(name)
+        if curves is None:
+            curves = self._curves[name] = self._store.object_curves(name)
+            while len(self._curves) > CURVE_CACHE_OBJECTS:
+                self._curves.popitem(last=False)
+        else:
+            self._curves.move_to_end(name)
         try:
             stored, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
         except KeyError:
             stored, mirrored = (azimuth, elevation), False
-        curve = self._store.curve(name, *stored)
-        out = None
-        if curve is not None:
-            out = np.asarray(curve, np.float64)
-            if mirrored:
-                out = np.ascontiguousarray(np.roll(out[::-1], 1))
-        self._curves[key] = out
-        while len(self._curves) > CURVE_CACHE_SIZE:
-            self._curves.popitem(last=False)
-        return out
+        curve = curves.get(stored)
+        if curve is None:
+            return None
+        out = np.asarray(curve, np.float64)
+        return np.ascontiguousarray(np.roll(out[::-1], 1)) if mirrored else out
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
@@ -330,6 +334,7 @@ class ViewDB:
         """
         if plan not in PLANS:
             raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+        self._full_tier_only()
         q = self._query_curve(curve, k, "full")
         start = time.perf_counter()
         if plan == "server":
@@ -351,6 +356,33 @@ class ViewDB:
         received = len(json.dumps(reply.to_dict()))
         return Recognition(plan, reply.results, mine, (middle - start) * 1e3, (end - middle) * 1e3,
                            reply.stats, sent, received)
+
+    def query(
+        self,
+        image: str | Path | NDArray[Any],
+        *,
+        k: int = 5,
+        plan: str = "server",
+        client: ViewDB | None = None,
+        mask: NDArray[Any] | str | Path | None = None,
+        band: int = 6,
+        rotations: int = 12,
+        pose: bool = True,
+        intrinsics: tuple[float, float, float, float] | None = None,
+    ) -> QueryResult:
+        """Which k objects a photo (path or array) shows, and their poses.
+
+        The object is segmented (alpha channel, ``mask``, or automatically from the
+        background); its silhouette, also turned in the image plane by ``rotations``
+        evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``, ``cs2``; the
+        client half runs on ``client``, default this file); the pose of each result is
+        chosen among its candidate same-shape views by SIFT or by outline (see
+        :mod:`viewdb.query`). ``intrinsics`` ``(fx, fy, cx, cy)`` give a perspective pose in
+        that camera's OpenCV frame.
+        """
+        return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
+                         rotations=rotations, pose=pose and self.role == "full",
+                         intrinsics=intrinsics)
 
     def _forget(self, name: str) -> None:
         self._curves.clear()
@@ -376,10 +408,10 @@ class ViewDB:
         return [self._info(r) for r in self._store.objects()]
 
     def object(self, name: str) -> ObjectInfo:
-        for info in self.objects():
-            if info.name == name:
-                return info
-        raise NotFound(f"no object named {name!r}", self.path)
+        rows = self._store.objects(name)
+        if not rows:
+            raise NotFound(f"no object named {name!r}", self.path)
+        return self._info(rows[0])
 
     def views(self, name: str) -> list[tuple[float, float]]:
         """``(azimuth, elevation)`` of every stored view of object ``name``."""

@@ -230,6 +230,20 @@ class Store:
             ).first()
         return "full" if row is None else str(json.loads(row[0]))
 
+    def object_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
+        """Every stored curve of object ``name``, by ``(azimuth, elevation)``, in one query."""
+        v = s.views
+        with self.read() as conn:
+            rows = conn.execute(
+                sa.select(v.c.azimuth, v.c.elevation, s.curves.c.samples)
+                .select_from(
+                    v.join(s.curves, s.curves.c.view_id == v.c.id).join(
+                        s.objects, s.objects.c.id == v.c.object_id)
+                )
+                .where(s.objects.c.name == name)
+            ).all()
+        return {(float(a), float(e)): decode_array(b, np.float32, (None,)) for a, e, b in rows}
+
     def curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
         """The stored curve of one view (None if that view is not stored)."""
         v = s.views
@@ -251,7 +265,8 @@ class Store:
             rows = conn.execute(sa.select(s.objects.c.name, s.objects.c.content_hash)).all()
         return {name: h for name, h in rows}
 
-    def objects(self) -> list[ObjectRow]:
+    def objects(self, name: str | None = None) -> list[ObjectRow]:
+        """Every object by name (or just the one called ``name``)."""
         o, v = s.objects, s.views
         count = (
             sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
@@ -261,6 +276,8 @@ class Store:
             o.c.scale, o.c.centre, count, o.c.empty_views, o.c.ingest_seconds, o.c.created_at,
             o.c.skimmed, o.c.symmetry,
         ).order_by(o.c.name)
+        if name is not None:
+            query = query.where(o.c.name == name)
         with self.read() as conn:
             rows = conn.execute(query).all()
         return [

@@ -291,13 +291,15 @@ class TierReader:
     def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
         """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`)."""
         ids = [int(i) for i in view_ids]
-        if not ids:
-            return {}
-        marks = ",".join("?" * len(ids))
-        rows = self.conn.execute(
-            f"SELECT id, azimuth, elevation FROM views WHERE id IN ({marks})", ids
-        ).fetchall()
-        return {int(i): (float(a), float(e)) for i, a, e in rows}
+        out: dict[int, tuple[float, float]] = {}
+        for start in range(0, len(ids), 900):  # SQLite caps the variables of one statement
+            chunk = ids[start : start + 900]
+            marks = ",".join("?" * len(chunk))
+            rows = self.conn.execute(
+                f"SELECT id, azimuth, elevation FROM views WHERE id IN ({marks})", chunk
+            ).fetchall()
+            out.update((int(i), (float(a), float(e))) for i, a, e in rows)
+        return out
 
     def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:
         """Every view of tier ``name`` in memory (the brute-force reference and the flat

@@ -1,0 +1,265 @@
+"""The query engine: photo → segmentation → distance curves → plan → pose.
+
+A query image is segmented (:mod:`viewdb.query_image`); its silhouette's distance curve
+starts at the top of the centroid's vertical line, so an object turned *in the image
+plane* gives a cyclically shifted curve that the (fixed-start) DTW of the index does not
+match. The engine therefore also tries the silhouette turned by a few in-plane angles
+(``rotations``, evenly spaced; 1 = upright only) and keeps, per object, the best view over
+all of them, remembering the turn that matched. Each turn is one search by the chosen
+plan (:meth:`viewdb.ViewDB.recognise`); CS1 stays exact per turn, so CS1 still equals the
+``server`` plan.
+
+For each of the top results the candidate same-shape poses of the matched view (the
+paper's eqs. 1–2) are fetched or regenerated from the mesh, and :mod:`viewdb.pose` picks
+the pose by SIFT (ratio test + RANSAC, then a full 6-DoF fit) or, for texture-less
+views, by comparing outlines (``method: "shape"``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import FeatureError, ImageError, QueryError, ViewDBError
+from .features import distance_curve
+from .pose import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose
+from .query_image import LoadedImage, Segmentation, load_image, segment
+from .search.plans import Candidate
+
+if TYPE_CHECKING:
+    from .api import ViewDB
+
+__all__ = ["QueryMatch", "QueryResult", "rotated_curves", "run_query"]
+
+#: Most candidate poses examined per result (a sphere has every grid view as one).
+MAX_POSE_CANDIDATES = 24
+
+
+@dataclass(frozen=True)
+class QueryMatch:
+    """One recognised object: its best view, the in-plane turn that matched, its pose."""
+
+    rank: int
+    object: str
+    distance: float
+    azimuth: float
+    elevation: float
+    mirrored: bool
+    #: The query's silhouette matched the view after turning it back by this angle.
+    inplane: float
+    pose: PoseEstimate | None = None
+    #: Why there is no pose (e.g. a client file without meshes), if there is none.
+    pose_error: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "rank": self.rank, "object": self.object, "distance": self.distance,
+            "view": {"azimuth": self.azimuth, "elevation": self.elevation,
+                     "mirrored": self.mirrored, "inplane": self.inplane},
+            "pose": None,
+        }
+        p = self.pose
+        if p is not None:
+            out["pose"] = {
+                "azimuth": p.azimuth, "elevation": p.elevation, "inplane": p.inplane,
+                "method": p.method, "inliers": int(p.inliers), "scale": p.scale,
+                "score": p.score, "frame": p.frame,
+                "rotation": [[float(x) for x in row] for row in p.rotation],
+                "translation": [float(x) for x in p.translation],
+            }
+        if self.pose_error is not None:
+            out["pose_error"] = self.pose_error
+        return out
+
+
+@dataclass(frozen=True)
+class QueryResult:
+    """The answer to one query (``to_dict`` is the ``viewdb query --json`` shape)."""
+
+    image: str
+    plan: str
+    k: int
+    results: list[QueryMatch]
+    timing_ms: dict[str, float]
+    segmentation: str
+    #: What went over the (would-be) wire: bytes each way and round trips (CS1/CS2).
+    transfer: dict[str, int] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "image": self.image, "plan": self.plan, "k": self.k,
+            "results": [r.to_dict() for r in self.results],
+            "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
+            "segmentation": self.segmentation, "transfer": dict(self.transfer),
+        }
+
+
+def rotated_curves(
+    mask: NDArray[np.bool_], samples: int, rotations: int
+) -> list[tuple[float, NDArray[np.float64]]]:
+    """``(angle, curve)`` of the silhouette turned back by ``angle`` for ``rotations``
+    evenly spaced angles (0 first). A turn that loses the silhouette is skipped."""
+    if rotations < 1:
+        raise QueryError(f"rotations must be at least 1, got {rotations}")
+    ys, xs = np.nonzero(mask)
+    cy, cx = float(ys.mean()), float(xs.mean())
+    # pad to the diagonal so no turn clips the silhouette
+    h, w = mask.shape
+    pad = int(np.ceil(np.hypot(h, w) / 2 - min(h, w) / 2)) + 2
+    canvas = np.pad(mask.astype(np.uint8) * 255, pad)
+    centre = (cx + pad, cy + pad)
+    out = []
+    for i in range(rotations):
+        angle = 360.0 * i / rotations
+        if angle == 0.0:
+            turned = canvas
+        else:
+            # cv2 turns counter-clockwise for positive angles: turn back by -angle
+            m = cv2.getRotationMatrix2D(centre, -angle, 1.0)
+            turned = cv2.warpAffine(canvas, m, (canvas.shape[1], canvas.shape[0]),
+                                    flags=cv2.INTER_LINEAR)
+        try:
+            out.append((angle, distance_curve(turned > 127, samples)))
+        except FeatureError:
+            continue
+    if not out:
+        raise ImageError("the silhouette gives no usable contour")
+    return out
+
+
+def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tuple[Candidate, float]]:
+    best: dict[str, tuple[Candidate, float]] = {}
+    for angle, found in per_turn:
+        for c in found:
+            if c.object not in best or c.distance < best[c.object][0].distance:
+                best[c.object] = (c, angle)
+    return sorted(best.values(), key=lambda x: (x[0].distance, x[0].object))[:k]
+
+
+def _pose(
+    db: ViewDB, query: QueryView, match: Candidate, config: PoseConfig,
+    intrinsics: tuple[float, float, float, float] | None,
+) -> PoseEstimate:
+    poses = db.candidate_poses(match.object, match.azimuth, match.elevation)
+    # the matched view first, then the rest in their (deterministic) order
+    poses.sort(key=lambda p: (p.azimuth, p.elevation) != (match.azimuth, match.elevation))
+    candidates = []
+    for p in poses[:MAX_POSE_CANDIDATES]:
+        try:
+            view = db.view(match.object, p.azimuth, p.elevation)
+            rendered = db.render(match.object, p.azimuth, p.elevation)
+        except ViewDBError:
+            continue  # e.g. no silhouette at that view
+        candidates.append(CandidateView(
+            azimuth=p.azimuth, elevation=p.elevation, mirrored=p.mirrored,
+            keypoints=view.keypoints, descriptors=view.descriptors, points3d=view.points3d,
+            mask=rendered.mask, image_size=db.config.render.image_size, xmag=db.config.render.xmag,
+            color=rendered.color,
+        ))
+    estimate = estimate_pose(query, candidates, config, intrinsics)
+    if estimate.method == "shape":
+        estimate = _refine_shape(db, match.object, query, candidates[estimate.candidate], estimate,
+                                 config, intrinsics)
+    return estimate
+
+
+#: The off-grid shape refinement stops at this step (degrees).
+SHAPE_REFINE_STEP = 2.0
+
+
+def _refine_shape(
+    db: ViewDB, name: str, query: QueryView, start: CandidateView, estimate: PoseEstimate,
+    config: PoseConfig, intrinsics: tuple[float, float, float, float] | None,
+) -> PoseEstimate:
+    """Texture-less objects: walk the viewing direction off the grid, rendering the mesh
+    around the best outline match (steps halving from half the grid gap down to
+    :data:`SHAPE_REFINE_STEP`) and keeping whichever outline fits the query best."""
+    h, v, best = start.azimuth, start.elevation, estimate
+    step = db.config.gap / 2.0
+    size, xmag = db.config.render.image_size, db.config.render.xmag
+    while step >= SHAPE_REFINE_STEP - 1e-9:
+        around = []
+        for dh in (-step, 0.0, step):
+            for dv in (-step, 0.0, step):
+                if not (dh or dv):
+                    continue
+                rendered = db.render(name, h + dh, v + dv)
+                mask = rendered.mask
+                if mask.any():
+                    around.append(CandidateView(
+                        azimuth=(h + dh) % 360.0, elevation=(v + dv) % 360.0, mirrored=False,
+                        keypoints=np.zeros((0, 5), np.float32), descriptors=np.zeros((0, 128), np.uint8),
+                        points3d=np.zeros((0, 3), np.float32), mask=mask, image_size=size, xmag=xmag,
+                        color=rendered.color))
+        if around:
+            found = estimate_pose(query, around, config, intrinsics)
+            if found.score > best.score:
+                best, h, v = found, around[found.candidate].azimuth, around[found.candidate].elevation
+                continue  # moved: try the same step around the new view
+        step /= 2.0
+    return best
+
+
+def run_query(
+    db: ViewDB,
+    image: str | Path | NDArray[Any] | LoadedImage,
+    *,
+    k: int = 5,
+    plan: str = "server",
+    client: ViewDB | None = None,
+    mask: NDArray[Any] | str | Path | None = None,
+    band: int = 6,
+    rotations: int = 12,
+    pose: bool = True,
+    intrinsics: tuple[float, float, float, float] | None = None,
+    pose_config: PoseConfig | None = None,
+) -> QueryResult:
+    """Recognise the object a query image shows and estimate its pose (see module doc)."""
+    start = time.perf_counter()
+    loaded = image if isinstance(image, LoadedImage) else load_image(image)
+    seg: Segmentation = segment(loaded, mask)
+    curves = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
+    segmented = time.perf_counter()
+    per_turn = []
+    client_ms = server_ms = 0.0
+    sent = received = trips = 0
+    for angle, curve in curves:
+        found = db.recognise(curve, k, band=band, plan=plan, client=client)
+        per_turn.append((angle, found.results))
+        client_ms += found.client_ms
+        server_ms += found.server_ms
+        sent += found.bytes_sent
+        received += found.bytes_received
+        trips += plan != "server"
+    merged = _merge(per_turn, k)
+    recognised = time.perf_counter()
+    matches = []
+    query = QueryView(loaded.rgb, seg.mask)
+    config = pose_config or PoseConfig()
+    for rank, (c, angle) in enumerate(merged, 1):
+        estimate, problem = None, None
+        if pose:
+            try:
+                estimate = _pose(db, query, c, config, intrinsics)
+            except ViewDBError as exc:
+                problem = exc.message
+        matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
+                                  angle, estimate, problem))
+    end = time.perf_counter()
+    name = loaded.path or (str(image) if isinstance(image, (str, Path)) else "<array>")
+    return QueryResult(
+        image=name, plan=plan, k=k, results=matches,
+        timing_ms={
+            "segment": (segmented - start) * 1e3, "client": client_ms, "server": server_ms,
+            "pose": (end - recognised) * 1e3, "total": (end - start) * 1e3,
+        },
+        segmentation=seg.method,
+        transfer={"bytes_sent": sent, "bytes_received": received, "round_trips": trips},
+    )
