@@ -115,3 +115,23 @@ def test_a_file_from_schema_0001_is_upgraded_in_place_with_its_data(tmp_path):
         after = conn.execute("SELECT v.azimuth, v.elevation, c.samples FROM views v JOIN curves c ON c.view_id = v.id ORDER BY v.id").fetchall()
         assert after == before
         assert conn.execute("SELECT DISTINCT skimmed FROM objects").fetchall() == [(0,)]
+
+
+def test_a_file_whose_creation_was_cut_short_is_not_taken_as_built_with_defaults(tmp_path):
+    path = tmp_path / "cut.db"
+    Store(path).close()  # schema, but no build configuration (as an older viewdb could leave)
+    with pytest.raises(StorageError, match="unfinished database"):
+        viewdb.open(path, create=False)
+    with viewdb.open(path, gap=45) as db:  # an ingest may still finish creating it
+        assert db.config.gap == 45
+    with viewdb.open(path, create=False) as db:
+        assert db.config.gap == 45
+
+
+def test_a_new_file_gets_schema_and_configuration_together(tmp_path):
+    path = tmp_path / "new.db"
+    with viewdb.open(path, gap=45, client_gap=90):
+        pass
+    with sqlite3.connect(path) as conn:
+        keys = {k for (k,) in conn.execute("SELECT key FROM settings")}
+    assert keys == {"build", "role"}

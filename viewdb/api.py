@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from .camera import grid_views, normalise_angle
 from .config import BuildConfig, RenderConfig
 from .describe import ObjectDescription, describe_view
-from .errors import FeatureError, NotFound, QueryError, ViewDBError
+from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .query import QueryResult, run_query
@@ -620,10 +620,13 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc
-    store = Store(path, create=create)
+    store = Store(path, create=create, initial=(wanted, "full"))
     try:
         stored = store.build_config()
-        if stored is None:
+        if stored is None:  # a file whose creation by an older viewdb was cut short
+            if not create:
+                raise StorageError("is an unfinished database (its creation was interrupted); "
+                                   "delete it and ingest again", path)
             store.set_build_config(wanted)
             stored = wanted
         else:

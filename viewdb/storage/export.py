@@ -58,9 +58,8 @@ def export_client(
     for stale in (partial, Path(f"{partial}-wal"), Path(f"{partial}-shm")):
         stale.unlink(missing_ok=True)
     try:
-        target = Store(partial)
+        target = Store(partial, initial=(client, "client"))
         try:
-            target.set_build_config(client, role="client")
             _copy(source, target, client, progress)
         finally:
             target.close()

@@ -117,8 +117,15 @@ def _symmetry_columns(desc: Any) -> dict[str, Any]:
 class Store:
     """An open database file."""
 
-    def __init__(self, path: str | Path, *, create: bool = True) -> None:
+    def __init__(
+        self, path: str | Path, *, create: bool = True,
+        initial: tuple[BuildConfig, str] | None = None,
+    ) -> None:
+        """Open ``path`` (creating it if ``create``). A new file gets its schema and, given
+        ``initial = (config, role)``, its build configuration in one transaction, so a
+        creation that is interrupted leaves no file that looks built with defaults."""
         self.path = Path(path)
+        self._initial = initial
         exists = self.path.exists() and self.path.stat().st_size > 0
         if not exists and not create:
             raise StorageError("no such database", self.path)
@@ -204,6 +211,12 @@ class Store:
 
         with self.transaction() as conn:
             command.upgrade(_alembic_config(conn), "head")
+            if current is None and self._initial is not None:
+                config, role = self._initial
+                conn.execute(sa.insert(s.settings), [
+                    {"key": "build", "value": json.dumps(config.to_dict())},
+                    {"key": "role", "value": json.dumps(role)},
+                ])
 
     # ----------------------------------------------------------------- settings
     def build_config(self) -> BuildConfig | None:
