@@ -136,3 +136,18 @@ def test_db_search_finds_the_object_of_a_rendered_query(small_db):
             db.search(q, k=0)
         with pytest.raises(viewdb.QueryError, match="tier"):
             db.search(q, tier="medium")
+
+
+@settings(max_examples=30)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(0, 8))
+def test_unskimmed_db_search_equals_brute_force(small_db_full, seed, k, band):
+    rng = np.random.default_rng(seed)
+    with viewdb.open(small_db_full, create=False) as db:
+        tier, _ = db.search_tier("full")
+        assert not any(o.skimmed for o in db.objects())
+        q = tier.curves[rng.integers(len(tier.curves))] + rng.normal(0, rng.choice([0.01, 0.1]), 128)
+        hits, _ = db.search(q, k=k, band=band)
+        expected = brute_force_knn(q, tier, k, band)
+        assert [h.object for h in hits] == [e.object for e in expected]
+        np.testing.assert_allclose([h.distance for h in hits], [e.distance for e in expected],
+                                   rtol=0, atol=1e-9)
