@@ -269,14 +269,7 @@ class ViewDB:
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
     ) -> tuple[list[Candidate], SearchStats]:
         """The client half of CS1/CS2: the k nearest objects on this file's sparse tier."""
-        q = self._query_curve(curve, k, "sparse")
-        with self._tier_reader().snapshot() as reader:
-            source = reader.tier("sparse")
-            if source.n_groups == 0:
-                raise QueryError("the database holds no views", self.path)
-            found, stats = knn(q, source, k, band)
-            angles = reader.view_angles([n.view for n in found])
-        return neighbours_to_candidates(found, angles), stats
+        return self._knn(self._query_curve(curve, k, "sparse"), k, band, "sparse")
 
     def refine(self, request: RefineRequest) -> ServerReply:
         """The server half of CS1 (Algorithm 3): exact, the same answer as ``plan="server"``
@@ -427,15 +420,21 @@ class ViewDB:
         (Sakoe–Chiba band of ``band`` samples) against the curve and its mirror.
         ``tier`` is ``"full"`` (every stored view) or ``"sparse"`` (the client grid).
         """
-        q = self._query_curve(curve, k, tier)
+        found, stats = self._knn(self._query_curve(curve, k, tier), k, band, tier)
+        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored) for c in found]
+        return hits, stats
+
+    def _knn(
+        self, q: NDArray[np.float64], k: int, band: int, tier: str
+    ) -> tuple[list[Candidate], SearchStats]:
+        """Algorithm 2 on one tier, in one read snapshot, with the views' angles."""
         with self._tier_reader().snapshot() as reader:
             source = reader.tier(tier)
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
             found, stats = knn(q, source, k, band)
             angles = reader.view_angles([n.view for n in found])
-        hits = [SearchHit(n.object, n.distance, *angles[n.view], n.mirrored) for n in found]
-        return hits, stats
+        return neighbours_to_candidates(found, angles), stats
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, *, band: int = 6, tier: str = "full"

@@ -177,23 +177,29 @@ def _dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _window_range(x, i, r):  # pragma: no cover - compiled
+    # min and max of x over the band window [i - r, i + r] (clipped to the sequence)
+    n = x.shape[0]
+    a = max(0, i - r)
+    b = min(n - 1, i + r)
+    lo = x[a]
+    hi = x[a]
+    for t in range(a + 1, b + 1):
+        v = x[t]
+        if v < lo:
+            lo = v
+        if v > hi:
+            hi = v
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
 def _envelope_kernel(q, r):  # pragma: no cover - compiled
     n = q.shape[0]
     lower = np.empty(n)
     upper = np.empty(n)
     for i in range(n):
-        a = max(0, i - r)
-        b = min(n - 1, i + r)
-        lo = q[a]
-        hi = q[a]
-        for t in range(a + 1, b + 1):
-            v = q[t]
-            if v < lo:
-                lo = v
-            if v > hi:
-                hi = v
-        lower[i] = lo
-        upper[i] = hi
+        lower[i], upper[i] = _window_range(q, i, r)
     return lower, upper
 
 
@@ -256,16 +262,7 @@ def _cascade_dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
     s = 0.0
     limit = best_so_far * best_so_far
     for i in range(n):
-        a = max(0, i - r)
-        b = min(n - 1, i + r)
-        lo = c[a]
-        hi = c[a]
-        for t in range(a + 1, b + 1):
-            v = c[t]
-            if v < lo:
-                lo = v
-            if v > hi:
-                hi = v
+        lo, hi = _window_range(c, i, r)
         v = q[i]
         if v > hi:
             s += (v - hi) * (v - hi)

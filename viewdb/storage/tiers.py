@@ -158,6 +158,7 @@ class StoredTier:
             for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
         )
         self._names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
+        self._ids_by_name: dict[str, int] | None = None
         self._groups: OrderedDict[int, Group] = OrderedDict()
 
     def close(self) -> None:
@@ -198,10 +199,9 @@ class StoredTier:
 
     def object_index(self, name: str) -> int | None:
         """The source's index of object ``name`` (None if it has none)."""
-        for index, known in self._names.items():
-            if known == name:
-                return index
-        return None
+        if self._ids_by_name is None:
+            self._ids_by_name = {known: index for index, known in self._names.items()}
+        return self._ids_by_name.get(name)
 
 
 def index_stored_objects(conn: Any, config: BuildConfig) -> int:
