@@ -27,10 +27,10 @@ def same(a, b):
     np.testing.assert_allclose([x.distance for x in a], [x.distance for x in b], rtol=0, atol=1e-9)
 
 
-@settings(max_examples=80)
+@settings(max_examples=120)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 6), st.integers(2, 10),
-       st.integers(1, 12))
-def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects, group_views):
+       st.integers(1, 12), st.sampled_from([1e-4, 0.01, 0.125, 10.0]))
+def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects, group_views, initial_radius):
     rng = np.random.default_rng(seed)
     owner = rng.integers(0, objects, 80)
     owner[:objects] = np.arange(objects)
@@ -39,7 +39,8 @@ def test_knn_equals_brute_force_on_random_tiers(seed, k, r, objects, group_views
     query = smooth_curves(rng, 1)[0]
     if rng.random() < 0.5:  # a noisy copy (or mirror) of a stored curve
         query = tier.curves[rng.integers(80)][:: rng.choice([1, -1])] + rng.normal(0, 0.01, 64)
-    result, stats = knn(query, tier, k, r)
+    # a small first radius makes the search browse outwards many times
+    result, stats = knn(query, tier, k, r, initial_radius=initial_radius)
     same(result, brute_force_knn(query, tier, k, r))
     assert len(result) == min(k, objects)
     assert stats.dtw <= 2 * len(tier.curves)
@@ -151,3 +152,22 @@ def test_unskimmed_db_search_equals_brute_force(small_db_full, seed, k, band):
         assert [h.object for h in hits] == [e.object for e in expected]
         np.testing.assert_allclose([h.distance for h in hits], [e.distance for e in expected],
                                    rtol=0, atol=1e-9)
+
+
+@settings(max_examples=120)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.integers(0, 6), st.integers(2, 10),
+       st.sampled_from([1e-4, 0.01, 0.125]), st.floats(0.0, 1.0))
+def test_knn_with_a_clients_upper_bounds_equals_brute_force(seed, k, r, objects, initial_radius, slack):
+    # CS1 hands the server upper bounds (the k-th distance, and some objects' distances);
+    # any valid bounds, tight or loose, leave the answer unchanged
+    rng = np.random.default_rng(seed)
+    owner = rng.integers(0, objects, 80)
+    owner[:objects] = np.arange(objects)
+    tier = TierArrays([f"o{i}" for i in range(objects)], owner, smooth_curves(rng, 80), group_views=6)
+    query = smooth_curves(rng, 1)[0]
+    everything = brute_force_knn(query, tier, objects, r)
+    known = {tier.names.index(nb.object): nb.distance * (1 + slack * rng.random())
+             for nb in everything if rng.random() < 0.6}
+    upper = everything[k - 1].distance * (1 + slack) if len(everything) >= k else np.inf
+    result, _ = knn(query, tier, k, r, upper=upper, known=known, initial_radius=initial_radius)
+    same(result, everything[:k])

@@ -115,7 +115,7 @@ def test_objects_within_a_distance_miss_no_object_at_that_distance(tiered_db, se
         # and exactly the objects with a group whose bound is within the radius
         from viewdb.search.knn import QueryBoxes
 
-        keys = QueryBoxes.of(q, band).group_keys(arrays.mbr_lo, arrays.mbr_hi, arrays.curve_lo,
+        _, keys = QueryBoxes.of(q, band).group_keys(arrays.mbr_lo, arrays.mbr_hi, arrays.curve_lo,
                                                  arrays.curve_hi)
         owners = {arrays.names[arrays.owner[g[0]]] for g, key in zip(arrays.groups, keys, strict=True)
                   if key <= radius}

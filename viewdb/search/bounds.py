@@ -131,49 +131,50 @@ __all__ = [
 
 @njit(cache=True, nogil=True)
 def _dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
+    return _dtw_rest_kernel(q, c, r, best_so_far, np.zeros(q.shape[0]))
+
+
+@njit(cache=True, nogil=True)
+def _dtw_rest_kernel(q, c, r, best_so_far, rest):  # pragma: no cover - compiled
+    # DTW abandoned as soon as (the cheapest cell of row i) + rest[i] exceeds the limit,
+    # ``rest[i]`` being a lower bound of what the rows after i add to any path (UCR
+    # suite's cumulative bound; zeros for plain early abandoning).
+    # Rows of the band only, indexed by w = j - i + r (0..2r), stored at w + 1 between two
+    # infinite sentinels: cell (i, j) reads (i-1, j) at prev[w + 2], (i-1, j-1) at
+    # prev[w + 1] and (i, j-1) at cur[w]; no branch per cell but the minimum.
     n = q.shape[0]
+    width = 2 * r + 1
     thresh = best_so_far * best_so_far
-    prev = np.empty(n)
-    cur = np.empty(n)
-    # row 0: only the horizontal step is possible
-    hi = min(n - 1, r)
-    acc = 0.0
-    for j in range(hi + 1):
-        d = q[0] - c[j]
-        acc += d * d
-        cur[j] = acc
-    if cur[0] > thresh and math.sqrt(cur[0]) > best_so_far:
-        return np.inf
-    prev, cur = cur, prev
-    for i in range(1, n):
-        lo = max(0, i - r)
-        hi = min(n - 1, i + r)
-        phi = min(n - 1, i - 1 + r)  # last valid column of row i-1
-        plo = max(0, i - 1 - r)  # first valid column of row i-1
-        rowmin = np.inf
+    prev = np.full(width + 2, np.inf)
+    cur = np.full(width + 2, np.inf)
+    for i in range(n):
+        w_lo = max(0, r - i)
+        w_hi = min(width - 1, n - 1 - i + r)
         qi = q[i]
-        for j in range(lo, hi + 1):
-            best = np.inf
-            if j <= phi:  # (i-1, j)
-                best = prev[j]
-            if j - 1 >= plo:  # (i-1, j-1); j-1 <= phi always holds
-                v = prev[j - 1]
-                if v < best:
-                    best = v
-            if j - 1 >= lo:  # (i, j-1)
-                v = cur[j - 1]
-                if v < best:
-                    best = v
-            d = qi - c[j]
+        rowmin = np.inf
+        cur[w_lo] = np.inf
+        for w in range(w_lo, w_hi + 1):
+            best = prev[w + 2]
+            v = prev[w + 1]
+            if v < best:
+                best = v
+            v = cur[w]
+            if v < best:
+                best = v
+            if i == 0 and w == r:  # cell (0, 0): the path starts here
+                best = 0.0
+            d = qi - c[i - r + w]
             v = d * d + best
-            cur[j] = v
+            cur[w + 1] = v
             if v < rowmin:
                 rowmin = v
-        # every path crosses row i and costs are >= 0: the path cost is >= rowmin
-        if rowmin > thresh and math.sqrt(rowmin) > best_so_far:
+        cur[w_hi + 2] = np.inf
+        # every path crosses row i, then adds at least rest[i]: its cost is >= the sum
+        # (summed in another order than the path's cost: a hair of slack for rounding)
+        if rowmin + rest[i] * (1.0 - 1e-12) > thresh * (1.0 + 1e-12):
             return np.inf
         prev, cur = cur, prev
-    return math.sqrt(prev[n - 1])
+    return math.sqrt(prev[r + 1])
 
 
 @njit(cache=True, nogil=True)
@@ -256,21 +257,83 @@ def _group_bounds_kernel(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _group_keys_kernel(  # pragma: no cover - compiled
+    blo, bhi, mblo, mbhi, lower, upper, mlower, mupper, lo, hi, clo, chi, at
+):
+    # per group g = at[i]: MINDIST of the nearer box to the MBR, and the key
+    # max(MINDIST, curve-box bound of the nearer envelope)
+    m = at.shape[0]
+    d = lo.shape[1]
+    n = clo.shape[1]
+    mind = np.empty(m)
+    keys = np.empty(m)
+    for i in range(m):
+        g = at[i]
+        a = 0.0
+        b = 0.0
+        for j in range(d):
+            e = max(blo[j] - hi[g, j], 0.0) + max(lo[g, j] - bhi[j], 0.0)
+            a += e * e
+            e = max(mblo[j] - hi[g, j], 0.0) + max(lo[g, j] - mbhi[j], 0.0)
+            b += e * e
+        md = math.sqrt(min(a, b))
+        a = 0.0
+        b = 0.0
+        for t in range(n):
+            e = max(clo[g, t] - upper[t], 0.0) + max(lower[t] - chi[g, t], 0.0)
+            a += e * e
+            e = max(clo[g, t] - mupper[t], 0.0) + max(mlower[t] - chi[g, t], 0.0)
+            b += e * e
+        mind[i] = md
+        keys[i] = max(md, math.sqrt(min(a, b)))
+    return mind, keys
+
+
+@njit(cache=True, nogil=True)
 def _cascade_dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
+    return _cascade_env_kernel(q, c, r, best_so_far, q, q, False)
+
+
+@njit(cache=True, nogil=True)
+def _cascade_env_kernel(q, c, r, best_so_far, lower, upper, with_envelope):  # pragma: no cover
     # LB_Keogh the other way round (the candidate's envelope against the query), then DTW
+    # abandoned on the cumulative bound of that LB per row (and, given the query's
+    # envelope, of the forward LB_Keogh per column: the columns after i + r are reached
+    # in later rows only)
     n = q.shape[0]
-    s = 0.0
     limit = best_so_far * best_so_far
+    terms = np.empty(n)
+    s = 0.0
     for i in range(n):
         lo, hi = _window_range(c, i, r)
         v = q[i]
+        e = 0.0
         if v > hi:
-            s += (v - hi) * (v - hi)
+            e = (v - hi) * (v - hi)
         elif v < lo:
-            s += (lo - v) * (lo - v)
+            e = (lo - v) * (lo - v)
+        terms[i] = e
+        s += e
         if s > limit and math.sqrt(s) > best_so_far:
             return np.inf
-    return _dtw_kernel(q, c, r, best_so_far)
+    rest = np.empty(n)
+    acc = 0.0
+    for i in range(n - 1, -1, -1):
+        rest[i] = acc  # rows after i
+        acc += terms[i]
+    if with_envelope:
+        acc = 0.0
+        for j in range(n - 1, r, -1):
+            x = c[j]
+            if x > upper[j]:
+                acc += (x - upper[j]) * (x - upper[j])
+            elif x < lower[j]:
+                acc += (lower[j] - x) * (lower[j] - x)
+            # acc = forward terms of the columns >= j, all reached after row j - r - 1
+            i = j - r - 1
+            if acc > rest[i]:
+                rest[i] = acc
+    return _dtw_rest_kernel(q, c, r, best_so_far, rest)
 
 
 @njit(cache=True, nogil=True)

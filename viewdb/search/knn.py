@@ -1,42 +1,36 @@
 """Exact k-NN over distance curves: Algorithm 2 as a best-first search, and its reference.
 
-One min-priority queue mixes four kinds of entries, each keyed by a lower bound of the
-exact distance of everything below it (:mod:`viewdb.search.bounds` proves the chain):
+One min-priority order over entries keyed by lower bounds of the exact distance of
+everything below them (:mod:`viewdb.search.bounds` proves the chain):
 
 * a **group** (an MBR around a few views of one object, :mod:`viewdb.search.grouping`),
-  keyed by ``MINDIST`` of the query box (or the mirrored box) to the MBR;
-* a **curve** (a view's curve, or its reverse for the mirror view), keyed by
-  ``max(Fourier_Dist, LB_Keogh)``: both bound the exact distance, so their maximum does
-  too. Algorithm 2 pushes the Fourier point first and the curve when that pops; here
-  both bounds are computed at once, vectorised over a group's views when the group
-  pops, and sorted: the queue holds one *cursor* per opened group, keyed by the bound
-  of its next unrefined curve (a lazy merge of the sorted lists), which pops curves in
-  exactly the order the per-curve entries would;
-* a **curve with its DTW distance**, keyed by the exact distance.
+  keyed by the larger of ``MINDIST`` of the query box (or the mirrored box) to the MBR
+  and the curve-box bound of the group's per-sample range;
+* a **Fourier point** of a view (or of its mirror), keyed by ``Fourier_Dist``;
+* a **curve**, keyed by ``LB_Keogh``, refined to its DTW distance when it pops.
 
-When an exact entry reaches the top, no entry left can beat it, so its object is final
-(Algorithm 2, lines 8–11); entries of objects already in the result are dropped (lines
-5–6). The exact distance of a view is ``min(DTW(q, c), DTW(q, reverse(c)))`` with a
-Sakoe–Chiba band of ``r`` samples.
+The queue and the refinement run compiled (:mod:`viewdb.search.refine`, which also says
+when the search stops and why the answer is exact). The exact distance of a view is
+``min(DTW(q, c), DTW(q, reverse(c)))`` with a Sakoe–Chiba band of ``r`` samples; the
+result is the ``k`` distinct objects with the smallest distances, each with its best
+view.
 
 Groups come from a :class:`TierSource`: an R-tree in the database
 (:class:`viewdb.storage.tiers.StoredTier`) or arrays in memory (:class:`TierArrays`).
-The queue is fed by **range browsing**: it holds every group whose MINDIST is at most a
-radius ``rho``; entries are popped only while the top key is ``<= rho``, and when the
-top exceeds ``rho`` (or the queue runs dry) ``rho`` grows and the source is asked for
-the groups within the new radius. Every group with key ``<= rho`` is in the queue
-whenever something is popped, so entries pop in exactly the order of a queue that held
-all groups from the start: the result is that of Algorithm 2. :func:`brute_force_knn`
-computes the same answer by scanning everything and is the oracle the tests use.
+They are fed by **range browsing**: the candidates are every group whose MINDIST is at
+most a radius ``rho``; entries are taken only while the smallest key is ``<= rho``, and
+when it exceeds ``rho`` the radius grows and the source is asked for the groups within
+the new radius. Every group with key ``<= rho`` is a candidate whenever something is
+taken, so entries come in exactly the order of a queue that held all groups from the
+start. :func:`brute_force_knn` computes the same answer by scanning everything and is
+the oracle the tests use.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 import time
 from collections.abc import Mapping
-from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -45,20 +39,17 @@ from numpy.typing import NDArray
 
 from ..features import mirror_curve
 from .bounds import (
-    _cascade_dtw_kernel,
-    curve_box_lb_many,
+    _group_keys_kernel,
     dtw,
     envelope,
     envelope_box,
     fourier_coordinates,
-    group_bounds,
-    mindist_many,
     mirror_box,
 )
 from .grouping import INDEXED_COEFFICIENTS, group_points, indexed_coordinates, indexed_rows, padded_mbr
+from .refine import DONE, EXHAUSTED, NEED, RADIUS, WIDEN_ABS, WIDEN_REL, refine_groups
 
 __all__ = [
-    "Group",
     "Neighbour",
     "QueryBoxes",
     "SearchStats",
@@ -126,61 +117,65 @@ class QueryBoxes:
 
     def group_keys(
         self, lo: NDArray[np.float64], hi: NDArray[np.float64],
-        curve_lo: NDArray[np.float64], curve_hi: NDArray[np.float64],
-    ) -> NDArray[np.float64]:
-        """Lower bounds of the distance to every view of groups given by their MBRs (rows of
-        ``(g, d)``) and per-sample curve ranges (rows of ``(g, N)``), either orientation:
-        the larger of MINDIST and the curve-box bound (module doc of
-        :mod:`~viewdb.search.bounds`)."""
-        mind = np.minimum(mindist_many(*self.box, lo, hi), mindist_many(*self.mirrored_box, lo, hi))
-        if not len(curve_lo):
-            return mind
-        boxed = np.minimum(
-            curve_box_lb_many(self.lower, self.upper, curve_lo, curve_hi),
-            curve_box_lb_many(self.mirrored_lower, self.mirrored_upper, curve_lo, curve_hi),
+        curve_lo: NDArray[np.floating], curve_hi: NDArray[np.floating],
+        at: NDArray[np.int64] | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """MINDIST and key of groups given by their MBRs (rows of ``(g, d)``) and
+        per-sample curve ranges (rows of ``(g, N)``), either orientation, for the rows
+        ``at`` (default all): the key is the larger of MINDIST and the curve-box bound
+        (module doc of :mod:`~viewdb.search.bounds`), a lower bound of the distance of
+        every view of the group. Inputs are trusted (float64 contiguous, finite)."""
+        rows = np.arange(len(lo), dtype=np.int64) if at is None else at
+        return _group_keys_kernel(
+            self.box[0], self.box[1], self.mirrored_box[0], self.mirrored_box[1],
+            self.lower, self.upper, self.mirrored_lower, self.mirrored_upper,
+            lo, hi, curve_lo, curve_hi, rows,
         )
-        return np.maximum(mind, boxed)
-
-
-@dataclass(frozen=True)
-class Group:
-    """A few views of one object, as a search needs them."""
-
-    object: int
-    #: View ids (of the source), (n,).
-    views: NDArray[np.int64]
-    #: Distance curves, (n, N) float64 contiguous, and their mirrors.
-    curves: NDArray[np.float64]
-    mirrored: NDArray[np.float64]
-    #: Indexed Fourier coordinates of ``curves``, (n, d).
-    coords: NDArray[np.float64]
-
-    @classmethod
-    def of(cls, object: int, views: NDArray[np.int64], curves: NDArray[np.floating]) -> Group:
-        c = np.ascontiguousarray(curves, dtype=np.float64)
-        return cls(object, views, c, np.ascontiguousarray(np.roll(c[:, ::-1], 1, axis=1)),
-                   np.ascontiguousarray(indexed_coordinates(c)))
 
 
 class TierSource(Protocol):
-    """Where a search gets its groups from."""
+    """Where a search gets its groups from.
 
-    #: Number of groups in the tier.
+    Groups are numbered ``0 .. n_groups - 1``; group ``g`` holds rows ``group_start[g] :
+    group_start[g] + group_count[g]`` of the arrays :meth:`rows` returns, all views of
+    object ``group_owner[g]`` (objects are numbered ``0 .. n_objects - 1``).
+    """
+
     n_groups: int
+    n_objects: int
+    group_owner: NDArray[np.int64]
+    group_start: NDArray[np.int64]
+    group_count: NDArray[np.int64]
+    #: Object of each row of :meth:`rows`.
+    row_owner: NDArray[np.int64]
 
     def groups_within(
-        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
-    ) -> list[tuple[int, float, int]]:
-        """``(group id, key, object)`` of (at least) every group whose MINDIST is ``<=
-        radius``, except those in ``skip``; ``key`` is :meth:`QueryBoxes.group_keys` of the
-        group."""
+        self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Groups (and their keys, :meth:`QueryBoxes.group_keys`) of (at least) every group
+        whose MINDIST is ``<= radius``, except those marked in ``seen``."""
         ...
 
-    def group(self, gid: int) -> Group: ...
+    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.floating], NDArray[np.float64]]:
+        """The curves ``(V, N)`` and indexed coordinates ``(V, d)`` of the tier's views; the
+        rows of ``groups`` are filled in (others may not be)."""
+        ...
+
+    def view_id(self, row: int) -> int: ...
 
     def object_name(self, index: int) -> str: ...
 
     def object_index(self, name: str) -> int | None: ...
+
+
+def _packed(
+    groups: list[NDArray[np.int64]],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Row order putting each group's members next to each other: (rows, starts, counts)."""
+    counts = np.array([len(g) for g in groups], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    rows = np.concatenate(groups).astype(np.int64) if groups else np.zeros(0, np.int64)
+    return rows, starts, counts
 
 
 @dataclass
@@ -188,7 +183,8 @@ class TierArrays:
     """A tier held in memory: curves with their owners, grouped like the stored R-trees.
 
     The reference implementation of :class:`TierSource` (and what tests build from
-    random curves); :func:`brute_force_knn` scans it.
+    random curves); :func:`brute_force_knn` scans it. View ids are row numbers of
+    ``curves``.
     """
 
     names: list[str]
@@ -217,27 +213,32 @@ class TierArrays:
         self.mbr_hi = np.array([b[1] for b in boxes]).reshape(g, d)
         self.curve_lo = np.array([self.curves[v].min(axis=0) for v in self.groups]).reshape(g, n)
         self.curve_hi = np.array([self.curves[v].max(axis=0) for v in self.groups]).reshape(g, n)
+        self._rows, self.group_start, self.group_count = _packed(self.groups)
+        self.group_owner = np.array([self.owner[v[0]] for v in self.groups], dtype=np.int64)
+        self.row_owner = np.ascontiguousarray(self.owner[self._rows])
+        self._curves = np.ascontiguousarray(self.curves[self._rows])
+        self._coords = np.ascontiguousarray(coords[self._rows])
 
     @property
     def n_groups(self) -> int:
         return len(self.groups)
 
-    def groups_within(
-        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
-    ) -> list[tuple[int, float, int]]:
-        mind = query.group_keys(self.mbr_lo, self.mbr_hi, self.curve_lo[:0], self.curve_hi[:0])
-        hits = np.array([g for g in np.flatnonzero(mind <= radius).tolist() if g not in skip],
-                        dtype=np.int64)
-        if not len(hits):
-            return []
-        keys = query.group_keys(self.mbr_lo[hits], self.mbr_hi[hits], self.curve_lo[hits],
-                                self.curve_hi[hits])
-        return [(int(g), float(key), int(self.owner[self.groups[g][0]]))
-                for g, key in zip(hits.tolist(), keys.tolist(), strict=True)]
+    @property
+    def n_objects(self) -> int:
+        return len(self.names)
 
-    def group(self, gid: int) -> Group:
-        views = self.groups[gid]
-        return Group.of(int(self.owner[views[0]]), views, self.curves[views])
+    def groups_within(
+        self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        mind, keys = query.group_keys(self.mbr_lo, self.mbr_hi, self.curve_lo, self.curve_hi)
+        hits = np.flatnonzero((mind <= radius) & ~seen).astype(np.int64)
+        return hits, keys[hits]
+
+    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return self._curves, self._coords
+
+    def view_id(self, row: int) -> int:
+        return int(self._rows[row])
 
     def object_name(self, index: int) -> str:
         return self.names[index]
@@ -259,7 +260,8 @@ def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: in
     return sorted(best.values(), key=lambda nb: (nb.distance, nb.object))[:k]
 
 
-_GROUP, _CURSOR, _EXACT = 0, 1, 2
+#: Groups made ready (read from the file if need be) per call of the compiled refinement.
+CHUNK = 32
 
 
 def knn(
@@ -270,6 +272,7 @@ def knn(
     *,
     upper: float = math.inf,
     known: Mapping[int, float] | None = None,
+    initial_radius: float = INITIAL_RADIUS,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`.
 
@@ -279,94 +282,69 @@ def knn(
     → the client's distance). Groups whose key exceeds ``upper`` are never fetched; the
     result is unchanged as long as the bounds hold.
 
-    DTW runs after the UCR cascade (LB_Keogh against the candidate's envelope) and
-    abandons early past ``min(U, b_o)``: ``U`` the k-th smallest of the best distances
-    found so far of distinct objects (the final k-th distance is at most ``U``) and
-    ``b_o`` the best found so far for the candidate's object. A curve beyond that can
-    neither enter the result nor improve its object, so it is dropped.
+    Candidate groups are refined in the order of their keys by the compiled loop of
+    :func:`~viewdb.search.refine.refine_groups` (each group's views in the order of their
+    own keys, the UCR cascade, DTW abandoning past ``min(U, b_o)``); see the module doc
+    for the range browsing that feeds it and why the result is exact.
     """
     start = time.perf_counter()
     stats = SearchStats()
     qb = QueryBoxes.of(query, r)
-    q, envelope_pair, mirrored_pair = qb.curve, (qb.lower, qb.upper), (qb.mirrored_lower, qb.mirrored_upper)
-    # entries: (key, tiebreak, kind, gid, x): x is the object of a group entry and the
-    # position in the group's sorted bounds of a cursor or exact entry
-    heap: list[tuple[float, int, int, int, int]] = []
-    counter = 0
-    seen: set[int] = set()
-    opened: dict[int, tuple[Group, NDArray[np.float64], NDArray[np.int64]]] = {}
+    envelope_pair = (qb.lower, qb.upper)
+    mirrored_pair = (qb.mirrored_lower, qb.mirrored_upper)
+    bound = np.full(source.n_objects, math.inf)
+    for o, d in (known or {}).items():
+        bound[o] = min(bound[o], float(d))
+    exact = np.full(source.n_objects, math.inf)
+    exact_row = np.full(source.n_objects, -1, dtype=np.int64)
+    exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
+    cap = upper * (1.0 + WIDEN_REL) + WIDEN_ABS if math.isfinite(upper) else math.inf
+    counters = np.zeros(4, dtype=np.int64)
+    views = int(source.group_count.sum())
+    heap = (np.empty(2 * views), np.empty(2 * views, dtype=np.int64), np.zeros(1, dtype=np.int64))
+    seen = np.zeros(source.n_groups, dtype=np.bool_)
+    order = np.zeros(0, dtype=np.int64)
+    keys = np.zeros(0, dtype=np.float64)
+    pos = ready = 0
     radius = -math.inf
     exhausted = source.n_groups == 0
-    result: list[Neighbour] = []
-    done: set[int] = set()
-    # best distance known so far per object (computed here, or an upper bound handed in)
-    found: dict[int, float] = dict(known or {})
-    bound = sorted(found.values())[k - 1] if len(found) >= k else math.inf  # U: k-th of found
-    if math.isfinite(upper):  # widened by a hair, like the limits below
-        upper = upper * (1.0 + 1e-9) + 1e-12
-    bound = min(bound, upper)
-    while len(result) < k:
-        while not exhausted and (not heap or heap[0][0] > radius):
-            radius = min(max(2.0 * radius, heap[0][0] if heap else 0.0, INITIAL_RADIUS), upper)
+    status = EXHAUSTED
+    while True:
+        if status in (EXHAUSTED, RADIUS):
+            if exhausted:
+                break
+            # browse further: every group within the (grown) radius joins the candidates
+            smallest = min(float(keys[pos]) if pos < len(keys) else math.inf,
+                           float(heap[0][0]) if heap[2][0] else math.inf)
+            radius = min(max(2.0 * radius, smallest if math.isfinite(smallest) else 0.0,
+                             initial_radius), cap)
             stats.expansions += 1
-            for gid, key, owner in source.groups_within(qb, radius, seen):
-                seen.add(gid)
-                if key <= upper:
-                    heap.append((key, counter, _GROUP, gid, owner))
-                    counter += 1
-            heapq.heapify(heap)
-            exhausted = len(seen) >= source.n_groups or radius >= upper
-        if not heap:
+            found, found_keys = source.groups_within(qb, radius, seen)
+            seen[found] = True
+            keep = found_keys <= cap
+            order = np.concatenate([order[pos:], found[keep]])
+            keys = np.concatenate([keys[pos:], found_keys[keep]])
+            by_key = np.argsort(keys, kind="stable")
+            order, keys, pos, ready = order[by_key], keys[by_key], 0, 0
+            exhausted = bool(seen.all()) or radius >= cap
+        if ready < len(order) and (status == NEED or ready <= pos):
+            end = min(len(order), max(ready, pos) + CHUNK)
+            source.rows(order[ready:end])
+            ready = end
+        curves, coords = source.rows(order[:0])
+        pos, status = refine_groups(
+            qb.curve, r, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
+            order, keys, pos, ready, math.inf if exhausted else radius,
+            source.group_start, source.group_count, source.group_owner, source.row_owner,
+            curves, coords, bound, exact, exact_row, exact_mirrored, k, cap, counters, heap,
+        )
+        if status == DONE:
             break
-        key, _, kind, gid, position = heapq.heappop(heap)
-        if kind == _GROUP:
-            if position in done:  # a group entry carries its object in the last slot
-                continue
-            group = source.group(gid)
-            stats.groups_visited += 1
-            n = len(group.views)
-            stats.points_visited += n
-            stats.lb_keogh += 2 * n
-            keys = group_bounds(envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
-                                group.coords, group.curves)
-            order = np.argsort(keys, kind="stable")
-            keys = keys[order]
-            opened[gid] = (group, keys, order)
-            heapq.heappush(heap, (float(keys[0]), counter, _CURSOR, gid, 0))
-            counter += 1
-            continue
-        group, keys, order = opened[gid]
-        owner = group.object
-        if owner in done:
-            continue
-        n = len(group.views)
-        slot = int(order[position])
-        view, mirrored = slot % n, slot >= n
-        if kind == _EXACT:
-            done.add(owner)
-            result.append(Neighbour(source.object_name(owner), int(group.views[view]), key, mirrored))
-            continue
-        # a cursor: refine its curve exactly, move on to the group's next curve
-        # bounds and DTW sum the same squares in different orders: a bound may exceed the
-        # distance it bounds by a few ulps, so a limit that *equals* a distance (an upper
-        # bound handed in, or a tie) is widened by a hair before anything is dropped
-        limit = min(bound, found.get(owner, math.inf)) * (1.0 + 1e-9) + 1e-12
-        if key > limit:  # so are the group's later curves (sorted), and limits only shrink
-            continue
-        if position + 1 < len(keys):
-            heapq.heappush(heap, (float(keys[position + 1]), counter, _CURSOR, gid, position + 1))
-            counter += 1
-        stats.dtw += 1
-        curve = group.mirrored[view] if mirrored else group.curves[view]
-        distance = float(_cascade_dtw_kernel(q, curve, r, limit))
-        if distance > limit:  # abandoned (inf): it can neither enter the result nor improve
-            continue
-        heapq.heappush(heap, (distance, counter, _EXACT, gid, position))
-        counter += 1
-        if distance < found.get(owner, math.inf):
-            found[owner] = distance
-            if len(found) >= k and distance < bound:
-                bound = min(bound, sorted(found.values())[k - 1])
+    stats.groups_visited, stats.points_visited, stats.lb_keogh, stats.dtw = (int(x) for x in counters)
+    hits = sorted((float(exact[o]), source.object_name(int(o)), int(o))
+                  for o in np.flatnonzero(np.isfinite(exact)))[:k]
+    result = [Neighbour(name, source.view_id(int(exact_row[o])), d, bool(exact_mirrored[o]))
+              for d, name, o in hits]
     stats.seconds = time.perf_counter() - start
     return result, stats
 
@@ -384,8 +362,10 @@ def objects_within(
     if not radius >= 0:
         raise ValueError(f"radius must be >= 0, got {radius}")
     qb = QueryBoxes.of(query, r)
+    found, keys = source.groups_within(qb, radius, np.zeros(source.n_groups, dtype=np.bool_))
     best: dict[int, float] = {}
-    for _, key, owner in source.groups_within(qb, radius):
+    for g, key in zip(found.tolist(), keys.tolist(), strict=True):
+        owner = int(source.group_owner[g])
         if key <= radius and key < best.get(owner, math.inf):
             best[owner] = key
     return {source.object_name(o): key for o, key in sorted(best.items(), key=lambda x: x[1])}

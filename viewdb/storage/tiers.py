@@ -7,8 +7,9 @@ that writes the object, so an object is in the index exactly when it is in the f
 
 Reading: :class:`StoredTier` is a :class:`~viewdb.search.knn.TierSource` over one tier
 of an open file: the R-tree answers "which groups lie within distance d of the query
-box" (a box query widened by d, then the exact MINDIST), and a group's views and curves
-are one row read (cached).
+box" (a box query widened by d, then the exact MINDIST); the groups' MBRs and curve
+ranges are read when the tier is opened, and a group's curves (one row) the first time
+a search reaches it, into arrays kept for the life of the open tier.
 """
 
 from __future__ import annotations
@@ -16,9 +17,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -35,7 +34,7 @@ from ..search.grouping import (
     padded_mbr,
     tier_members,
 )
-from ..search.knn import Group, QueryBoxes, TierArrays
+from ..search.knn import QueryBoxes, TierArrays
 from .codecs import decode_array, encode_array
 from .spatial import FourierIndex, _raw
 
@@ -51,10 +50,6 @@ __all__ = [
 
 #: The two tiers: every stored view (server grid) and the client grid's stand-ins.
 TIERS = ("full", "sparse")
-
-#: Groups kept decoded in memory per open tier (a group of 32 views is ~40 KB).
-GROUP_CACHE = 4096
-
 
 def create_tiers(conn: Any) -> None:
     """Create the empty R-trees of both tiers (the tables must exist)."""
@@ -146,62 +141,76 @@ class StoredTier:
         self.tier = tier
         self.index = FourierIndex.open(conn, tier)
         rows = conn.execute(
-            "SELECT id, object_id, lo, hi, curve_lo, curve_hi FROM index_groups WHERE tier = ?"
-            " ORDER BY id",
+            "SELECT id, object_id, lo, hi, curve_lo, curve_hi, view_ids FROM index_groups"
+            " WHERE tier = ? ORDER BY id",
             (tier,),
         ).fetchall()
         self.n_groups = len(rows)
-        self._owner = np.array([r[1] for r in rows], dtype=np.int64)
         self._ids = np.array([r[0] for r in rows], dtype=np.int64)
+        object_ids, owner = np.unique(np.array([r[1] for r in rows], dtype=np.int64),
+                                      return_inverse=True)
+        self.group_owner = owner.astype(np.int64).reshape(-1)
+        self.n_objects = len(object_ids)
         self._lo, self._hi, self._curve_lo, self._curve_hi = (
             np.array([decode_array(r[i], dtype, (None,)) for r in rows], dtype=np.float64)
             for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
         )
-        self._names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
-        self._ids_by_name: dict[str, int] | None = None
-        self._groups: OrderedDict[int, Group] = OrderedDict()
+        views = [decode_array(r[6], np.int64, (None,)) for r in rows]
+        self.group_count = np.array([len(v) for v in views], dtype=np.int64)
+        self.group_start = np.concatenate([[0], np.cumsum(self.group_count)[:-1]]).astype(np.int64)
+        self._views = np.concatenate(views) if views else np.zeros(0, np.int64)
+        self.row_owner = np.repeat(self.group_owner, self.group_count)
+        samples = self._curve_lo.shape[1] if rows else 0
+        # curves and coordinates of every view, filled in group by group as searches need them
+        self._curves = np.empty((len(self._views), samples), dtype=np.float32)
+        self._coords = np.empty((len(self._views), DIMENSION), dtype=np.float64)
+        self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
+        names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
+        self._names = [names[int(i)] for i in object_ids]
+        self._index_by_name = {name: i for i, name in enumerate(self._names)}
 
     def close(self) -> None:
         self.index.discard()
 
     def groups_within(
-        self, query: QueryBoxes, radius: float, skip: AbstractSet[int] = frozenset()
-    ) -> list[tuple[int, float, int]]:
+        self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         hits = [self.index.intersection(lo - radius, hi + radius)
                 for lo, hi in (query.box, query.mirrored_box)]
-        gids = np.union1d(*hits)
-        if skip:
-            gids = gids[[g not in skip for g in gids.tolist()]]
-        if not len(gids):
-            return []
-        at = np.searchsorted(self._ids, gids)
-        keys = query.group_keys(self._lo[at], self._hi[at], self._curve_lo[at], self._curve_hi[at])
-        return list(zip(gids.tolist(), keys.tolist(), self._owner[at].tolist(), strict=True))
+        at = np.searchsorted(self._ids, np.union1d(*hits))
+        at = at[~seen[at]]
+        if not len(at):
+            return at.astype(np.int64), np.zeros(0)
+        _, keys = query.group_keys(self._lo, self._hi, self._curve_lo, self._curve_hi,
+                                   at.astype(np.int64))
+        return at.astype(np.int64), keys
 
-    def group(self, gid: int) -> Group:
-        group = self._groups.get(gid)
-        if group is not None:
-            self._groups.move_to_end(gid)
-            return group
-        row = self.conn.execute(
-            "SELECT object_id, view_ids, curves FROM index_groups WHERE id = ?", (gid,)
-        ).fetchone()
-        views = decode_array(row[1], np.int64, (None,))
-        curves = decode_array(row[2], np.float32, (len(views), None))
-        group = Group.of(int(row[0]), views, curves)
-        self._groups[gid] = group
-        if len(self._groups) > GROUP_CACHE:
-            self._groups.popitem(last=False)
-        return group
+    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+        missing = groups[~self._loaded[groups]]
+        for start in range(0, len(missing), 900):  # SQLite caps the variables of one statement
+            chunk = missing[start : start + 900]
+            by_id = {int(self._ids[g]): int(g) for g in chunk}
+            marks = ",".join("?" * len(chunk))
+            for gid, blob in self.conn.execute(
+                f"SELECT id, curves FROM index_groups WHERE id IN ({marks})", list(by_id)
+            ):
+                g = by_id[int(gid)]
+                a, n = int(self.group_start[g]), int(self.group_count[g])
+                curves = decode_array(blob, np.float32, (n, self._curves.shape[1]))
+                self._curves[a : a + n] = curves
+                self._coords[a : a + n] = indexed_coordinates(curves)
+                self._loaded[g] = True
+        return self._curves, self._coords
+
+    def view_id(self, row: int) -> int:
+        return int(self._views[row])
 
     def object_name(self, index: int) -> str:
         return self._names[index]
 
     def object_index(self, name: str) -> int | None:
         """The source's index of object ``name`` (None if it has none)."""
-        if self._ids_by_name is None:
-            self._ids_by_name = {known: index for index, known in self._names.items()}
-        return self._ids_by_name.get(name)
+        return self._index_by_name.get(name)
 
 
 def index_stored_objects(conn: Any, config: BuildConfig) -> int:
