@@ -204,6 +204,11 @@ class ViewDB:
     def path(self) -> Path:
         return self._store.path
 
+    @property
+    def read_only(self) -> bool:
+        """Whether the file was opened with ``read_only=True`` (nothing is ever written)."""
+        return self._store.read_only
+
     def close(self) -> None:
         if self._reader is not None:
             self._reader.close()
@@ -239,6 +244,8 @@ class ViewDB:
                 "is a client database (export-client): ingest into the full database and "
                 "export again", self.path,
             )
+        if self.read_only:
+            raise ViewDBError("is open read-only; open it without read_only to ingest", self.path)
 
         def write(desc: ObjectDescription) -> None:
             self._store.write_object(desc, self.config)
@@ -463,7 +470,7 @@ class ViewDB:
 
     def _tier_reader(self) -> TierReader:
         if self._reader is None:
-            self._reader = TierReader(self.path)
+            self._reader = TierReader(self.path, self._store.connect)
         return self._reader
 
     def search_tier(self, tier: str = "full") -> tuple[TierArrays, list[tuple[int, float, float]]]:
@@ -599,6 +606,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     image_size: int | None = None,
     client_gap: float | None = None,
     config: BuildConfig | None = None,
+    read_only: bool = False,
 ) -> ViewDB:
     """Open (or create) a view database file.
 
@@ -607,6 +615,10 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°)
     overriding it. An existing file keeps the configuration it was built with; asking for
     a different one raises :class:`~viewdb.errors.ViewDBError`.
+
+    ``read_only=True`` opens an existing file without ever writing to it (no journal-mode
+    switch, no migration: a file from an older viewdb must be opened once normally to be
+    upgraded), e.g. for a server or a shipped client file on read-only storage.
     """
     try:  # a bad configuration is refused before any file is touched
         wanted = config or BuildConfig()
@@ -619,11 +631,11 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc
-    store = Store(path, create=create, initial=(wanted, "full"))
+    store = Store(path, create=create, initial=(wanted, "full"), read_only=read_only)
     try:
         stored = store.build_config()
         if stored is None:  # a file whose creation by an older viewdb was cut short
-            if not create:
+            if not create or read_only:
                 raise StorageError("is an unfinished database (its creation was interrupted); "
                                    "delete it and ingest again", path)
             store.set_build_config(wanted)
