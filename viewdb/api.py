@@ -23,6 +23,7 @@ from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBErro
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .query import QueryResult, run_query
+from .remote import ServerTier
 from .render import RenderedView, get_renderer
 from .search.knn import SearchStats, TierArrays, knn, objects_within
 from .search.plans import (
@@ -77,6 +78,8 @@ class Recognition:
     #: JSON bytes the client would send and receive (CS1/CS2).
     bytes_sent: int
     bytes_received: int
+    #: With a remote server: the round trip's wall time beyond the server's own time.
+    network_ms: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -325,15 +328,21 @@ class ViewDB:
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
-        client: ViewDB | None = None,
+        client: ViewDB | None = None, server: ServerTier | None = None,
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``).
 
         ``client`` is the file the client half runs on (a client file from
-        :meth:`export_client`, or any full file); default this file.
+        :meth:`export_client`, or any full file); default this file. With ``server`` (e.g.
+        :class:`viewdb.http.RemoteServer`) this file is the client: its sparse tier runs
+        the client half and ``server`` the rest (for ``plan="server"``, all of it).
         """
         if plan not in PLANS:
             raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+        if server is not None:
+            if client is not None:
+                raise QueryError("give either a client file or a server, not both")
+            return self._recognise_remote(curve, k, band, plan, server)
         self._full_tier_only()
         q = self._query_curve(curve, k, "full")
         start = time.perf_counter()
@@ -357,6 +366,21 @@ class ViewDB:
         return Recognition(plan, reply.results, mine, (middle - start) * 1e3, (end - middle) * 1e3,
                            reply.stats, sent, received)
 
+    def _recognise_remote(
+        self, curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier
+    ) -> Recognition:
+        q = self._query_curve(curve, k, "sparse")
+        start = time.perf_counter()
+        mine = [] if plan == "server" else self.client_candidates(q, k, band=band)[0]
+        client_ms = (time.perf_counter() - start) * 1e3
+        if plan == "cs2":
+            reply, exchange = server.walk(WalkRequest(q, band, k, self.config.client_gap, mine))
+        else:  # cs1; and the server plan is CS1 without client candidates
+            reply, exchange = server.refine(RefineRequest(q, band, k, mine))
+        return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
+                           exchange.sent, exchange.received,
+                           max(exchange.wall_ms - exchange.server_ms, 0.0))
+
     def query(
         self,
         image: str | Path | NDArray[Any],
@@ -364,6 +388,7 @@ class ViewDB:
         k: int = 5,
         plan: str = "server",
         client: ViewDB | None = None,
+        server: ServerTier | None = None,
         mask: NDArray[Any] | str | Path | None = None,
         band: int = 6,
         rotations: int = 12,
@@ -379,10 +404,16 @@ class ViewDB:
         chosen among its candidate same-shape views by SIFT or by outline (see
         :mod:`viewdb.query`). ``intrinsics`` ``(fx, fy, cx, cy)`` give a perspective pose in
         that camera's OpenCV frame.
+
+        With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
+        segmentation and the client half run here, the server half and the pose on the
+        server; the answer is the one the full file gives locally.
         """
+        if server is not None and client is not None:
+            raise QueryError("give either a client file or a server, not both")
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
-                         rotations=rotations, pose=pose and self.role == "full",
-                         intrinsics=intrinsics)
+                         rotations=rotations, pose=pose and (self.role == "full" or server is not None),
+                         intrinsics=intrinsics, server=server)
 
     def _forget(self, name: str) -> None:
         self._curves.clear()
