@@ -223,7 +223,10 @@ def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
 @app.command()
 def query(
     image: Annotated[Path, typer.Argument(help="Query photo (PNG, JPEG, ...).", dir_okay=False)],
-    db: DbOption,
+    db: Annotated[
+        Path | None, typer.Option("--db", help="Full database file (or --client with --server).",
+                                  dir_okay=False)
+    ] = None,
     k: Annotated[int, typer.Option("-k", help="How many objects.", min=1, max=100)] = 5,
     plan: Annotated[str, typer.Option(help="server, cs1 or cs2.")] = "server",
     client: Annotated[
@@ -242,26 +245,50 @@ def query(
         str | None, typer.Option(help="Camera intrinsics fx,fy,cx,cy (pose in that camera's frame).")
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    server: Annotated[
+        str | None, typer.Option(help="URL of a viewdb server (viewdb serve); the client half runs "
+                                      "on --client, the rest on the server.")
+    ] = None,
+    token: Annotated[
+        str | None, typer.Option(help="Bearer token for --server.", envvar="VIEWDB_TOKEN")
+    ] = None,
 ) -> None:
-    """Recognise the object a photo shows and estimate its pose."""
+    """Recognise the object a photo shows and estimate its pose.
+
+    Locally on --db (the client half of cs1/cs2 on --client if given), or remotely:
+    --client FILE --server URL runs the client half on the client file and calls the
+    server for the rest (and the pose).
+    """
     if plan not in ("server", "cs1", "cs2"):
         raise typer.BadParameter("must be server, cs1 or cs2", param_hint="--plan")
     cam = _intrinsics(intrinsics)
-    with viewdb.open(db, create=False) as vdb:
-        side = viewdb.open(client, create=False) if client is not None else None
-        try:
-            result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
-                               rotations=rotations, pose=not no_pose, intrinsics=cam)
-        finally:
-            if side is not None:
-                side.close()
+    if server is not None:
+        if client is None or db is not None:
+            raise typer.BadParameter("with --server give --client FILE (and no --db)",
+                                     param_hint="--server")
+        with viewdb.open(client, read_only=True) as side, \
+                viewdb.RemoteServer(server, token=token) as remote:
+            result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
+                                rotations=rotations, pose=not no_pose, intrinsics=cam)
+    elif db is None:
+        raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
+    else:
+        with viewdb.open(db, create=False) as vdb:
+            side = viewdb.open(client, create=False) if client is not None else None
+            try:
+                result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
+                                   rotations=rotations, pose=not no_pose, intrinsics=cam)
+            finally:
+                if side is not None:
+                    side.close()
     if as_json:
         _echo_json(result.to_dict())
         return
     t = result.timing_ms
+    network = f", network {t['network']:.0f}" if "network" in t else ""
     out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
               f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
-              f"server {t['server']:.0f}, pose {t['pose']:.0f})")
+              f"server {t['server']:.0f}, pose {t['pose']:.0f}{network})")
     table = Table("rank", "object", "distance", "view h/v", "pose h/v/in-plane", "method", "inliers")
     for r in result.results:
         p = r.pose
@@ -297,6 +324,47 @@ def export_client(
         f"{config.client_gap:g}° client grid, {small.file_bytes / 1e6:.2f} MB "
         f"({small.file_bytes / max(full.file_bytes, 1):.1%} of {full.file_bytes / 1e6:.1f} MB)"
     )
+
+
+@app.command()
+def serve(
+    db: DbOption,
+    host: Annotated[str, typer.Option(help="Address to listen on (loopback by default).")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port (0 picks a free one).", min=0, max=65535)] = 8765,
+    workers: Annotated[int, typer.Option(help="Worker processes, each with the db open read-only.",
+                                         min=1, max=64)] = 1,
+    token: Annotated[
+        str | None, typer.Option(help="Require 'Authorization: Bearer TOKEN' (except /health).",
+                                 envvar="VIEWDB_TOKEN")
+    ] = None,
+    max_body: Annotated[
+        int, typer.Option(help="Largest /refine or /walk body in bytes.", min=1024)
+    ] = 256 * 1024,
+    max_image_body: Annotated[
+        int, typer.Option(help="Largest /pose body (the query image) in bytes.", min=1024)
+    ] = 32 * 1024 * 1024,
+    log_level: Annotated[
+        str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
+    ] = "warning",
+) -> None:
+    """Serve the server tier of a full database over HTTP (read-only; OpenAPI at /openapi.json).
+
+    POST /refine (CS1), /walk (CS2), /pose; GET /info, /health. Clients run
+    `viewdb query IMAGE --client CLIENT --server URL`.
+    """
+    from viewdb.http.serve import run_server
+
+    if log_level not in ("critical", "error", "warning", "info", "debug"):
+        raise typer.BadParameter("must be critical, error, warning, info or debug", param_hint="--log-level")
+
+    def ready(url: str, objects: int) -> None:
+        auth = ", bearer token required" if token else ""
+        out.print(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
+                  f"worker{'s' if workers > 1 else ''}{auth}; Ctrl-C stops")
+        sys.stdout.flush()
+
+    run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
+               max_image_body=max_image_body, log_level=log_level, ready=ready)
 
 
 @app.command()

@@ -31,9 +31,11 @@ from .errors import (
     QueryError,
     RenderError,
     SchemaMismatch,
+    ServerError,
     StorageError,
     ViewDBError,
 )
+from .http.client import RemoteServer
 from .ingest import FileOutcome, IngestProgress, IngestReport
 from .render import RenderedView
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
@@ -61,11 +63,13 @@ __all__ = [
     "QueryResult",
     "Recognition",
     "RefineRequest",
+    "RemoteServer",
     "RenderConfig",
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
     "SearchHit",
+    "ServerError",
     "ServerReply",
     "SiftConfig",
     "SkimConfig",

@@ -23,6 +23,7 @@ from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBErro
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
 from .query import QueryResult, run_query
+from .remote import ServerTier
 from .render import RenderedView, get_renderer
 from .search.knn import SearchStats, TierArrays, knn, objects_within
 from .search.plans import (
@@ -77,6 +78,8 @@ class Recognition:
     #: JSON bytes the client would send and receive (CS1/CS2).
     bytes_sent: int
     bytes_received: int
+    #: With a remote server: the round trip's wall time beyond the server's own time.
+    network_ms: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -204,6 +207,11 @@ class ViewDB:
     def path(self) -> Path:
         return self._store.path
 
+    @property
+    def read_only(self) -> bool:
+        """Whether the file was opened with ``read_only=True`` (nothing is ever written)."""
+        return self._store.read_only
+
     def close(self) -> None:
         if self._reader is not None:
             self._reader.close()
@@ -239,6 +247,8 @@ class ViewDB:
                 "is a client database (export-client): ingest into the full database and "
                 "export again", self.path,
             )
+        if self.read_only:
+            raise ViewDBError("is open read-only; open it without read_only to ingest", self.path)
 
         def write(desc: ObjectDescription) -> None:
             self._store.write_object(desc, self.config)
@@ -318,15 +328,21 @@ class ViewDB:
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
-        client: ViewDB | None = None,
+        client: ViewDB | None = None, server: ServerTier | None = None,
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``).
 
         ``client`` is the file the client half runs on (a client file from
-        :meth:`export_client`, or any full file); default this file.
+        :meth:`export_client`, or any full file); default this file. With ``server`` (e.g.
+        :class:`viewdb.http.RemoteServer`) this file is the client: its sparse tier runs
+        the client half and ``server`` the rest (for ``plan="server"``, all of it).
         """
         if plan not in PLANS:
             raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+        if server is not None:
+            if client is not None:
+                raise QueryError("give either a client file or a server, not both")
+            return self._recognise_remote(curve, k, band, plan, server)
         self._full_tier_only()
         q = self._query_curve(curve, k, "full")
         start = time.perf_counter()
@@ -350,6 +366,21 @@ class ViewDB:
         return Recognition(plan, reply.results, mine, (middle - start) * 1e3, (end - middle) * 1e3,
                            reply.stats, sent, received)
 
+    def _recognise_remote(
+        self, curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier
+    ) -> Recognition:
+        q = self._query_curve(curve, k, "sparse")
+        start = time.perf_counter()
+        mine = [] if plan == "server" else self.client_candidates(q, k, band=band)[0]
+        client_ms = (time.perf_counter() - start) * 1e3
+        if plan == "cs2":
+            reply, exchange = server.walk(WalkRequest(q, band, k, self.config.client_gap, mine))
+        else:  # cs1; and the server plan is CS1 without client candidates
+            reply, exchange = server.refine(RefineRequest(q, band, k, mine))
+        return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
+                           exchange.sent, exchange.received,
+                           max(exchange.wall_ms - exchange.server_ms, 0.0))
+
     def query(
         self,
         image: str | Path | NDArray[Any],
@@ -357,6 +388,7 @@ class ViewDB:
         k: int = 5,
         plan: str = "server",
         client: ViewDB | None = None,
+        server: ServerTier | None = None,
         mask: NDArray[Any] | str | Path | None = None,
         band: int = 6,
         rotations: int = 12,
@@ -372,10 +404,16 @@ class ViewDB:
         chosen among its candidate same-shape views by SIFT or by outline (see
         :mod:`viewdb.query`). ``intrinsics`` ``(fx, fy, cx, cy)`` give a perspective pose in
         that camera's OpenCV frame.
+
+        With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
+        segmentation and the client half run here, the server half and the pose on the
+        server; the answer is the one the full file gives locally.
         """
+        if server is not None and client is not None:
+            raise QueryError("give either a client file or a server, not both")
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
-                         rotations=rotations, pose=pose and self.role == "full",
-                         intrinsics=intrinsics)
+                         rotations=rotations, pose=pose and (self.role == "full" or server is not None),
+                         intrinsics=intrinsics, server=server)
 
     def _forget(self, name: str) -> None:
         self._curves.clear()
@@ -463,7 +501,7 @@ class ViewDB:
 
     def _tier_reader(self) -> TierReader:
         if self._reader is None:
-            self._reader = TierReader(self.path)
+            self._reader = TierReader(self.path, self._store.connect)
         return self._reader
 
     def search_tier(self, tier: str = "full") -> tuple[TierArrays, list[tuple[int, float, float]]]:
@@ -599,6 +637,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     image_size: int | None = None,
     client_gap: float | None = None,
     config: BuildConfig | None = None,
+    read_only: bool = False,
 ) -> ViewDB:
     """Open (or create) a view database file.
 
@@ -607,6 +646,10 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°)
     overriding it. An existing file keeps the configuration it was built with; asking for
     a different one raises :class:`~viewdb.errors.ViewDBError`.
+
+    ``read_only=True`` opens an existing file without ever writing to it (no journal-mode
+    switch, no migration: a file from an older viewdb must be opened once normally to be
+    upgraded), e.g. for a server or a shipped client file on read-only storage.
     """
     try:  # a bad configuration is refused before any file is touched
         wanted = config or BuildConfig()
@@ -619,11 +662,11 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc
-    store = Store(path, create=create, initial=(wanted, "full"))
+    store = Store(path, create=create, initial=(wanted, "full"), read_only=read_only)
     try:
         stored = store.build_config()
         if stored is None:  # a file whose creation by an older viewdb was cut short
-            if not create:
+            if not create or read_only:
                 raise StorageError("is an unfinished database (its creation was interrupted); "
                                    "delete it and ingest again", path)
             store.set_build_config(wanted)

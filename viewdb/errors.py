@@ -11,7 +11,8 @@ Catch :class:`ViewDBError` to handle them all. The tree::
     │   ├── SchemaMismatch      the file's schema is newer than this viewdb knows
     │   └── NotFound            an object or view asked for is not in the database
     ├── QueryError              a query cannot be answered as asked
-    └── PoseError               a pose cannot be estimated
+    ├── PoseError               a pose cannot be estimated
+    └── ServerError             a viewdb server cannot be reached or refused a request
 
 Every error carries an optional ``path`` (the file it is about), so the CLI can print
 ``viewdb: <path>: <problem>`` on one line.
@@ -30,6 +31,7 @@ __all__ = [
     "QueryError",
     "RenderError",
     "SchemaMismatch",
+    "ServerError",
     "StorageError",
     "ViewDBError",
 ]
@@ -81,3 +83,13 @@ class QueryError(ViewDBError):
 
 class PoseError(ViewDBError):
     """A pose cannot be estimated."""
+
+
+class ServerError(ViewDBError):
+    """A viewdb server (``viewdb serve``) cannot be reached, or refused a request; the
+    ``path`` is its URL, ``status`` the HTTP status (None if none came back)."""
+
+    def __init__(self, message: str, path: str | PathLike[str] | None = None,
+                 status: int | None = None) -> None:
+        super().__init__(message, path)
+        self.status = status

@@ -34,9 +34,9 @@ from .query_image import LoadedImage, Segmentation, load_image, segment
 from .search.plans import Candidate
 
 if TYPE_CHECKING:
-    from .api import ViewDB
+    from .api import ServerTier, ViewDB
 
-__all__ = ["QueryMatch", "QueryResult", "rotated_curves", "run_query"]
+__all__ = ["QueryMatch", "QueryResult", "pose_matches", "rotated_curves", "run_query"]
 
 #: Most candidate poses examined per result (a sphere has every grid view as one).
 MAX_POSE_CANDIDATES = 24
@@ -207,6 +207,22 @@ def _refine_shape(
     return best
 
 
+def pose_matches(
+    db: ViewDB, query: QueryView, matches: Sequence[Candidate],
+    intrinsics: tuple[float, float, float, float] | None = None, config: PoseConfig | None = None,
+) -> list[tuple[PoseEstimate | None, str | None]]:
+    """``(pose, None)`` or ``(None, why not)`` for each match, from the full file ``db``
+    (what a server does for a remote client's ``pose`` request)."""
+    config = config or PoseConfig()
+    out: list[tuple[PoseEstimate | None, str | None]] = []
+    for c in matches:
+        try:
+            out.append((_pose(db, query, c, config, intrinsics), None))
+        except ViewDBError as exc:
+            out.append((None, exc.message))
+    return out
+
+
 def run_query(
     db: ViewDB,
     image: str | Path | NDArray[Any] | LoadedImage,
@@ -220,8 +236,13 @@ def run_query(
     pose: bool = True,
     intrinsics: tuple[float, float, float, float] | None = None,
     pose_config: PoseConfig | None = None,
+    server: ServerTier | None = None,
 ) -> QueryResult:
-    """Recognise the object a query image shows and estimate its pose (see module doc)."""
+    """Recognise the object a query image shows and estimate its pose (see module doc).
+
+    With ``server`` (e.g. :class:`viewdb.http.RemoteServer`), ``db`` is the client file:
+    the client half of the plan runs on it, the server half and the pose on ``server``.
+    """
     start = time.perf_counter()
     loaded = image if isinstance(image, LoadedImage) else load_image(image)
     seg: Segmentation = segment(loaded, mask)
@@ -230,35 +251,41 @@ def run_query(
     per_turn = []
     client_ms = server_ms = 0.0
     sent = received = trips = 0
+    network_ms = pose_server_ms = 0.0
     for angle, curve in curves:
-        found = db.recognise(curve, k, band=band, plan=plan, client=client)
+        if server is None:
+            found = db.recognise(curve, k, band=band, plan=plan, client=client)
+        else:
+            found = db.recognise(curve, k, band=band, plan=plan, server=server)
         per_turn.append((angle, found.results))
         client_ms += found.client_ms
         server_ms += found.server_ms
+        network_ms += found.network_ms
         sent += found.bytes_sent
         received += found.bytes_received
-        trips += plan != "server"
+        trips += plan != "server" or server is not None
     merged = _merge(per_turn, k)
     recognised = time.perf_counter()
-    matches = []
     query = QueryView(loaded.rgb, seg.mask)
-    config = pose_config or PoseConfig()
-    for rank, (c, angle) in enumerate(merged, 1):
-        estimate, problem = None, None
-        if pose:
-            try:
-                estimate = _pose(db, query, c, config, intrinsics)
-            except ViewDBError as exc:
-                problem = exc.message
-        matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
-                                  angle, estimate, problem))
+    poses: list[tuple[PoseEstimate | None, str | None]] = [(None, None)] * len(merged)
+    if pose and server is not None and merged:
+        poses, exchange = server.poses(query, [c for c, _ in merged], intrinsics)
+        sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
+        pose_server_ms = exchange.server_ms
+        network_ms += exchange.wall_ms - exchange.server_ms
+    elif pose:
+        poses = pose_matches(db, query, [c for c, _ in merged], intrinsics, pose_config)
+    matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
+                          angle, *poses[rank - 1])
+               for rank, (c, angle) in enumerate(merged, 1)]
     end = time.perf_counter()
+    remote = {} if server is None else {"network": network_ms, "pose_server": pose_server_ms}
     name = loaded.path or (str(image) if isinstance(image, (str, Path)) else "<array>")
     return QueryResult(
         image=name, plan=plan, k=k, results=matches,
         timing_ms={
             "segment": (segmented - start) * 1e3, "client": client_ms, "server": server_ms,
-            "pose": (end - recognised) * 1e3, "total": (end - start) * 1e3,
+            "pose": (end - recognised) * 1e3, "total": (end - start) * 1e3, **remote,
         },
         segmentation=seg.method,
         transfer={"bytes_sent": sent, "bytes_received": received, "round_trips": trips},

@@ -5,12 +5,20 @@ One SQLite file per database, in WAL mode. Every connection sets ``journal_mode=
 upgraded only by the Alembic migrations in ``migrations/``; opening an older file upgrades
 it, a file from a newer viewdb is refused with :class:`~viewdb.errors.SchemaMismatch`.
 SQLAlchemy and sqlite3 errors are turned into :class:`~viewdb.errors.StorageError` here.
+
+``Store(path, read_only=True)`` never writes to the file: it connects through SQLite's
+``mode=ro`` URI with ``query_only`` on, sets no journal mode and runs no migration (a file
+that would need one is refused with a message saying to open it once normally). A file
+in a folder that cannot be written, with no WAL beside it, is opened ``immutable=1``
+(SQLite could not make its ``-shm`` there); such a file must not change while it is open.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
+import urllib.parse
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -103,6 +111,23 @@ def _set_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
     cur.close()
 
 
+def _set_read_only_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
+    cur = dbapi_conn.cursor()
+    cur.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+    cur.execute("PRAGMA query_only=1")
+    cur.close()
+
+
+def read_only_uri(path: Path) -> str:
+    """The ``file:`` URI that opens ``path`` read-only (``immutable`` where SQLite could
+    not create a WAL file's ``-shm`` beside it: a folder that cannot be written)."""
+    base = "file:" + urllib.parse.quote(str(path.resolve()), safe="/") + "?mode=ro"
+    folder = path.resolve().parent
+    if not os.access(folder, os.W_OK) and not Path(f"{path}-wal").exists():
+        return base + "&immutable=1"
+    return base
+
+
 def _symmetry_columns(desc: Any) -> dict[str, Any]:
     sym = getattr(desc, "symmetry", None)
     if sym is None:
@@ -119,22 +144,30 @@ class Store:
 
     def __init__(
         self, path: str | Path, *, create: bool = True,
-        initial: tuple[BuildConfig, str] | None = None,
+        initial: tuple[BuildConfig, str] | None = None, read_only: bool = False,
     ) -> None:
         """Open ``path`` (creating it if ``create``). A new file gets its schema and, given
         ``initial = (config, role)``, its build configuration in one transaction, so a
-        creation that is interrupted leaves no file that looks built with defaults."""
+        creation that is interrupted leaves no file that looks built with defaults.
+        ``read_only`` opens an existing file without ever writing to it."""
         self.path = Path(path)
         self._initial = initial
+        self.read_only = read_only
         exists = self.path.exists() and self.path.stat().st_size > 0
-        if not exists and not create:
+        if not exists and (read_only or not create):
             raise StorageError("no such database", self.path)
         if exists:
             self._check_header()
         elif not self.path.parent.exists():
             raise StorageError("its folder does not exist", self.path)
-        self.engine: Engine = sa.create_engine(f"sqlite:///{self.path}")
-        event.listen(self.engine, "connect", _set_pragmas)
+        if read_only:
+            self._uri = read_only_uri(self.path)
+            self.engine: Engine = sa.create_engine("sqlite://", creator=lambda: sqlite3.connect(
+                self._uri, uri=True, check_same_thread=False))
+            event.listen(self.engine, "connect", _set_read_only_pragmas)
+        else:
+            self.engine = sa.create_engine(f"sqlite:///{self.path}")
+            event.listen(self.engine, "connect", _set_pragmas)
         try:
             self._migrate()
         except Exception:
@@ -144,6 +177,14 @@ class Store:
     # ----------------------------------------------------------------- lifecycle
     def close(self) -> None:
         self.engine.dispose()
+
+    def connect(self) -> sqlite3.Connection:
+        """A new raw sqlite3 connection to the file (read-only if the store is), usable
+        from any thread; for readers that manage their own transactions."""
+        if self.read_only:
+            return sqlite3.connect(self._uri, uri=True, check_same_thread=False,
+                                   isolation_level=None)
+        return sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
 
     def _check_header(self) -> None:
         try:
@@ -175,6 +216,8 @@ class Store:
     @contextmanager
     def transaction(self) -> Iterator[Connection]:
         """One write transaction: everything inside commits together or not at all."""
+        if self.read_only:
+            raise StorageError("is open read-only; open it normally to change it", self.path)
         with self._errors(), self.engine.begin() as conn:
             yield conn
 
@@ -205,6 +248,15 @@ class Store:
             raise SchemaMismatch(
                 f"was written by a newer viewdb (schema revision {current}; this viewdb "
                 f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it",
+                self.path,
+            )
+        if self.read_only:
+            if current is None:
+                raise StorageError("is an unfinished database (its creation was interrupted); "
+                                   "delete it and ingest again", self.path)
+            raise StorageError(
+                f"has schema revision {current}, older than this viewdb's {s.SCHEMA_REVISION}: "
+                "open it once without read-only (e.g. viewdb info --db FILE) to upgrade it",
                 self.path,
             )
         from alembic import command

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -247,10 +247,12 @@ class TierReader:
     Thread-safe: snapshots are serialised.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, connect: Callable[[], sqlite3.Connection] | None = None) -> None:
+        """``connect`` makes the connection (e.g. a read-only one); default: open ``path``."""
         self.path = Path(path)
         try:
-            self.conn = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self.conn = (connect() if connect is not None else
+                         sqlite3.connect(self.path, check_same_thread=False, isolation_level=None))
             self.conn.execute("PRAGMA query_only = 1")
             self.conn.execute("PRAGMA busy_timeout = 5000")
         except sqlite3.Error as exc:

@@ -1,0 +1,403 @@
+"""``viewdb serve`` over real HTTP on loopback: remote queries equal local ones exactly;
+bad input gets a 4xx with a one-line JSON error and the server stays up.
+
+One server (two worker processes, a bearer token) is shared by the whole module.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import shutil
+import struct
+import zlib
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from PIL import Image
+
+import viewdb
+from tests.serving import ServerProcess, request
+from viewdb.features import distance_curve, mirror_curve
+from viewdb.http import models
+from viewdb.http.wire import PoseRequest, decode_query, encode_query
+from viewdb.pose import QueryView
+from viewdb.search.plans import MAX_K
+from viewdb_cli.main import main
+
+TOKEN = "s3cret-token"
+
+
+@pytest.fixture(scope="module")
+def files(tiered_db, tmp_path_factory):
+    """The served copy of the full db (checked unchanged at the end) and a client file."""
+    folder = tmp_path_factory.mktemp("http")
+    served = folder / "served.db"
+    shutil.copy(tiered_db, served)
+    client = folder / "client.db"
+    with viewdb.open(tiered_db, create=False) as db:
+        db.export_client(client)
+    return served, client
+
+
+@pytest.fixture(scope="module")
+def server(files):
+    served, _ = files
+    before = served.read_bytes(), served.stat().st_mtime_ns
+    srv = ServerProcess(served, workers=2, token=TOKEN)
+    with srv:
+        yield srv
+        assert srv.alive(), srv.log()
+        assert srv.worker_pids() <= srv.pids, "a worker was restarted (crashed)"
+    assert srv.returncode == 130, (srv.returncode, srv.log())  # Ctrl-C: "interrupted"
+    assert (served.read_bytes(), served.stat().st_mtime_ns) == before
+
+
+@pytest.fixture
+def remote(server):
+    with viewdb.RemoteServer(server.url, token=TOKEN) as r:
+        yield r
+
+
+def photo(db, name, h, v, turn):
+    view = db.render(name, h, v)
+    size = view.mask.shape[0]
+    m = cv2.getRotationMatrix2D((size / 2, size / 2), turn, 0.85)
+    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
+    img = np.full((size, size, 3), 190, np.uint8)
+    img[mask] = color[mask]
+    return img
+
+
+def _curves(db, rng, count):
+    arrays, _ = db.search_tier("full")
+    out = []
+    for i in range(count):
+        if i % 2:
+            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
+            out.append(mirror_curve(q) if rng.random() < 0.5 else q)
+        else:
+            name = arrays.names[rng.integers(len(arrays.names))]
+            out.append(distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128))
+    return out
+
+
+# ----------------------------------------------------------------------------- exactness
+def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote):
+    _, client_path = files
+    with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
+        cases = [("mug", 47, 22, 30, "cs1", True), ("car", 200, 15, -40, "cs2", False),
+                 ("l_bracket", 120, 40, 10, "server", False)]
+        for name, h, v, turn, plan, pose in cases:
+            img = photo(full, name, h, v, turn)
+            kw = dict(k=2, plan=plan, rotations=6, pose=pose)
+            local = full.query(img, client=client if plan != "server" else None, **kw)
+            there = client.query(img, server=remote, **kw)
+            assert there.to_dict()["results"] == local.to_dict()["results"], plan
+            assert len(there.results) == 2
+            if pose:
+                assert there.results[0].pose is not None
+            t, x = there.timing_ms, there.transfer
+            assert x["round_trips"] == 6 + bool(pose) and x["bytes_sent"] > 0 and x["bytes_received"] > 0
+            assert t["server"] > 0 and t["network"] >= 0 and t["total"] >= t["segment"]
+            if plan == "server":
+                assert t["client"] < 1.0  # nothing runs on the client's tier
+            if pose:
+                assert t["pose_server"] > 0
+
+
+def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files, remote):
+    _, client_path = files
+    rng = np.random.default_rng(5)
+    with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
+        for curve in _curves(full, rng, 24):
+            k, band = int(rng.integers(1, 6)), int(rng.integers(0, 10))
+            for plan in ("server", "cs1", "cs2"):
+                local = full.recognise(curve, k, band=band, plan=plan, client=client)
+                there = client.recognise(curve, k, band=band, plan=plan, server=remote)
+                assert there.results == local.results, (plan, k, band)
+                if plan != "server":
+                    assert there.client_results == local.client_results
+                    assert there.bytes_sent > 0 and there.bytes_received > 0
+
+
+def test_health_info_and_openapi(server, remote):
+    health = remote.health()
+    assert health["status"] == "ok" and health["objects"] == 6
+    assert server.pids and len(server.pids) == 2  # both workers answer
+    info = remote.info()
+    assert info["role"] == "full" and info["read_only"] and info["auth"]
+    assert len(info["objects"]) == 6 and "path" not in info
+    assert info["limits"]["curve_samples"] == 128 and info["limits"]["max_k"] == MAX_K
+    status, schema = request(server.url, "GET", "/openapi.json")
+    assert status == 200
+    assert {"/refine", "/walk", "/pose", "/info", "/health"} <= set(schema["paths"])
+    body = schema["paths"]["/refine"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert body["$ref"].split("/")[-1] in schema["components"]["schemas"]
+    assert "CandidateModel" in schema["components"]["schemas"]
+
+
+def test_the_documented_models_accept_real_messages():
+    req = viewdb.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3, [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True)])
+    models.RefineRequestModel.model_validate(json.loads(json.dumps(req.to_dict())))
+    walk = viewdb.WalkRequest(req.curve, 6, 3, 90.0, req.client)
+    models.WalkRequestModel.model_validate(json.loads(json.dumps(walk.to_dict())))
+    img = np.zeros((32, 40, 3), np.uint8)
+    mask = np.zeros((32, 40), bool)
+    mask[5:20, 8:30] = True
+    pose = PoseRequest.from_query(QueryView(img, mask), req.client, (100.0, 100.0, 20.0, 16.0))
+    models.PoseRequestModel.model_validate(json.loads(json.dumps(pose.to_dict())))
+    reply = viewdb.ServerReply(req.client, {"dtw": 3.0})
+    models.ServerReplyModel.model_validate(reply.to_dict())
+
+
+def test_the_query_image_round_trips_exactly():
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    mask = rng.random((37, 53)) < 0.4
+    back = decode_query(encode_query(QueryView(img, mask)))
+    assert np.array_equal(back.color, img) and np.array_equal(back.mask, mask)
+
+
+# ----------------------------------------------------------------------------- bad input
+def _valid(kind="refine"):
+    body = {"curve": [1.0] * 128, "band": 6, "k": 3,
+            "client": [{"object": "mug", "distance": 0.5, "azimuth": 30.0, "elevation": 60.0, "mirrored": False}]}
+    if kind == "walk":
+        body["client_gap"] = 90.0
+    return body
+
+
+def _png(array, mode=None):
+    out = io.BytesIO()
+    Image.fromarray(array, mode).save(out, format="PNG")
+    return base64.b64encode(out.getvalue()).decode()
+
+
+def _pose_body(image):
+    return {"image": image, "matches": _valid()["client"], "intrinsics": None}
+
+
+@pytest.mark.parametrize("path, body, status, problem", [
+    ("/refine", b"{not json", 400, "not valid JSON"),
+    ("/refine", b"", 400, "empty body"),
+    ("/refine", b"\xff\xfe\x00garbage", 400, "not valid JSON"),
+    ("/refine", b"[" * 100_000 + b"]" * 100_000, 400, "not valid JSON"),
+    ("/refine", b'{"curve": [NaN], "band": 1, "k": 1, "client": []}', 400, "NaN is not allowed"),
+    ("/refine", b'{"curve": [Infinity], "band": 1, "k": 1, "client": []}', 400, "Infinity is not allowed"),
+    ("/refine", [1, 2, 3], 422, "must be an object"),
+    ("/refine", {**_valid(), "curve": [1.0] * 127}, 422, "128 samples"),
+    ("/refine", {**_valid(), "curve": [1.0] * 129}, 422, "128 samples"),
+    ("/refine", {**_valid(), "curve": [[1.0] * 128]}, 422, "128 samples"),
+    ("/refine", {**_valid(), "curve": [1.0] * 127 + ["NaN"]}, 422, "finite"),
+    ("/refine", json.dumps(_valid()).replace("1.0]", "1e400]"), 422, "finite"),
+    ("/refine", {**_valid(), "curve": ["a"] * 128}, 422, "list of numbers"),
+    ("/refine", {**_valid(), "k": 0}, 422, "k must be in"),
+    ("/refine", {**_valid(), "k": 10**30}, 422, "k must be in"),
+    ("/refine", {**_valid(), "k": 2.5}, 422, "k must be an integer"),
+    ("/refine", {**_valid(), "band": True}, 422, "band must be an integer"),
+    ("/refine", {**_valid(), "band": 65}, 422, "band must be in"),
+    ("/refine", {**_valid(), "client": [{"object": "mug"}] * 101}, 422, "at most 100"),
+    ("/refine", {**_valid(), "client": [{"object": "mug", "distance": -1, "azimuth": 0, "elevation": 0}]}, 422, ">= 0"),
+    ("/refine", {**_valid(), "client": [{"object": 5, "distance": 1, "azimuth": 0, "elevation": 0}]}, 422, "non-empty string"),
+    ("/refine", {"curve": [1.0] * 128}, 422, "lacks 'band'"),
+    ("/walk", _valid(), 422, "lacks 'client_gap'"),
+    ("/walk", {**_valid("walk"), "client_gap": 0}, 422, "client_gap must be in"),
+    ("/walk", {**_valid("walk"), "client_gap": "NaN"}, 422, "finite"),
+    ("/pose", {"matches": []}, 422, "lacks 'image'"),
+    ("/pose", _pose_body("!!!not base64!!!"), 422, "not valid base64"),
+    ("/pose", _pose_body(base64.b64encode(b"GIF89a....").decode()), 422, "must be a PNG"),
+    ("/pose", _pose_body(base64.b64encode(b"\x89PNG\r\n\x1a\n" + b"\x00" * 50).decode()), 422, "not a readable PNG"),
+    ("/pose", _pose_body(_png(np.zeros((32, 32, 3), np.uint8))), 422, "must be RGBA"),
+    ("/pose", _pose_body(_png(np.zeros((32, 32, 4), np.uint8))), 422, "mask (alpha channel) is empty"),
+    ("/pose", _pose_body(_png(np.zeros((4, 4, 4), np.uint8))), 422, "too small"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "matches": []}, 422, "must not be empty"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [1, 2, 3]}, 422, "intrinsics"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "positive"),
+])
+def test_bad_input_gets_a_4xx_with_a_one_line_json_error(server, path, body, status, problem):
+    got, reply = request(server.url, "POST", path, body, token=TOKEN)
+    assert got == status, reply
+    assert reply["status"] == status and problem in reply["error"] and "\n" not in reply["error"]
+
+
+def _chunk(kind, data):
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def test_an_image_too_large_is_refused_from_its_header(server):
+    # a PNG claiming 20000 x 20000 RGBA pixels: refused before any pixel is decoded
+    header = struct.pack(">IIBBBBB", 20000, 20000, 8, 6, 0, 0, 0)
+    png = (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
+           + _chunk(b"IDAT", zlib.compress(b"\x00" * 1000)) + _chunk(b"IEND", b""))
+    got, reply = request(server.url, "POST", "/pose", _pose_body(base64.b64encode(png).decode()), token=TOKEN)
+    assert got == 422 and "too large" in reply["error"]
+
+
+@pytest.mark.parametrize("chunked", [False, True])
+def test_huge_payloads_get_413(server, chunked):
+    huge = json.dumps({**_valid(), "curve": [1.0] * 600_000}).encode()  # ~3.6 MB
+    got, reply = request(server.url, "POST", "/refine", huge, token=TOKEN, chunked=chunked)
+    assert got == 413 and "limit" in reply["error"]
+    got, reply = request(server.url, "POST", "/refine", b"x", token=TOKEN,
+                         headers={"Content-Length": str(10**9)})
+    assert got == 413
+
+
+@pytest.mark.parametrize("headers", [{}, {"Authorization": "Bearer wrong"}, {"Authorization": TOKEN},
+                                     {"Authorization": f"Basic {TOKEN}"}, {"Authorization": f"Bearer {TOKEN}x"}])
+@pytest.mark.parametrize("method, path", [("POST", "/refine"), ("POST", "/walk"), ("POST", "/pose"), ("GET", "/info")])
+def test_a_missing_or_wrong_token_gets_401(server, headers, method, path):
+    got, reply = request(server.url, method, path, _valid() if method == "POST" else None, headers=headers)
+    assert got == 401 and "token" in reply["error"]
+
+
+def test_unknown_paths_and_methods_get_json_4xx(server):
+    assert request(server.url, "GET", "/nope", token=TOKEN)[0] == 404
+    got, reply = request(server.url, "GET", "/refine", token=TOKEN)
+    assert got == 405 and reply["status"] == 405
+
+
+def test_the_remote_client_reports_server_errors_in_one_line(server, files):
+    with viewdb.RemoteServer(server.url, token="wrong") as bad:
+        with pytest.raises(viewdb.ServerError, match=r"\(401\)") as info:
+            bad.info()
+        assert info.value.status == 401 and server.url in str(info.value)
+    with viewdb.RemoteServer("http://127.0.0.1:1") as nowhere:
+        with pytest.raises(viewdb.ServerError, match="cannot connect"):
+            nowhere.health()
+    with pytest.raises(viewdb.ServerError, match="not a server URL"):
+        viewdb.RemoteServer("ftp://x")
+    with viewdb.RemoteServer(server.url, token=TOKEN) as r:
+        req = viewdb.RefineRequest(np.ones(64), 6, 3, [])  # a client file of another build
+        with pytest.raises(viewdb.ServerError, match=r"\(422\).*128 samples"):
+            r.refine(req)
+
+
+# ----------------------------------------------------------------------------- CLI
+def test_cli_query_against_the_server_equals_the_local_query(tiered_db, files, server, tmp_path, capsys):
+    _, client = files
+    with viewdb.open(tiered_db, create=False) as full:
+        img = photo(full, "car", 150, 20, 15)
+    path = tmp_path / "q.png"
+    cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+    common = [str(path), "--plan", "cs1", "-k", "2", "--rotations", "4", "--no-pose", "--json"]
+    assert main(["query", *common, "--client", str(client), "--server", server.url, "--token", TOKEN]) == 0
+    there = json.loads(capsys.readouterr().out)
+    assert main(["query", *common, "--db", str(tiered_db), "--client", str(client)]) == 0
+    local = json.loads(capsys.readouterr().out)
+    assert there["results"] == local["results"] and there["results"][0]["object"] == "car"
+    assert there["transfer"]["round_trips"] == 4 and "network" in there["timing_ms"]
+
+
+def test_cli_errors_for_remote_queries(files, server, tmp_path, capsys):
+    _, client = files
+    img = tmp_path / "q.png"
+    disc = np.full((64, 64, 3), 200, np.uint8)
+    cv2.circle(disc, (30, 34), 18, (40, 60, 90), -1)
+    cv2.imwrite(str(img), disc)
+    assert main(["query", str(img), "--client", str(client), "--server", "http://127.0.0.1:1"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("viewdb: http://127.0.0.1:1") and "cannot connect" in err and "\n" not in err
+    assert main(["query", str(img), "--server", server.url]) == 2  # --client is needed
+    capsys.readouterr()
+    assert main(["query", str(img)]) == 2  # neither --db nor --server
+    capsys.readouterr()
+    assert main(["serve", "--db", str(client), "--port", "0"]) == 1  # a client file cannot be served
+    assert "client file" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- fuzz
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=10), inner, max_size=6),
+    max_leaves=30,
+)
+KEYS = {"/refine": ("curve", "band", "k", "client"), "/walk": ("curve", "band", "k", "client", "client_gap"),
+        "/pose": ("image", "matches", "intrinsics")}
+
+
+@st.composite
+def mutated(draw):
+    """A valid request of some endpoint with one part replaced, dropped or corrupted."""
+    path = draw(st.sampled_from(sorted(KEYS)))
+    body = (_pose_body(_png(np.full((20, 20, 4), 255, np.uint8))) if path == "/pose"
+            else _valid("walk" if path == "/walk" else "refine"))
+    key = draw(st.sampled_from(KEYS[path]))
+    how = draw(st.sampled_from(["replace", "drop", "candidate", "curve"]))
+    if how == "drop":
+        del body[key]
+    elif how == "candidate":
+        cands = body["matches" if path == "/pose" else "client"]
+        cands[0][draw(st.sampled_from(["object", "distance", "azimuth", "elevation", "mirrored"]))] = draw(JSON)
+    elif how == "curve" and path != "/pose":
+        body["curve"] = draw(st.lists(st.floats(allow_nan=False) | st.integers(), max_size=200))
+    else:
+        body[key] = draw(JSON)
+    return path, body
+
+
+def _fuzz_one(url, path, body):
+    got, reply = request(url, "POST", path, body, token=TOKEN)
+    assert got in (200, 400, 413, 422), (got, reply)
+    assert isinstance(reply, dict)
+    if got == 200:
+        if path == "/pose":
+            assert len(reply["poses"]) == len(body["matches"])
+        else:
+            viewdb.ServerReply.from_dict(reply)
+    else:
+        assert reply["status"] == got and isinstance(reply["error"], str) and "\n" not in reply["error"]
+
+
+FUZZ = settings(max_examples=40, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                        HealthCheck.too_slow])
+FUZZ_LONG = settings(max_examples=1500, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                               HealthCheck.too_slow])
+
+
+@FUZZ
+@given(path=st.sampled_from(sorted(KEYS)), data=JSON)
+def test_fuzz_arbitrary_json_bodies(server, path, data):
+    _fuzz_one(server.url, path, data)
+
+
+@FUZZ
+@given(case=mutated())
+def test_fuzz_mutated_requests(server, case):
+    _fuzz_one(server.url, *case)
+
+
+@FUZZ
+@given(path=st.sampled_from(sorted(KEYS)), raw=st.binary(max_size=300))
+def test_fuzz_raw_bytes(server, path, raw):
+    got, reply = request(server.url, "POST", path, raw, token=TOKEN)
+    assert got in (400, 422), (got, reply)
+
+
+@pytest.mark.slow
+@FUZZ_LONG
+@given(path=st.sampled_from(sorted(KEYS)), data=JSON | st.binary(max_size=2000).map(bytes))
+def test_fuzz_long_arbitrary_bodies(server, path, data):
+    if isinstance(data, bytes):
+        got, _ = request(server.url, "POST", path, data, token=TOKEN)
+        assert got in (400, 422)
+    else:
+        _fuzz_one(server.url, path, data)
+
+
+@pytest.mark.slow
+@FUZZ_LONG
+@given(case=mutated())
+def test_fuzz_long_mutated_requests(server, case):
+    _fuzz_one(server.url, *case)
+
+
+def test_the_server_is_still_up_after_all_of_it(server):
+    assert server.alive()
+    assert server.worker_pids() <= server.pids

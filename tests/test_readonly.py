@@ -1,0 +1,189 @@
+"""``viewdb.open(path, read_only=True)``: never writes to the file, refuses what would."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import viewdb
+from tests.conftest import ROOT, sample
+from viewdb.errors import SchemaMismatch, StorageError
+from viewdb.storage.store import Store
+
+
+def _snapshot(path):
+    st = path.stat()
+    return path.read_bytes(), st.st_mtime_ns, st.st_size
+
+
+def _use(db: viewdb.ViewDB) -> None:
+    """Everything a server or a client does with a file."""
+    names = [o.name for o in db.objects()]
+    assert names
+    info = db.info()
+    assert info.objects
+    curve = np.ones(db.config.features.curve_samples)
+    curve[::7] = 1.3
+    if db.role == "full":
+        hits, _ = db.search(curve, k=2, tier="full")
+        assert hits
+        db.recognise(curve, 2, plan="cs1")
+        db.recognise(curve, 2, plan="cs2")
+        view = db.view(names[0], *db.views(names[0])[0])
+        assert view.curve.shape == (db.config.features.curve_samples,)
+        assert db.check().ok
+    found, _ = db.client_candidates(curve, 2)
+    assert found
+
+
+def test_read_only_use_leaves_the_file_byte_for_byte_and_mtime_unchanged(tiered_db, tmp_path):
+    path = tmp_path / "copy.db"
+    shutil.copy(tiered_db, path)
+    before = _snapshot(path)
+    with viewdb.open(path, read_only=True) as db:
+        assert db.read_only
+        _use(db)
+    assert _snapshot(path) == before
+
+
+def test_a_file_without_write_permission_opens_read_only(tiered_db, tmp_path):
+    path = tmp_path / "ro.db"
+    shutil.copy(tiered_db, path)
+    os.chmod(path, 0o444)
+    before = _snapshot(path)
+    try:
+        with viewdb.open(path, read_only=True) as db:
+            _use(db)
+        assert _snapshot(path) == before
+    finally:
+        os.chmod(path, 0o644)
+
+
+def test_a_client_file_read_only_creates_no_journal_files(tiered_db, tmp_path):
+    client = tmp_path / "client.db"
+    with viewdb.open(tiered_db, read_only=True) as db:
+        db.export_client(client)  # reading the source read-only is enough to export
+    before = _snapshot(client)
+    with viewdb.open(client, read_only=True) as db:
+        assert db.role == "client"
+        _use(db)
+    assert _snapshot(client) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["client.db"]
+
+
+def test_writes_are_refused_with_a_clear_error(tiered_db, tmp_path):
+    path = tmp_path / "copy.db"
+    shutil.copy(tiered_db, path)
+    before = _snapshot(path)
+    with viewdb.open(path, read_only=True) as db:
+        with pytest.raises(viewdb.ViewDBError, match="read-only") as info:
+            db.ingest([sample("sphere")])
+        assert str(path) in str(info.value)
+        with pytest.raises(StorageError, match="read-only"):
+            with db._store.transaction():
+                pass
+    assert _snapshot(path) == before
+
+
+def test_an_old_schema_is_not_upgraded_read_only(tmp_path):
+    path = tmp_path / "old.db"
+    shutil.copy(ROOT / "tests" / "data" / "schema_0001.db", path)
+    before = _snapshot(path)
+    with pytest.raises(StorageError, match="older than this viewdb.*open it once without read-only") as info:
+        viewdb.open(path, read_only=True)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+    assert _snapshot(path) == before
+    with viewdb.open(path, create=False):  # the upgrade the message asks for
+        pass
+    with viewdb.open(path, read_only=True) as db:
+        assert [o.name for o in db.objects()] == ["cone", "pyramid"]
+
+
+def test_unfinished_newer_missing_and_foreign_files_are_refused(tmp_path):
+    cut = tmp_path / "cut.db"
+    Store(cut).close()  # schema but no build configuration
+    with pytest.raises(StorageError, match="unfinished"):
+        viewdb.open(cut, read_only=True)
+    empty = tmp_path / "empty.db"
+    sqlite3.connect(empty).execute("PRAGMA user_version = 1").connection.close()
+    before = _snapshot(empty)
+    with pytest.raises(StorageError, match="unfinished"):
+        viewdb.open(empty, read_only=True)
+    assert _snapshot(empty) == before
+    future = tmp_path / "future.db"
+    Store(future).close()
+    with sqlite3.connect(future) as conn:
+        conn.execute("UPDATE alembic_version SET version_num = '9999'")
+    with pytest.raises(SchemaMismatch, match="newer viewdb"):
+        viewdb.open(future, read_only=True)
+    with pytest.raises(StorageError, match="no such database"):
+        viewdb.open(tmp_path / "absent.db", read_only=True)
+    assert not (tmp_path / "absent.db").exists()
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"not a database" * 100)
+    with pytest.raises(StorageError, match="not an SQLite file"):
+        viewdb.open(junk, read_only=True)
+
+
+def test_a_read_only_reader_sees_objects_ingested_after_it_opened(tmp_path):
+    path = tmp_path / "live.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        db.ingest([sample("mug")])
+    with viewdb.open(path, read_only=True) as reader:
+        curve = reader.view("mug", 0, 0).curve
+        assert [h.object for h in reader.search(curve, 5)[0]] == ["mug"]
+        with viewdb.open(path) as writer:
+            writer.ingest([sample("car")])
+        assert sorted(h.object for h in reader.search(curve, 5)[0]) == ["car", "mug"]
+
+
+def test_a_file_on_read_only_storage_opens(tiered_db, tmp_path):
+    """A shipped file on storage nobody may write (SQLite cannot make a ``-shm`` there):
+    a read-only bind mount in a private mount namespace when running as root, a folder
+    without write permission otherwise."""
+    folder, mount = tmp_path / "shipped", tmp_path / "mnt"
+    folder.mkdir()
+    mount.mkdir()
+    shutil.copy(tiered_db, folder / "full.db")
+    before = _snapshot(folder / "full.db")
+    script = textwrap.dedent(f"""
+        import os, viewdb
+        path = {str(mount / "full.db")!r}
+        assert not os.access(os.path.dirname(path), os.W_OK)
+        with viewdb.open(path, read_only=True) as db:
+            curve = db.view("mug", 0, 0).curve
+            hits, _ = db.search(curve, 2)
+            assert hits[0].object == "mug" and hits[0].distance == 0.0, hits
+            print("ok", len(db.objects()))
+    """)
+    python = [sys.executable, "-c", script]
+    if os.geteuid() == 0:
+        if shutil.which("unshare") is None:
+            pytest.skip("no unshare to make a read-only mount")
+        shell = (f"mount --bind {folder} {mount} && mount -o remount,bind,ro {mount} && "
+                 f"exec \"$@\"")
+        probe = subprocess.run(["unshare", "-m", "sh", "-c", shell, "sh", "true"], capture_output=True)
+        if probe.returncode != 0:
+            pytest.skip(f"cannot make a read-only mount here: {probe.stderr.decode()[:200]}")
+        cmd = ["unshare", "-m", "sh", "-c", shell, "sh", *python]
+    else:
+        mount.rmdir()
+        mount.symlink_to(folder)
+        os.chmod(folder / "full.db", 0o444)
+        os.chmod(folder, 0o555)
+        cmd = python
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert done.stdout.startswith("ok 6")
+    finally:
+        os.chmod(folder, 0o755)
+    assert _snapshot(folder / "full.db") == before
+    assert sorted(p.name for p in folder.iterdir()) == ["full.db"]

@@ -1,0 +1,351 @@
+"""The server tier over HTTP: an ASGI app (FastAPI) serving a full database read-only.
+
+Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
+:mod:`viewdb.http.wire`; the HTTP layer is only transport):
+
+``POST /refine``  CS1's server half (Algorithm 3); with no client candidates, the
+                  ``server`` plan's exact k-NN
+``POST /walk``    CS2's server half (Algorithm 4)
+``POST /pose``    the pose of given matches from the segmented query image
+``GET /info``     what the database holds, its build settings and the server's limits
+``GET /health``   liveness (no database access, no token)
+``GET /openapi.json``  the schema
+
+Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
+not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
+limit 413 (refused from its Content-Length before it is read), a missing or wrong bearer
+token 401; every error body is ``{"error": "<one line>", "status": <code>}``.
+
+Each worker process opens the database read-only once and answers on one thread of its
+own (the renderer's GL context is per thread): requests to one worker are served one
+at a time; run several workers (``viewdb serve --workers N``) for parallelism.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import json
+import logging
+import os
+import time
+from collections.abc import AsyncIterator, Callable
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+from fastapi import Depends, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.utils import get_openapi
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from .. import __version__
+from ..api import ViewDB
+from ..api import open as open_db
+from ..errors import NotFound, QueryError, StorageError, ViewDBError
+from ..query import pose_matches
+from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
+from . import models
+from .wire import PoseReply, PoseRequest, decode_query
+
+__all__ = ["DEFAULT_MAX_BODY", "DEFAULT_MAX_IMAGE_BODY", "app_from_env", "create_app"]
+
+log = logging.getLogger("viewdb.http")
+
+#: Largest body of a /refine or /walk request (a curve and at most MAX_K candidates).
+DEFAULT_MAX_BODY = 256 * 1024
+#: Largest body of a /pose request (a base64 PNG).
+DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
+
+#: Environment variables a worker process reads its configuration from.
+ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
+ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
+
+T = TypeVar("T")
+
+
+def _error(status: int, message: str, headers: dict[str, str] | None = None) -> JSONResponse:
+    return JSONResponse({"error": " ".join(str(message).split()), "status": status},
+                        status_code=status, headers=headers)
+
+
+#: A refused body up to this size is read and dropped before the 413 goes out, so the
+#: client (still sending) gets the reply rather than a reset connection.
+DRAIN_BYTES = 16 * 1024 * 1024
+
+
+async def _drain(receive: Receive, seen: int) -> None:
+    while seen <= DRAIN_BYTES:
+        message = await receive()
+        if message["type"] != "http.request":
+            return
+        seen += len(message.get("body", b""))
+        if not message.get("more_body", False):
+            return
+
+
+class BodyLimit:
+    """ASGI middleware: 413 for a body over the path's limit, from its Content-Length
+    before reading, or while reading a body sent without one (chunked)."""
+
+    def __init__(self, app: ASGIApp, limits: dict[str, int], default: int) -> None:
+        self.app, self.limits, self.default = app, limits, default
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = self.limits.get(scope["path"], self.default)
+        declared = dict(scope["headers"]).get(b"content-length")
+        close = {"Connection": "close"}
+        if declared is not None:
+            if not declared.isdigit():
+                await _error(400, "Content-Length is not a number", close)(scope, receive, send)
+                return
+            if int(declared) > limit:
+                if int(declared) <= DRAIN_BYTES:
+                    await _drain(receive, 0)
+                await _error(413, f"body of {int(declared):,} bytes is over this endpoint's "
+                                  f"limit of {limit:,}", close)(scope, receive, send)
+                return
+        seen = 0
+
+        async def limited() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > limit:
+                    if message.get("more_body", False):
+                        await _drain(receive, seen)
+                    raise HTTPException(413, f"body is over this endpoint's limit of {limit:,} bytes",
+                                    headers=close)
+            return message
+
+        await self.app(scope, limited, send)
+
+
+@dataclass
+class _State:
+    db: ViewDB
+    executor: ThreadPoolExecutor
+    curve_samples: int
+    objects: int
+
+
+def _no_constants(name: str) -> Any:
+    raise ValueError(f"{name} is not allowed in JSON")
+
+
+async def _json(request: Request) -> Any:
+    body = await request.body()
+    if not body:
+        raise HTTPException(400, "empty body: expected a JSON object")
+    try:
+        return json.loads(body, parse_constant=_no_constants)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError too
+        raise HTTPException(400, f"body is not valid JSON: {exc}") from exc
+
+
+def _parse(parse: Callable[[], T]) -> T:
+    try:
+        return parse()
+    except QueryError as exc:
+        raise HTTPException(422, exc.message) from exc
+
+
+def _body(model: type[Any]) -> dict[str, Any]:
+    """``openapi_extra`` declaring a JSON request body of ``model`` (documented, not
+    validated by FastAPI: the message's ``from_dict`` validates)."""
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
+
+
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    code: {"model": models.ErrorModel, "description": what} for code, what in (
+        (400, "the body is not JSON"), (401, "missing or wrong bearer token"),
+        (413, "the body is over the limit"), (422, "the JSON is not a valid message"),
+    )
+}
+
+
+def create_app(
+    db_path: str | Path,
+    *,
+    token: str | None = None,
+    max_body: int = DEFAULT_MAX_BODY,
+    max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+) -> FastAPI:
+    """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
+
+    ``token``: when given, every endpoint but ``/health`` and the schema needs the header
+    ``Authorization: Bearer <token>``.
+    """
+    db_path = Path(db_path)
+    holder: dict[str, _State] = {}
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="viewdb")
+        loop = asyncio.get_running_loop()
+        db = await loop.run_in_executor(executor, _open_for_serving, db_path)
+        holder["state"] = _State(db, executor, db.config.features.curve_samples, len(db.objects()))
+        try:
+            yield
+        finally:
+            await loop.run_in_executor(executor, db.close)
+            executor.shutdown(wait=True)
+
+    app = FastAPI(
+        title="viewdb server",
+        version=__version__,
+        description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
+                    "estimation, over a full database opened read-only.",
+        lifespan=lifespan,
+    )
+
+    def state() -> _State:
+        return holder["state"]
+
+    async def run(fn: Callable[[ViewDB], T]) -> tuple[T, float]:
+        s = state()
+
+        def timed() -> tuple[T, float]:
+            start = time.perf_counter()
+            out = fn(s.db)
+            return out, (time.perf_counter() - start) * 1e3
+
+        return await asyncio.get_running_loop().run_in_executor(s.executor, timed)
+
+    def authorised(request: Request) -> None:
+        if token is None:
+            return
+        given = request.headers.get("authorization", "")
+        scheme, _, value = given.partition(" ")
+        if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), token.encode()):
+            raise HTTPException(401, "missing or wrong bearer token" if given else
+                                "this server needs a bearer token (Authorization: Bearer ...)",
+                                headers={"WWW-Authenticate": "Bearer"})
+
+    guarded = [Depends(authorised)]
+
+    @app.exception_handler(HTTPException)
+    async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
+        return _error(exc.status_code, str(exc.detail), dict(exc.headers or {}))
+
+    @app.exception_handler(RequestValidationError)
+    async def validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0] if exc.errors() else {"msg": "invalid request"}
+        return _error(422, f"{'.'.join(str(x) for x in first.get('loc', ()))}: {first['msg']}")
+
+    @app.exception_handler(ViewDBError)
+    async def viewdb_error(_request: Request, exc: ViewDBError) -> JSONResponse:
+        if isinstance(exc, NotFound):
+            return _error(404, exc.message)
+        if isinstance(exc, StorageError):
+            log.error("database error: %s", exc)
+            return _error(503, f"the server's database is unavailable: {exc.message}")
+        return _error(422, exc.message)
+
+    @app.exception_handler(Exception)
+    async def internal_error(_request: Request, exc: Exception) -> JSONResponse:
+        log.exception("internal error")
+        return _error(500, f"internal server error ({type(exc).__name__})")
+
+    def reply(r: ServerReply, ms: float) -> dict[str, Any]:
+        out = r.to_dict()
+        out["stats"]["server_ms"] = ms
+        return out
+
+    @app.get("/health", summary="Liveness: the worker is up and its database open")
+    async def health() -> dict[str, Any]:
+        return {"status": "ok", "pid": os.getpid(), "objects": state().objects}
+
+    @app.get("/info", dependencies=guarded, responses=_ERRORS,
+             summary="What the database holds, its build settings and this server's limits")
+    async def info() -> dict[str, Any]:
+        data, _ = await run(lambda db: db.info().to_dict())
+        data.pop("path", None)
+        return {**data, "viewdb": __version__, "role": "full", "read_only": True,
+                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": max_body,
+                           "max_image_body": max_image_body,
+                           "curve_samples": state().curve_samples},
+                "auth": token is not None}
+
+    @app.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
+              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+              summary="CS1: exact top-k refined from the client's candidates")
+    async def refine(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
+        found, ms = await run(lambda db: db.refine(req))
+        return reply(found, ms)
+
+    @app.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
+              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+              summary="CS2: neighbour walk from the client's views")
+    async def walk(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))
+        found, ms = await run(lambda db: db.walk(req))
+        return reply(found, ms)
+
+    @app.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
+              responses={200: {"model": models.PoseReplyModel}, **_ERRORS},
+              summary="Pose of the given matches from the segmented query image")
+    async def pose(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: PoseRequest.from_dict(data))
+        query = _parse(lambda: decode_query(req.image))
+        poses, ms = await run(lambda db: pose_matches(db, query, req.matches, req.intrinsics))
+        return PoseReply(poses, {"server_ms": ms}).to_dict()
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = get_openapi(title=app.title, version=app.version, description=app.description,
+                                 routes=app.routes)
+            components = schema.setdefault("components", {}).setdefault("schemas", {})
+            for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel):
+                doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
+                components.update(doc.pop("$defs", {}))
+                components[model.__name__] = doc
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body}, default=max_body)
+    return app
+
+
+def _open_for_serving(path: Path) -> ViewDB:
+    db = open_db(path, read_only=True)
+    try:
+        if db.role != "full":
+            raise ViewDBError("is a client file (export-client); serve the full database", path)
+        # compile the search kernels now rather than on the first request
+        db.search(np.ones(db.config.features.curve_samples), 1)
+    except QueryError:
+        pass  # an empty database: nothing to warm up
+    except BaseException:
+        db.close()
+        raise
+    return db
+
+
+def app_from_env() -> FastAPI:
+    """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``): the factory each worker of
+    ``viewdb serve`` calls."""
+    path = os.environ.get(ENV_DB)
+    if not path:
+        raise ViewDBError(f"set {ENV_DB} to the database to serve")
+    return create_app(
+        path, token=os.environ.get(ENV_TOKEN) or None,
+        max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
+        max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
+    )

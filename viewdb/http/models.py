@@ -1,0 +1,102 @@
+"""Pydantic models of the JSON bodies, for the OpenAPI schema (``/openapi.json``) only.
+
+Requests are validated by the messages' own ``from_dict`` (:mod:`viewdb.search.plans`,
+:mod:`viewdb.http.wire`), the one source of truth for what is accepted; these models
+describe the same shapes for readers of the schema (a test checks that real messages
+validate against them).
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..search.plans import MAX_BAND, MAX_K
+
+__all__ = [
+    "CandidateModel",
+    "ErrorModel",
+    "PoseEntryModel",
+    "PoseModel",
+    "PoseReplyModel",
+    "PoseRequestModel",
+    "RefineRequestModel",
+    "ServerReplyModel",
+    "WalkRequestModel",
+]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(strict=True, extra="ignore", allow_inf_nan=False)
+
+
+class CandidateModel(_Strict):
+    """An object with its best view so far and that view's exact (DTW) distance."""
+
+    object: str = Field(min_length=1)
+    distance: float = Field(ge=0)
+    azimuth: float
+    elevation: float
+    mirrored: bool = False
+
+
+class RefineRequestModel(_Strict):
+    """CS1: the query's distance curve and the client's top-k on its sparse tier (an empty
+    ``client`` list gives the ``server`` plan: exact k-NN on the full tier)."""
+
+    curve: list[float] = Field(description="the server's curve_samples numbers (see /info)",
+                               min_length=8)
+    band: int = Field(ge=0, le=MAX_BAND, description="Sakoe-Chiba band in samples")
+    k: int = Field(ge=1, le=MAX_K)
+    client: list[CandidateModel] = Field(max_length=MAX_K)
+
+
+class WalkRequestModel(RefineRequestModel):
+    """CS2: as for CS1, plus the client file's grid gap the walk starts from."""
+
+    client_gap: float = Field(gt=0, le=180)
+
+
+class ServerReplyModel(_Strict):
+    results: list[CandidateModel]
+    stats: dict[str, float] = Field(description="search counters and server_ms")
+
+
+class PoseRequestModel(_Strict):
+    """The segmented query image and the matches to pose."""
+
+    image: str = Field(description="base64 of an 8-bit RGBA PNG whose alpha is the object mask")
+    matches: list[CandidateModel] = Field(min_length=1, max_length=MAX_K)
+    intrinsics: list[float] | None = Field(
+        default=None, min_length=4, max_length=4,
+        description="fx, fy, cx, cy for a perspective (OpenCV-frame) pose; null: orthographic")
+
+
+class PoseModel(_Strict):
+    azimuth: float | None
+    elevation: float | None
+    inplane: float | None
+    scale: float | None
+    rotation: list[list[float | None]] = Field(description="3x3 model-to-camera rotation")
+    translation: list[float | None]
+    method: str = Field(description="sift or shape")
+    inliers: int
+    candidate: int
+    frame: str = Field(description="viewdb or opencv")
+    score: float | None
+
+
+class PoseEntryModel(_Strict):
+    pose: PoseModel | None
+    error: str | None = Field(description="why there is no pose")
+
+
+class PoseReplyModel(_Strict):
+    poses: list[PoseEntryModel]
+    stats: dict[str, float]
+
+
+class ErrorModel(_Strict):
+    """Every error reply."""
+
+    error: str = Field(description="one line saying what was wrong")
+    status: int

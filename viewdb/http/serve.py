@@ -1,0 +1,121 @@
+"""Running the server: validate the database, bind the socket, start uvicorn workers.
+
+The socket is bound here, before any worker starts, so ``port=0`` picks a free port and
+the caller learns the real URL (``ready``) before the first request can arrive; with
+``workers > 1`` uvicorn's supervisor hands the socket to that many worker processes, each
+of which builds the app (:func:`viewdb.http.app.app_from_env`) and opens the database
+read-only.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..api import open as open_db
+from ..errors import ServerError, ViewDBError
+from .app import (
+    DEFAULT_MAX_BODY,
+    DEFAULT_MAX_IMAGE_BODY,
+    ENV_DB,
+    ENV_MAX_BODY,
+    ENV_MAX_IMAGE_BODY,
+    ENV_TOKEN,
+)
+
+__all__ = ["bind", "run_server"]
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``(host, port)``; port 0 picks a free one."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise ServerError(f"cannot resolve host: {exc.strerror}", f"{host}:{port}") from exc
+    family, kind, proto, _, address = infos[0]
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        sock.listen(2048)
+        sock.set_inheritable(True)
+    except OSError as exc:
+        sock.close()
+        raise ServerError(f"cannot listen: {exc.strerror or exc}", f"{host}:{port}") from exc
+    return sock
+
+
+def run_server(
+    db: str | Path,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8765,
+    workers: int = 1,
+    token: str | None = None,
+    max_body: int = DEFAULT_MAX_BODY,
+    max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+    log_level: str = "warning",
+    ready: Callable[[str, int], None] | None = None,
+) -> None:
+    """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
+    once the socket listens (before the workers start answering)."""
+    import uvicorn
+    from uvicorn.supervisors import Multiprocess
+
+    if workers < 1:
+        raise ViewDBError(f"workers must be at least 1, got {workers}")
+    with open_db(db, read_only=True) as vdb:  # refuse a bad file before binding anything
+        if vdb.role != "full":
+            raise ViewDBError("is a client file (export-client); serve the full database", db)
+        objects = len(vdb.objects())
+    os.environ[ENV_DB] = str(Path(db).resolve())
+    os.environ[ENV_MAX_BODY] = str(int(max_body))
+    os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
+    if token:
+        os.environ[ENV_TOKEN] = token
+    else:
+        os.environ.pop(ENV_TOKEN, None)
+    sock = bind(host, port)
+    try:
+        bound_host, bound_port = sock.getsockname()[:2]
+        shown = f"[{bound_host}]" if ":" in bound_host else bound_host
+        config = uvicorn.Config("viewdb.http.app:app_from_env", factory=True, workers=workers,
+                                log_level=log_level, access_log=log_level in ("debug", "info"),
+                                timeout_graceful_shutdown=10)
+        if ready is not None:
+            ready(f"http://{shown}:{bound_port}", objects)
+        if workers > 1:
+            supervisor = _supervisor(Multiprocess)(config, sockets=[sock])
+            supervisor.run()
+            stopped_by = supervisor.stopped_by
+        else:  # uvicorn re-raises the signal that stopped it (SIGINT: KeyboardInterrupt)
+            server = uvicorn.Server(config)
+            server.run(sockets=[sock])
+            stopped_by = "signal" if server.started else None
+    finally:
+        sock.close()
+    if stopped_by is None:
+        raise ServerError("the server failed to start (see the log above)", db)
+    if stopped_by == "int":
+        raise KeyboardInterrupt  # Ctrl-C, as with one worker
+
+
+def _supervisor(base: type[Any]) -> type[Any]:
+    """uvicorn's multi-process supervisor, remembering which signal stopped it (it
+    returns normally for both; and without one when a worker could not start)."""
+
+    class Supervisor(base):  # type: ignore[misc, valid-type]
+        stopped_by: str | None = None
+
+        def handle_int(self) -> None:
+            self.stopped_by = "int"
+            super().handle_int()
+
+        def handle_term(self) -> None:
+            self.stopped_by = "term"
+            super().handle_term()
+
+    return Supervisor

@@ -1,0 +1,206 @@
+"""The pose messages between a client and ``viewdb serve``, and the query image codec.
+
+A client holds no meshes and no SIFT features, so it sends the server the query image
+already segmented: one lossless PNG whose alpha channel is the object mask (the server
+gets exactly the pixels and the mask the client has), the matches to pose, and the
+camera intrinsics if any. The server answers a pose, or why there is none, per match.
+Like :mod:`viewdb.search.plans`, every message is a dataclass with ``to_dict`` /
+``from_dict``; ``from_dict`` validates and raises :class:`~viewdb.errors.QueryError`.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import io
+import math
+import struct
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from PIL import Image
+
+from ..errors import QueryError
+from ..pose import PoseEstimate, QueryView
+from ..query_image import MAX_PIXELS, MIN_SIDE
+from ..search.plans import MAX_K, Candidate, _candidates, _finite
+
+__all__ = ["PoseReply", "PoseRequest", "decode_query", "encode_query", "pose_from_dict", "pose_to_dict"]
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def encode_query(query: QueryView) -> bytes:
+    """The query's pixels with its mask as the alpha channel (255 = object), as PNG."""
+    rgb = np.asarray(query.color, np.uint8)
+    mask = np.asarray(query.mask, bool)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or mask.shape != rgb.shape[:2]:
+        raise QueryError(f"query image {rgb.shape} and mask {mask.shape} do not match")
+    bgra = np.dstack([rgb[:, :, ::-1], mask.astype(np.uint8) * np.uint8(255)])
+    ok, data = cv2.imencode(".png", bgra, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8 BGRA array
+        raise QueryError("cannot encode the query image")
+    return data.tobytes()
+
+
+def decode_query(data: bytes, max_pixels: int = MAX_PIXELS) -> QueryView:
+    """The inverse of :func:`encode_query`: an RGBA PNG (size checked before decoding)."""
+    if not data.startswith(PNG_SIGNATURE):
+        raise QueryError("image must be a PNG")
+    if len(data) >= 24 and data[12:16] == b"IHDR":  # refuse a bomb before Pillow sees it
+        width, height = struct.unpack(">II", data[16:24])
+        if width * height > max_pixels:
+            raise QueryError(f"image too large: {width}x{height}, more than {max_pixels:,} pixels")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(io.BytesIO(data)) as im:
+                width, height, mode = int(im.size[0]), int(im.size[1]), im.mode
+    except Exception as exc:  # Pillow's many ways of saying the header is bad
+        raise QueryError(f"image is not a readable PNG ({type(exc).__name__})") from exc
+    if width * height > max_pixels:
+        raise QueryError(f"image too large: {width}x{height}, more than {max_pixels:,} pixels")
+    if min(width, height) < MIN_SIDE:
+        raise QueryError(f"image too small: {width}x{height}, at least {MIN_SIDE} on each side")
+    if mode != "RGBA":
+        raise QueryError(f"image must be RGBA (8 bits, alpha = object mask), not {mode}")
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.dtype != np.uint8 or arr.shape != (height, width, 4):
+        raise QueryError("image is not a readable 8-bit RGBA PNG")
+    mask = arr[:, :, 3] > 127
+    if not mask.any():
+        raise QueryError("image mask (alpha channel) is empty")
+    return QueryView(np.ascontiguousarray(arr[:, :, 2::-1]), mask)
+
+
+def _number(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None  # JSON has no NaN or infinity
+
+
+def _back(x: Any, what: str) -> float:
+    if x is None:
+        return math.nan
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise QueryError(f"pose {what} must be a number")
+    return float(x)
+
+
+def pose_to_dict(p: PoseEstimate) -> dict[str, Any]:
+    """Every field of a pose, JSON-able (non-finite numbers as null)."""
+    return {
+        "azimuth": _number(p.azimuth), "elevation": _number(p.elevation),
+        "inplane": _number(p.inplane), "scale": _number(p.scale),
+        "rotation": [[_number(x) for x in row] for row in np.asarray(p.rotation, float)],
+        "translation": [_number(x) for x in np.asarray(p.translation, float)],
+        "method": p.method, "inliers": int(p.inliers), "candidate": int(p.candidate),
+        "frame": p.frame, "score": _number(p.score),
+    }
+
+
+def pose_from_dict(data: Any) -> PoseEstimate:
+    if not isinstance(data, dict):
+        raise QueryError("a pose must be an object")
+    try:
+        rotation = np.array([[_back(x, "rotation") for x in row] for row in data["rotation"]], float)
+        translation = np.array([_back(x, "translation") for x in data["translation"]], float)
+        if rotation.shape != (3, 3) or translation.shape != (3,):
+            raise QueryError("pose rotation must be 3x3 and translation 3 numbers")
+        for key in ("method", "frame"):
+            if not isinstance(data[key], str):
+                raise QueryError(f"pose {key} must be a string")
+        for key in ("inliers", "candidate"):
+            if isinstance(data[key], bool) or not isinstance(data[key], int):
+                raise QueryError(f"pose {key} must be an integer")
+        return PoseEstimate(
+            azimuth=_back(data["azimuth"], "azimuth"), elevation=_back(data["elevation"], "elevation"),
+            inplane=_back(data["inplane"], "inplane"), scale=_back(data["scale"], "scale"),
+            rotation=rotation, translation=translation, method=data["method"],
+            inliers=data["inliers"], candidate=data["candidate"], frame=data["frame"],
+            score=_back(data["score"], "score"),
+        )
+    except (KeyError, TypeError) as exc:
+        raise QueryError(f"malformed pose ({type(exc).__name__}: {exc})") from exc
+
+
+def _intrinsics(x: Any) -> tuple[float, float, float, float] | None:
+    if x is None:
+        return None
+    if not isinstance(x, list) or len(x) != 4:
+        raise QueryError("intrinsics must be null or [fx, fy, cx, cy]")
+    fx, fy, cx, cy = (_finite(v, "intrinsics") for v in x)
+    if not (fx > 0 and fy > 0):
+        raise QueryError("intrinsics fx and fy must be positive")
+    return fx, fy, cx, cy
+
+
+@dataclass(frozen=True)
+class PoseRequest:
+    """Client → server: the segmented query (RGBA PNG) and the matches to pose."""
+
+    image: bytes = field(repr=False)
+    matches: list[Candidate]
+    intrinsics: tuple[float, float, float, float] | None = None
+
+    @classmethod
+    def from_query(
+        cls, query: QueryView, matches: Sequence[Candidate],
+        intrinsics: tuple[float, float, float, float] | None = None,
+    ) -> PoseRequest:
+        return cls(encode_query(query), list(matches), _intrinsics(
+            None if intrinsics is None else [float(v) for v in intrinsics]))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"image": base64.b64encode(self.image).decode("ascii"),
+                "matches": [c.to_dict() for c in self.matches],
+                "intrinsics": None if self.intrinsics is None else list(self.intrinsics)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> PoseRequest:
+        if not isinstance(data, dict):
+            raise QueryError("request must be an object")
+        try:
+            image = data["image"]
+            if not isinstance(image, str):
+                raise QueryError("image must be a base64 string")
+            try:
+                raw = base64.b64decode(image, validate=True)
+            except (binascii.Error, ValueError) as exc:
+                raise QueryError("image is not valid base64") from exc
+            matches = _candidates(data["matches"], MAX_K)
+            if not matches:
+                raise QueryError("matches must not be empty")
+            return cls(raw, matches, _intrinsics(data.get("intrinsics")))
+        except KeyError as exc:
+            raise QueryError(f"request lacks {exc.args[0]!r}") from exc
+
+
+@dataclass(frozen=True)
+class PoseReply:
+    """Server → client: per match, its pose or why there is none."""
+
+    poses: list[tuple[PoseEstimate | None, str | None]]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"poses": [{"pose": None if p is None else pose_to_dict(p), "error": e}
+                          for p, e in self.poses],
+                "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> PoseReply:
+        if not isinstance(data, dict) or not isinstance(data.get("poses"), list):
+            raise QueryError("reply must be an object with a poses list")
+        out: list[tuple[PoseEstimate | None, str | None]] = []
+        for item in data["poses"]:
+            if not isinstance(item, dict):
+                raise QueryError("each pose entry must be an object")
+            pose, error = item.get("pose"), item.get("error")
+            if error is not None and not isinstance(error, str):
+                raise QueryError("pose error must be a string")
+            out.append((None if pose is None else pose_from_dict(pose), error))
+        stats = data.get("stats", {})
+        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
