@@ -129,7 +129,7 @@ def full_db(
     path, adopted = _find(config, skim, files)
     names = sorted(f.stem for f in files)
     side = _read_sidecar(path)
-    if side.get("complete") and side.get("models") == _models_key(names):
+    if side.get("complete") and side.get("models") == _models_key(names) and path.exists():
         return CachedDb(path, skim, None, side.get("build_seconds"), side.get("jobs"),
                         dict(side.get("failed", {})), bool(side.get("adopted", adopted)))
     adopted = adopted or bool(side.get("adopted", False))

@@ -183,8 +183,8 @@ def write_report(
     wanted = {t for t in _wanted_keys(config)}
     records = [r for r in log if r["key"] in wanted]
     summary = summarise(config, records)
-    summary.update(config=config.to_dict(), objects=len(names), index=index_rows,
-                   queries={p: len(q) for p, q in queries.items()})
+    summary.update(config=config.to_dict(), objects=len(names), object_names=names,
+                   index=index_rows, queries={p: len(q) for p, q in queries.items()})
     files = {"results.json": out / "results.json", "accuracy.csv": out / "accuracy.csv",
              "timing.csv": out / "timing.csv", "index.md": out / "index.md",
              "report.md": out / "report.md"}
@@ -232,9 +232,9 @@ def _markdown(config: BenchConfig, summary: dict[str, Any], rows: list[dict[str,
               names: list[str]) -> str:
     parts = [
         "# viewdb bench\n",
-        f"{len(names)} objects from `{config.models}`; server grid {config.gap:g}°, images "
-        f"{config.image_size} px; {config.queries} queries per protocol, seed {config.seed}; "
-        f"accuracy client grid {config.client_gap:g}°, k = {config.k}.\n",
+        f"{len(names)} objects from `{config.models}` ({', '.join(names)}); server grid "
+        f"{config.gap:g}°, images {config.image_size} px; {config.queries} queries per protocol, "
+        f"seed {config.seed}; accuracy client grid {config.client_gap:g}°, k = {config.k}.\n",
         "## Index sizes and build times\n", index_table(rows),
     ]
     for protocol, acc in summary["accuracy"].items():
