@@ -28,6 +28,7 @@ from rich.table import Table
 from rich.text import Text
 
 import viewdb
+import viewdb.bench as viewdb_bench
 
 app = typer.Typer(
     name="viewdb",
@@ -414,6 +415,65 @@ def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:
     photo[mask] = color[mask]
     if not cv2.imwrite(str(out_path), cv2.cvtColor(photo, cv2.COLOR_RGB2BGR)):
         raise viewdb.ViewDBError("cannot write the image", out_path)
+
+
+def _floats(text: str, option: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise typer.BadParameter(f"expected numbers separated by commas, got {text!r}",
+                                 param_hint=option) from None
+    if not values:
+        raise typer.BadParameter("needs at least one value", param_hint=option)
+    return values
+
+
+@app.command()
+def bench(
+    models: Annotated[Path, typer.Argument(help="Folder of mesh files (e.g. ../shared/models).",
+                                           metavar="MODELS_DIR")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder for results, plots and the log.",
+                                          file_okay=False)],
+    queries: Annotated[int, typer.Option(help="Queries per protocol.", min=1)] = 100,
+    seed: Annotated[int, typer.Option(help="Seed of the queries (same seed, same queries).")] = 0,
+    gaps: Annotated[str, typer.Option(help="Client grid gaps of the time experiment.")] = "20,30,40,50",
+    k: Annotated[int, typer.Option("--k", "-k", help="Largest k (CMC ranks, time for k = 1..k).",
+                                   min=1, max=100)] = 5,
+    jobs: Annotated[int, typer.Option(help="Worker processes for ingest.", min=1)] = 1,
+    subset: Annotated[int | None, typer.Option(help="Use only N models, evenly spaced by name.",
+                                               min=1)] = None,
+    cache: Annotated[Path | None, typer.Option(
+        help="Folder of built databases (default OUT/cache); a full db built elsewhere with "
+             "the same gap and image size can be put here.", file_okay=False)] = None,
+    gap: Annotated[float, typer.Option(help="Server grid gap.")] = 10.0,
+    client_gap: Annotated[float, typer.Option(help="Client grid gap of the accuracy run.")] = 30.0,
+    image_size: Annotated[int, typer.Option(help="View size in pixels.")] = 256,
+    protocols: Annotated[str, typer.Option(help="Accuracy query protocols: grid, photo.")] = "grid,photo",
+) -> None:
+    """Reproduce the paper's experiments: S1–S6 CMC curves, time against the client gap
+    for k = 1..k, index sizes. Resumable: run the same command again to continue."""
+    config = viewdb_bench.BenchConfig(
+        models=models, out=out_dir, queries=queries, seed=seed, gaps=_floats(gaps, "--gaps"),
+        k=k, jobs=jobs, subset=subset, cache=cache, gap=gap, client_gap=client_gap,
+        image_size=image_size, protocols=tuple(p.strip() for p in protocols.split(",") if p.strip()),
+    )
+    with _progress() as bar:
+        tasks: dict[str, Any] = {}
+
+        def on_progress(p: viewdb_bench.BenchProgress) -> None:
+            task = tasks.get(p.stage)
+            if task is None:
+                task = tasks[p.stage] = bar.add_task(p.stage, total=p.total)
+            bar.update(task, completed=p.done, total=p.total,
+                       description=f"{p.stage} {p.detail}".strip())
+
+        run = viewdb_bench.run_bench(config, on_progress)
+    out.print(f"viewdb bench: {run.measured} measurements made, {run.skipped} read from "
+              f"{out_dir / 'results.jsonl'}")
+    for protocol, rows in run.summary["accuracy"].items():
+        out.print(f"{protocol} queries, rank-1 / rank-{k}: " + ", ".join(
+            f"{label} {r['cmc'][0]:.1%}/{r['cmc'][-1]:.1%}" for label, r in rows.items()))
+    out.print("wrote " + ", ".join(str(p) for p in run.files.values()))
 
 
 def main(argv: list[str] | None = None) -> int:

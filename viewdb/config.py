@@ -79,8 +79,11 @@ class SkimConfig:
 class IndexConfig:
     """The Fourier-point R-trees (paper section II.C; :mod:`viewdb.search.grouping`)."""
 
-    #: Client grid gap of the sparse tier, a multiple of the server gap that divides 360;
-    #: None picks the smallest such multiple of at least 30 degrees (the paper's best).
+    #: Client grid gap of the sparse tier, a multiple of the server gap of at most 180°;
+    #: None picks the smallest multiple of at least 30 degrees that divides 360 (the
+    #: paper's best). A gap that does not divide 360 (the paper's 50°) gives the rings
+    #: 0, g, 2g, ... < 360 (for 50°: 8 views per ring, the last step 10°), as a loop
+    #: extracting views every g degrees does.
     client_gap: float | None = None
     #: At most this many views of one object under one R-tree entry (MBR).
     group_views: int = 32
@@ -120,9 +123,9 @@ class BuildConfig:
         client = self.index.client_gap
         if client is not None:
             ratio = client / self.gap
-            if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 or not _divides_360(client):
+            if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 or client > 180:
                 raise ValueError(
-                    f"client gap must be a multiple of the gap ({self.gap:g}) that divides 360, "
+                    f"client gap must be a multiple of the gap ({self.gap:g}) of at most 180, "
                     f"got {client:g}"
                 )
 

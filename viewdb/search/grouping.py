@@ -14,6 +14,7 @@ the views that stand for the client grid (:func:`tier_views`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -105,14 +106,17 @@ def tier_views(
 ) -> list[tuple[float, float]]:
     """The stored views that stand for the client grid of ``client_gap`` degrees.
 
-    A client-grid view is either stored itself or, for a skimmed object, has the same (or
-    the mirrored) silhouette as the stored view ``mapping`` gives for it; searches try
-    every curve and its mirror, so that stored view stands for it. Views without a
-    silhouette are not stored and have no stand-in. Returned in ``stored`` order.
+    The client grid's rings are 0, g, 2g, ... < 360 (``g`` = ``client_gap``; when ``g``
+    does not divide 360 the last step is shorter). A client-grid view is either stored
+    itself or, for a skimmed object, has the same (or the mirrored) silhouette as the
+    stored view ``mapping`` gives for it; searches try every curve and its mirror, so that
+    stored view stands for it. Views without a silhouette are not stored and have no
+    stand-in. Returned in ``stored`` order.
     """
     stored = list(stored)
     have = set(stored)
-    steps = round(360.0 / client_gap)
+    # 0, g, 2g, ... < 360: a gap that does not divide 360 (50°) leaves a shorter last step
+    steps = math.ceil(360.0 / client_gap - 1e-9)
     wanted = set()
     for i in range(steps):
         for j in range(steps):

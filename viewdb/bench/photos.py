@@ -1,0 +1,117 @@
+"""Synthetic photographs for the realistic query protocol.
+
+A photo is a stored object seen from a random direction off the grid through a
+**perspective** camera (random field of view and distance), lit by a random directional
+light plus ambient light (pyrender's physically based shader, not the views' head-light),
+on a plain background of a random colour, with Gaussian pixel noise and JPEG compression.
+Everything random is drawn into a :class:`PhotoSpec` first, so the same spec always gives
+the same image.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import camera_pose
+from ..errors import RenderError
+from ..gl import pyrender_module
+from ..mesh import NormalisedMesh
+from ..render import _offscreen, _reraise_interrupt
+
+__all__ = ["PhotoSpec", "draw_photo_spec", "encode_jpeg", "render_photo"]
+
+
+@dataclass(frozen=True)
+class PhotoSpec:
+    """Everything that decides one synthetic photo."""
+
+    object: str
+    #: Viewing direction (camera convention); the camera stays upright.
+    azimuth: float
+    elevation: float
+    #: Vertical field of view, degrees, and camera distance from the model's centre.
+    fov: float
+    distance: float
+    #: Directional light: offset from the viewing direction, degrees, and intensity.
+    light_azimuth: float
+    light_elevation: float
+    light_intensity: float
+    ambient: float
+    background: tuple[int, int, int]
+    #: Gaussian noise sd in grey levels, and its seed.
+    noise: float
+    noise_seed: int
+    jpeg_quality: int
+    image_size: int
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["background"] = list(self.background)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PhotoSpec:
+        return cls(**{**data, "background": tuple(int(x) for x in data["background"])})
+
+
+def draw_photo_spec(rng: np.random.Generator, name: str, image_size: int = 256) -> PhotoSpec:
+    """A random photo of object ``name``: direction uniform on the sphere, the model's
+    bounding sphere filling 55–85 % of the frame height."""
+    azimuth = float(rng.uniform(0.0, 360.0))
+    elevation = float(np.degrees(np.arcsin(rng.uniform(-0.97, 0.97))))
+    fov = float(rng.uniform(30.0, 55.0))
+    fill = float(rng.uniform(0.55, 0.85))
+    distance = 1.0 / math.sin(math.radians(fov / 2.0)) / fill
+    return PhotoSpec(
+        object=name, azimuth=azimuth, elevation=elevation, fov=fov, distance=distance,
+        light_azimuth=float(rng.uniform(-60.0, 60.0)),
+        light_elevation=float(rng.uniform(-30.0, 60.0)),
+        light_intensity=float(rng.uniform(2.0, 5.0)), ambient=float(rng.uniform(0.25, 0.6)),
+        background=tuple(int(x) for x in rng.integers(0, 256, 3)),  # type: ignore[arg-type]
+        noise=float(rng.uniform(1.0, 6.0)), noise_seed=int(rng.integers(2**31)),
+        jpeg_quality=int(rng.integers(60, 96)), image_size=image_size,
+    )
+
+
+def render_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
+    """The photo ``spec`` describes, as RGB uint8 (before JPEG; see :func:`encode_jpeg`)."""
+    pyrender = pyrender_module()
+    size = spec.image_size
+    bg = np.array(spec.background, dtype=np.float64) / 255.0
+    try:
+        scene = pyrender.Scene(bg_color=[*bg, 1.0], ambient_light=[spec.ambient] * 3)
+        for geometry in mesh.scene.geometry.values():
+            smooth = geometry.visual.kind != "face"
+            scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=smooth))
+        camera = pyrender.PerspectiveCamera(
+            yfov=math.radians(spec.fov), aspectRatio=1.0, znear=max(0.05, spec.distance - 1.5),
+            zfar=spec.distance + 1.5,
+        )
+        scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
+        light = pyrender.DirectionalLight(color=np.ones(3), intensity=spec.light_intensity)
+        scene.add(light, pose=camera_pose(spec.azimuth + spec.light_azimuth,
+                                          spec.elevation + spec.light_elevation, 1.0))
+        gl = _offscreen(size)
+        flags = pyrender.RenderFlags
+        color, _ = gl.render(scene, flags=flags.SKIP_CULL_FACES)
+    except Exception as exc:
+        _reraise_interrupt(exc)
+        raise RenderError(f"rendering a photo of {mesh.name!r} failed: {exc}") from exc
+    rgb = np.asarray(color)[:, :, :3].astype(np.float64)
+    noise = np.random.default_rng(spec.noise_seed).normal(0.0, spec.noise, rgb.shape)
+    return np.clip(rgb + noise + 0.5, 0, 255).astype(np.uint8)
+
+
+def encode_jpeg(rgb: NDArray[np.uint8], quality: int) -> bytes:
+    """JPEG bytes of an RGB image at ``quality`` (OpenCV's encoder, deterministic)."""
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RenderError("JPEG encoding failed")
+    return bytes(buf)
