@@ -318,6 +318,22 @@ def test_intersection_equals_brute_force(shared_index, centre, half) -> None:
     assert idx.intersection(lo, hi).tolist() == brute(P, lo, hi).tolist()
 
 
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    boxes=st.lists(
+        st.tuples(st.lists(st.floats(-2.5, 2.5), min_size=D, max_size=D),
+                  st.lists(st.floats(0.0, 2.0), min_size=D, max_size=D)),
+        min_size=1, max_size=4,
+    )
+)
+def test_intersection_of_many_boxes_equals_brute_force(shared_index, boxes) -> None:
+    idx, P = shared_index
+    los = np.array([np.array(c) - np.array(h) for c, h in boxes])
+    his = np.array([np.array(c) + np.array(h) for c, h in boxes])
+    expected = sorted(set().union(*(brute(P, lo, hi).tolist() for lo, hi in zip(los, his, strict=True))))
+    assert idx.intersection_many(los, his).tolist() == expected
+
+
 def test_box_on_a_point_is_closed(shared_index) -> None:
     idx, P = shared_index
     assert 7 in idx.intersection(P[7], P[7]).tolist()

@@ -527,6 +527,20 @@ class FourierIndex:
         out.sort()
         return out
 
+    def intersection_many(self, los: NDArray[np.float64], his: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Ids of the points in any of the closed boxes ``[los[i], his[i]]`` (rows of
+        ``(n, d)`` arrays), sorted and unique; one call into libspatialindex."""
+        lo = np.ascontiguousarray(los, dtype=np.float64).reshape(-1, self.dimension)
+        hi = np.ascontiguousarray(his, dtype=np.float64).reshape(-1, self.dimension)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
+            raise ValueError("boxes must be finite with lo <= hi")
+        try:
+            ids, _ = self.index.intersection_v(lo, hi)
+        except RTreeError as exc:
+            raise self._error(exc, "cannot read the R-tree") from exc
+        self._check_storage("cannot read the R-tree")
+        return np.unique(ids.astype(np.int64))
+
     @property
     def count(self) -> int:
         """Number of entries."""

@@ -175,9 +175,9 @@ class StoredTier:
     def groups_within(
         self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        hits = [self.index.intersection(lo - radius, hi + radius)
-                for lo, hi in (query.box, query.mirrored_box)]
-        at = np.searchsorted(self._ids, np.union1d(*hits))
+        los = np.stack([query.box[0], query.mirrored_box[0]]) - radius
+        his = np.stack([query.box[1], query.mirrored_box[1]]) + radius
+        at = np.searchsorted(self._ids, self.index.intersection_many(los, his))
         at = at[~seen[at]]
         if not len(at):
             return at.astype(np.int64), np.zeros(0)
