@@ -88,6 +88,13 @@ def ingest(
     no_skim: Annotated[
         bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
     ] = False,
+    max_faces: Annotated[
+        int, typer.Option(help="Refuse meshes with more triangles (0 = no cap).", min=0)
+    ] = viewdb.DEFAULT_MAX_FACES,
+    allow_missing_textures: Annotated[
+        bool, typer.Option("--allow-missing-textures",
+                           help="Ingest meshes whose texture files are missing, untextured.")
+    ] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")] = False,
 ) -> None:
     """Add meshes; an object is named after its file's stem. Re-running is a no-op.
@@ -107,7 +114,9 @@ def ingest(
             if p.outcome is not None and p.outcome.status == "failed":
                 err.print(f"viewdb: {p.outcome.error}", markup=False)
 
-        report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress)
+        report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
+                            max_faces=max_faces or None,
+                            allow_missing_textures=allow_missing_textures)
     counts = report.counts()
     if as_json:
         _echo_json({

@@ -9,6 +9,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+import viewdb
 from tests.conftest import ROOT, sample
 from viewdb_cli.main import app, main
 
@@ -107,3 +108,28 @@ def test_export_client_writes_a_small_checked_file(tmp_path, small_db, capsys):
     assert main(["export-client", "--db", str(small_db), "--out", str(tmp_path / "x.db"), "--gap", "45"]) == 1
     assert not (tmp_path / "x.db").exists()
     assert main(["ingest", str(sample("cone")), "--db", str(out)]) == 1  # a client file takes no ingest
+
+
+def test_a_mesh_over_max_faces_fails_alone_and_nothing_stored_is_lost(tmp_path, capsys):
+    db = tmp_path / "x.db"
+    assert run(capsys, "ingest", sample("cone"), "--db", db, "--gap", 90, "--image-size", 64)[0] == 0
+    code, out, err = run(capsys, "ingest", sample("torus"), sample("cube_dice"), "--db", db,
+                         "--max-faces", 200)
+    assert code == 1
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert any(str(sample("torus")) in line and "more than the cap of 200" in line for line in lines)
+    with viewdb.open(db, create=False) as vdb:
+        names = {o.name for o in vdb.objects()}
+    assert "cone" in names and "torus" not in names  # the earlier object is untouched
+
+
+def test_missing_textures_refused_unless_allowed(tmp_path, capsys):
+    obj = tmp_path / "skinned.obj"
+    obj.write_text("mtllib skinned.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\n"
+                   "usemtl a\nf 1/1 2/2 3/3\nf 1/1 2/2 4/3\nf 2/1 3/2 4/3\nf 1/1 3/2 4/3\n")
+    (tmp_path / "skinned.mtl").write_text("newmtl a\nmap_Kd gone.jpg\n")
+    db = tmp_path / "x.db"
+    code, _, err = run(capsys, "ingest", obj, "--db", db, "--gap", 90, "--image-size", 64)
+    assert code == 1 and "gone.jpg" in err and str(obj) in err
+    code, out, _ = run(capsys, "ingest", obj, "--db", db, "--allow-missing-textures")
+    assert code == 0 and "1 added" in out

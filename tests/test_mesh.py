@@ -6,7 +6,7 @@ import trimesh
 
 from tests.conftest import sample, sample_files
 from viewdb.errors import MeshError
-from viewdb.mesh import load_mesh, mesh_from_glb
+from viewdb.mesh import LoadOptions, load_mesh, mesh_from_glb, missing_textures
 
 
 def test_every_format_is_present_among_the_samples():
@@ -109,3 +109,88 @@ def test_jpeg_textures_stay_jpeg_in_the_stored_glb(tmp_path):
     stored = load_mesh(path).to_glb()
     assert b"image/jpeg" in stored
     assert len(stored) < 1.2 * path.stat().st_size
+
+
+OBJ_WITH_TEXTURE = """mtllib box.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 0 1
+vt 0 0
+vt 1 0
+vt 1 1
+usemtl skin
+f 1/1 2/2 3/3
+f 1/1 2/2 4/3
+f 2/1 3/2 4/3
+f 1/1 3/2 4/3
+"""
+
+
+def _textured_obj(tmp_path, with_library=True, with_image=True):
+    obj = write(tmp_path, "box.obj", OBJ_WITH_TEXTURE)
+    if with_library:
+        write(tmp_path, "box.mtl", "newmtl skin\nKd 1 1 1\nmap_Kd -s 1 1 1 skin.png\n")
+    if with_image:
+        from PIL import Image
+
+        Image.new("RGB", (8, 8), (200, 30, 30)).save(tmp_path / "skin.png")
+    return obj
+
+
+def test_an_obj_whose_texture_file_is_missing_is_refused_by_name(tmp_path):
+    path = _textured_obj(tmp_path, with_image=False)
+    with pytest.raises(MeshError, match="'skin.png', which does not exist") as info:
+        load_mesh(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+    # on request it goes in untextured
+    mesh = load_mesh(path, options=LoadOptions(allow_missing_textures=True))
+    assert mesh.n_faces == 4
+
+
+def test_an_obj_whose_material_library_is_missing_is_refused(tmp_path):
+    path = _textured_obj(tmp_path, with_library=False, with_image=False)
+    with pytest.raises(MeshError, match="'box.mtl'"):
+        load_mesh(path)
+
+
+def test_an_obj_with_its_texture_present_loads_textured(tmp_path):
+    path = _textured_obj(tmp_path)
+    assert missing_textures(path) == []
+    mesh = load_mesh(path)
+    assert {g.visual.kind for g in mesh.scene.geometry.values()} == {"texture"}
+
+
+def test_a_gltf_whose_image_file_is_missing_is_refused(tmp_path):
+    import json
+
+    from PIL import Image
+
+    files = load_mesh(sample("car")).scene.export(file_type="gltf")
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    doc = json.loads(files["model.gltf"])
+    assert doc.get("images"), "the sample car is textured"
+    doc["images"][0] = {"uri": "paint%20job.png"}  # an external image file (URI-escaped name)
+    (tmp_path / "model.gltf").write_text(json.dumps(doc))
+    Image.new("RGB", (8, 8), (10, 200, 30)).save(tmp_path / "paint job.png")
+    assert missing_textures(tmp_path / "model.gltf") == []
+    assert load_mesh(tmp_path / "model.gltf").n_faces > 0
+    (tmp_path / "paint job.png").unlink()
+    with pytest.raises(MeshError, match="'paint%20job.png', which does not exist"):
+        load_mesh(tmp_path / "model.gltf")
+
+
+def test_sample_and_shared_meshes_name_no_missing_texture():
+    assert [p for p in sample_files() if missing_textures(p)] == []
+
+
+def test_a_mesh_over_the_face_cap_is_refused_with_its_count(tmp_path):
+    path = sample("chair")
+    faces = load_mesh(path).n_faces
+    with pytest.raises(MeshError, match=f"has {faces:,} triangles, more than the cap of {faces - 1:,}"):
+        load_mesh(path, options=LoadOptions(max_faces=faces - 1))
+    assert load_mesh(path, options=LoadOptions(max_faces=faces)).n_faces == faces
+    assert load_mesh(path, options=LoadOptions(max_faces=None)).n_faces == faces
+    with pytest.raises(ValueError):
+        LoadOptions(max_faces=0)

@@ -37,6 +37,7 @@ from .errors import (
 )
 from .http.client import RemoteServer
 from .ingest import FileOutcome, IngestProgress, IngestReport
+from .mesh import DEFAULT_MAX_FACES
 from .render import RenderedView
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .symmetry import SymmetryType
@@ -45,6 +46,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BuildConfig",
+    "DEFAULT_MAX_FACES",
     "Candidate",
     "CandidatePose",
     "DatabaseInfo",

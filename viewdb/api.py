@@ -21,7 +21,7 @@ from .config import BuildConfig, RenderConfig
 from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
-from .mesh import NormalisedMesh, load_mesh, mesh_from_glb
+from .mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
 from .query import QueryResult, run_query
 from .remote import ServerTier
 from .render import RenderedView, get_renderer
@@ -232,6 +232,8 @@ class ViewDB:
         jobs: int = 1,
         skim: bool = True,
         progress: Callable[[IngestProgress], None] | None = None,
+        max_faces: int | None = DEFAULT_MAX_FACES,
+        allow_missing_textures: bool = False,
     ) -> IngestReport:
         """Add mesh files; an object is named after its file's stem.
 
@@ -240,7 +242,9 @@ class ViewDB:
         skimming), otherwise the whole grid. Unchanged files (same name and content hash)
         are skipped; changed ones replace their object. Each object is written in one
         transaction. Files that fail are listed in the report's ``failed`` and the rest
-        still go in.
+        still go in: among them meshes with more than ``max_faces`` triangles (``None``:
+        no cap) and meshes naming texture files that do not exist (unless
+        ``allow_missing_textures``: then they go in untextured).
         """
         if self.role == "client":
             raise ViewDBError(
@@ -254,9 +258,13 @@ class ViewDB:
             self._store.write_object(desc, self.config)
             self._forget(desc.name)
 
+        try:
+            options = LoadOptions(max_faces, allow_missing_textures)
+        except ValueError as exc:
+            raise ViewDBError(str(exc)) from exc
         return run_ingest(
             list(paths), self.config, self._store.object_hashes(), write,
-            jobs=jobs, skim=skim, progress=progress,
+            jobs=jobs, skim=skim, progress=progress, options=options,
         )
 
     @property

@@ -22,7 +22,7 @@ from .camera import grid_views
 from .config import BuildConfig
 from .describe import ObjectDescription, describe_object
 from .errors import MeshError, ViewDBError
-from .mesh import file_hash, load_mesh
+from .mesh import LoadOptions, file_hash, load_mesh
 
 __all__ = ["FileOutcome", "IngestProgress", "IngestReport", "run_ingest"]
 
@@ -96,9 +96,9 @@ def _tick(n: int) -> None:
 
 
 def _describe_file(
-    path: str, name: str, digest: str, config: BuildConfig, skim: bool
+    path: str, name: str, digest: str, config: BuildConfig, skim: bool, options: LoadOptions
 ) -> ObjectDescription:
-    mesh = load_mesh(path, name, digest)
+    mesh = load_mesh(path, name, digest, options)
     return describe_object(mesh, config, skim=skim, on_view=_tick)
 
 
@@ -120,6 +120,7 @@ def run_ingest(
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
+    options: LoadOptions = LoadOptions(),  # noqa: B008 - frozen, shared on purpose
 ) -> IngestReport:
     """Describe every new or changed file and hand each result to ``write``.
 
@@ -195,7 +196,7 @@ def run_ingest(
                 notify()
 
             try:
-                mesh = load_mesh(job.path, job.name, job.digest)
+                mesh = load_mesh(job.path, job.name, job.digest, options)
                 result: ObjectDescription | BaseException = describe_object(
                     mesh, config, skim=skim, on_view=tick
                 )
@@ -213,7 +214,8 @@ def run_ingest(
         futures: dict[Future[ObjectDescription], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job.path, job.name, job.digest, config, skim)] = job
+                futures[pool.submit(_describe_file, job.path, job.name, job.digest, config, skim,
+                                    options)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
 import logging
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 import trimesh
@@ -22,7 +24,10 @@ from numpy.typing import NDArray
 
 from .errors import MeshError
 
-__all__ = ["MESH_SUFFIXES", "NormalisedMesh", "load_mesh", "mesh_from_glb"]
+__all__ = [
+    "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "load_mesh", "mesh_from_glb",
+    "missing_textures",
+]
 
 #: File endings ingest accepts (case-insensitive).
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -75,8 +80,29 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
+#: Meshes with more triangles than this are refused by default (rendering 1,296 views
+#: of a multi-million-triangle scan takes hours in software GL and the outline gains
+#: nothing at 256 px): decimate such a mesh first, or raise the cap.
+DEFAULT_MAX_FACES = 2_000_000
+
+
+@dataclass(frozen=True)
+class LoadOptions:
+    """What an ingest accepts."""
+
+    #: Most triangles a mesh may have (``None``: no cap).
+    max_faces: int | None = DEFAULT_MAX_FACES
+    #: Ingest a mesh whose texture files are missing untextured, instead of refusing it.
+    allow_missing_textures: bool = False
+
+    def __post_init__(self) -> None:
+        if self.max_faces is not None and self.max_faces < 1:
+            raise ValueError(f"max_faces must be at least 1, got {self.max_faces}")
+
+
 def load_mesh(
-    path: str | Path, name: str | None = None, content_hash: str | None = None
+    path: str | Path, name: str | None = None, content_hash: str | None = None,
+    options: LoadOptions = LoadOptions(),  # noqa: B008 - frozen, shared on purpose
 ) -> NormalisedMesh:
     """Load a mesh file and normalise it.
 
@@ -88,11 +114,15 @@ def load_mesh(
         Object name; defaults to the file's stem.
     content_hash
         The file's :func:`file_hash` if the caller already computed it.
+    options
+        The face cap and what to do about missing texture files.
 
     Raises
     ------
     MeshError
-        The file is missing, not a supported mesh, holds no triangles or has no area.
+        The file is missing, not a supported mesh, holds no triangles or has no area,
+        has more triangles than ``options.max_faces``, or names a texture file that does
+        not exist (unless ``options.allow_missing_textures``).
     """
     path = Path(path)
     if not path.is_file():
@@ -103,12 +133,72 @@ def load_mesh(
             f"use one of {', '.join(MESH_SUFFIXES)}",
             path,
         )
+    if not options.allow_missing_textures:
+        missing = missing_textures(path)
+        if missing:
+            raise MeshError(
+                f"names texture file {missing[0]!r}, which does not exist"
+                + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else "")
+                + "; restore it, or ingest untextured with --allow-missing-textures",
+                path,
+            )
     try:
         loaded = trimesh.load(str(path), process=False)
     except Exception as exc:  # trimesh raises many types for bad files
         raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
+    if options.max_faces is not None:
+        faces = _face_count(loaded)
+        if faces > options.max_faces:
+            raise MeshError(
+                f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
+                "decimate it first or raise the cap (--max-faces)", path,
+            )
     digest = content_hash or file_hash(path)
     return _normalise(loaded, name or path.stem, str(path), digest, path)
+
+
+def _face_count(loaded: object) -> int:
+    if isinstance(loaded, trimesh.Scene):
+        return sum(len(g.faces) for g in loaded.geometry.values() if isinstance(g, trimesh.Trimesh))
+    return len(getattr(loaded, "faces", ()))
+
+
+def missing_textures(path: str | Path) -> list[str]:
+    """Texture files a mesh file names that do not exist next to it: ``map_*`` lines of
+    an OBJ's material libraries (a missing library counts too), and image ``uri``s of a
+    glTF (embedded ``data:`` images and GLB files need nothing outside)."""
+    path = Path(path)
+    folder = path.parent
+    suffix = path.suffix.lower()
+    out: list[str] = []
+    try:
+        if suffix == ".obj":
+            with open(path, encoding="utf-8", errors="replace") as f:
+                libraries = [line.split(None, 1)[1].strip() for line in f
+                             if line.startswith("mtllib") and len(line.split(None, 1)) == 2]
+            for library in libraries:
+                mtl = folder / library
+                if not mtl.is_file():
+                    out.append(library)
+                    continue
+                with open(mtl, encoding="utf-8", errors="replace") as f:
+                    for line in f:
+                        parts = line.strip().split()
+                        if parts and parts[0].lower().startswith("map_") and len(parts) >= 2:
+                            name = parts[-1]  # options (-s 1 1 1 ...) come before the file
+                            if not (mtl.parent / name).is_file():
+                                out.append(name)
+        elif suffix == ".gltf":
+            with open(path, encoding="utf-8") as f:
+                doc = json.load(f)
+            for image in doc.get("images", []) if isinstance(doc, dict) else []:
+                uri = image.get("uri") if isinstance(image, dict) else None
+                if isinstance(uri, str) and not uri.startswith("data:"):
+                    if not (folder / unquote(uri)).is_file():
+                        out.append(uri)
+    except (OSError, ValueError):
+        return out  # an unreadable file is reported by the loader
+    return out
 
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
