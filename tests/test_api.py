@@ -165,3 +165,23 @@ def test_a_write_failing_inside_the_r_tree_rolls_back_everything(tmp_path, monke
         assert db.check().ok, db.check().problems
         q = distance_curve(db.render("pyramid", 30, 20).mask, db.config.features.curve_samples)
         assert db.search(q, k=1)[0][0].object == "pyramid"
+
+
+def test_a_non_manifold_open_mesh_is_ingested_and_searchable(tmp_path):
+    # three fins on one edge (an edge shared by three triangles) and an open fan: neither
+    # closed nor manifold, but it has a silhouette, which is all recognition needs
+    obj = tmp_path / "fins.obj"
+    obj.write_text(
+        "v 0 -1 0\nv 0 1 0\nv 1 0 0\nv -0.5 0 0.87\nv -0.5 0 -0.87\nv 0.3 0.2 0.9\n"
+        "f 1 2 3\nf 1 2 4\nf 1 2 5\nf 2 3 6\n"
+    )
+    import trimesh
+
+    assert not trimesh.load(str(obj), process=False).is_watertight
+    with viewdb.open(tmp_path / "x.db", gap=90, image_size=64) as db:
+        report = db.ingest([obj])
+        assert not report.failed, report.failed
+        curve = db.search_tier("full")[0].curves[0]
+        hits, _ = db.search(curve, k=1)
+        assert hits[0].object == "fins" and hits[0].distance == pytest.approx(0, abs=1e-9)
+        assert db.check().ok
