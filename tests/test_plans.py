@@ -153,3 +153,28 @@ def test_requests_round_trip_through_json():
                 {**req.to_dict(), "client": [{"object": "", "distance": 1, "azimuth": 0, "elevation": 0}]}):
         with pytest.raises(viewdb.QueryError):
             viewdb.RefineRequest.from_dict(json.loads(json.dumps(bad)))
+
+
+@settings(max_examples=25)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.integers(0, 8), st.sampled_from(["server", "cs1"]))
+def test_curves_bounded_by_earlier_curves_merge_to_the_unbounded_merge(tiered_db, seed, k, band, plan):
+    # how a photo's in-plane turns are searched: each with the merged results so far as
+    # `prior`; the merged answer must be that of searching every curve alone
+    rng = np.random.default_rng(seed)
+    with viewdb.open(tiered_db, create=False) as db:
+        arrays, _ = db.search_tier("full")
+        base = arrays.curves[rng.integers(len(arrays.curves))]
+        curves = [np.roll(base, int(s)) + rng.normal(0, 0.03, 128) for s in rng.integers(0, 128, 5)]
+        merged: dict[str, float] = {}
+        unbounded: dict[str, float] = {}
+        for q in curves:
+            prior = sorted((viewdb.Candidate(o, d, 0.0, 0.0, False) for o, d in merged.items()),
+                           key=lambda c: (c.distance, c.object))[:k]
+            for c in db.recognise(q, k, band=band, plan=plan, prior=prior).results:
+                merged[c.object] = min(merged.get(c.object, np.inf), c.distance)
+            for nb in brute_force_knn(q, arrays, k, band):
+                unbounded[nb.object] = min(unbounded.get(nb.object, np.inf), nb.distance)
+        top = lambda d: sorted(d.items(), key=lambda x: (x[1], x[0]))[:k]  # noqa: E731
+        got, want = top(merged), top(unbounded)
+        assert [o for o, _ in got] == [o for o, _ in want]
+        np.testing.assert_allclose([d for _, d in got], [d for _, d in want], rtol=0, atol=1e-9)

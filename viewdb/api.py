@@ -337,6 +337,7 @@ class ViewDB:
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
         client: ViewDB | None = None, server: ServerTier | None = None,
+        prior: Sequence[Candidate] = (),
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``).
 
@@ -344,16 +345,27 @@ class ViewDB:
         :meth:`export_client`, or any full file); default this file. With ``server`` (e.g.
         :class:`viewdb.http.RemoteServer`) this file is the client: its sparse tier runs
         the client half and ``server`` the rest (for ``plan="server"``, all of it).
+
+        ``prior`` are the best objects already found for the same photo by other curves
+        (e.g. other in-plane turns; for ``server`` and ``cs1``): their distances bound
+        the search as a CS1 client's do, so an object that cannot beat them (the k-th
+        of them, or its own) is left out. Merging the results of several curves, each
+        searched with the merged results so far as ``prior``, gives exactly the merge of
+        their unbounded searches.
         """
         if plan not in PLANS:
             raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
         if server is not None:
             if client is not None:
                 raise QueryError("give either a client file or a server, not both")
-            return self._recognise_remote(curve, k, band, plan, server)
+            return self._recognise_remote(curve, k, band, plan, server, prior)
         self._full_tier_only()
         q = self._query_curve(curve, k, "full")
         start = time.perf_counter()
+        if plan == "server" and prior:
+            reply = self.refine(RefineRequest(q, band, k, _best_of(prior, [], k)))
+            return Recognition(plan, reply.results, [], 0.0, (time.perf_counter() - start) * 1e3,
+                               reply.stats, 0, 0)
         if plan == "server":
             hits, stats = self.search(q, k, band=band, tier="full")
             found = [Candidate(h.object, h.distance, h.azimuth, h.elevation, h.mirrored) for h in hits]
@@ -363,7 +375,7 @@ class ViewDB:
         mine, _ = side.client_candidates(q, k, band=band)
         middle = time.perf_counter()
         if plan == "cs1":
-            request: RefineRequest | WalkRequest = RefineRequest(q, band, k, mine)
+            request: RefineRequest | WalkRequest = RefineRequest(q, band, k, _best_of(mine, prior, k))
             reply = self.refine(request)
         else:
             request = WalkRequest(q, band, k, side.config.client_gap, mine)
@@ -375,7 +387,8 @@ class ViewDB:
                            reply.stats, sent, received)
 
     def _recognise_remote(
-        self, curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier
+        self, curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
+        prior: Sequence[Candidate] = (),
     ) -> Recognition:
         q = self._query_curve(curve, k, "sparse")
         start = time.perf_counter()
@@ -384,7 +397,7 @@ class ViewDB:
         if plan == "cs2":
             reply, exchange = server.walk(WalkRequest(q, band, k, self.config.client_gap, mine))
         else:  # cs1; and the server plan is CS1 without client candidates
-            reply, exchange = server.refine(RefineRequest(q, band, k, mine))
+            reply, exchange = server.refine(RefineRequest(q, band, k, _best_of(mine, prior, k)))
         return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                            exchange.sent, exchange.received,
                            max(exchange.wall_ms - exchange.server_ms, 0.0))
@@ -626,6 +639,15 @@ class ViewDB:
                 for tier in TIERS
             },
         )
+
+
+def _best_of(mine: Sequence[Candidate], prior: Sequence[Candidate], k: int) -> list[Candidate]:
+    """The k best of two candidate lists, one per object (its smaller distance)."""
+    best: dict[str, Candidate] = {}
+    for c in (*mine, *prior):
+        if c.object not in best or c.distance < best[c.object].distance:
+            best[c.object] = c
+    return sorted(best.values(), key=lambda c: (c.distance, c.object))[:k]
 
 
 def _file_bytes(path: Path) -> int:

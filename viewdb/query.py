@@ -253,10 +253,12 @@ def run_query(
     sent = received = trips = 0
     network_ms = pose_server_ms = 0.0
     for angle, curve in curves:
+        # the turns so far bound this one's search (the merged result is unchanged)
+        prior = [c for c, _ in _merge(per_turn, k)]
         if server is None:
-            found = db.recognise(curve, k, band=band, plan=plan, client=client)
+            found = db.recognise(curve, k, band=band, plan=plan, client=client, prior=prior)
         else:
-            found = db.recognise(curve, k, band=band, plan=plan, server=server)
+            found = db.recognise(curve, k, band=band, plan=plan, server=server, prior=prior)
         per_turn.append((angle, found.results))
         client_ms += found.client_ms
         server_ms += found.server_ms
