@@ -118,3 +118,22 @@ def test_back_faces_are_drawn_in_both_render_modes(tmp_path):
     assert back.sum() > 1000
     np.testing.assert_array_equal(back, r.render(mesh, 180, 0).mask)
     np.testing.assert_array_equal(back, front[:, ::-1])
+
+
+def test_coplanar_parts_render_the_same_every_time(tmp_path):
+    # two parts of different colours sharing one plane (z-fighting): whichever is drawn
+    # last wins, so the draw order must not depend on anything that changes between
+    # renders (pyrender draws a scene's meshes in set order)
+    scene = trimesh.Scene()
+    for i, colour in enumerate(([255, 0, 0, 255], [0, 0, 255, 255], [0, 255, 0, 255])):
+        part = trimesh.creation.box((1.0, 1.0, 0.2))
+        part.visual.face_colors = colour
+        scene.add_geometry(part, node_name=f"part{i}")
+    path = tmp_path / "coplanar.glb"
+    scene.export(path)
+    mesh = load_mesh(path)
+    renderer = get_renderer(RenderConfig(image_size=64))
+    first = renderer.render(mesh, 0, 0).color
+    for _ in range(8):
+        renderer._mesh = None  # a new GL scene of the same mesh, as after rendering another
+        assert np.array_equal(renderer.render(mesh, 0, 0).color, first)

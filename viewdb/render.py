@@ -129,11 +129,7 @@ class Renderer:
         cfg = self.config
         try:
             scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
-            # the scene's transforms are baked into its geometry (mesh.py); normals do not
-            # matter in FLAT mode, and face colours need unshared (non-smooth) vertices
-            for geometry in mesh.scene.geometry.values():
-                smooth = geometry.visual.kind != "face"
-                scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=smooth))
+            scene.add(pyrender_mesh(mesh))
         except Exception as exc:
             _reraise_interrupt(exc)
             raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
@@ -184,6 +180,24 @@ class Renderer:
             color = np.clip(lit + 0.5, 0, 255).astype(np.uint8)
         return RenderedView(azimuth, elevation, color, mask, depth, pose)
 
+
+
+def pyrender_mesh(mesh: NormalisedMesh):  # type: ignore[no-untyped-def]
+    """The whole model as ONE pyrender mesh: every geometry's primitives, in the scene's
+    order. pyrender draws the meshes of a scene in set order (it changes from run to
+    run), so parts with coplanar faces (z-fighting) would win at random and the colours,
+    hence the SIFT features, of the same view would differ between renders; the
+    primitives of one mesh are drawn in list order.
+
+    The scene's transforms are baked into its geometry (:mod:`viewdb.mesh`); normals do
+    not matter in FLAT mode, and face colours need unshared (non-smooth) vertices.
+    """
+    pyrender = pyrender_module()
+    primitives = []
+    for geometry in mesh.scene.geometry.values():
+        smooth = geometry.visual.kind != "face"
+        primitives += pyrender.Mesh.from_trimesh(geometry, smooth=smooth).primitives
+    return pyrender.Mesh(primitives=primitives)
 
 
 _LOCAL = threading.local()

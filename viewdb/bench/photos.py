@@ -22,7 +22,7 @@ from ..camera import camera_pose
 from ..errors import RenderError
 from ..gl import pyrender_module
 from ..mesh import NormalisedMesh
-from ..render import _offscreen, _reraise_interrupt
+from ..render import _offscreen, _reraise_interrupt, pyrender_mesh
 
 __all__ = ["PhotoSpec", "draw_photo_spec", "encode_jpeg", "render_photo"]
 
@@ -86,9 +86,7 @@ def render_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
     bg = np.array(spec.background, dtype=np.float64) / 255.0
     try:
         scene = pyrender.Scene(bg_color=[*bg, 1.0], ambient_light=[spec.ambient] * 3)
-        for geometry in mesh.scene.geometry.values():
-            smooth = geometry.visual.kind != "face"
-            scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=smooth))
+        scene.add(pyrender_mesh(mesh))
         camera = pyrender.PerspectiveCamera(
             yfov=math.radians(spec.fov), aspectRatio=1.0, znear=max(0.05, spec.distance - 1.5),
             zfar=spec.distance + 1.5,
