@@ -35,6 +35,7 @@ from .errors import (
     ViewDBError,
 )
 from .ingest import FileOutcome, IngestProgress, IngestReport
+from .intrinsics import parse_intrinsics
 from .render import RenderedView
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .symmetry import SymmetryType
@@ -78,5 +79,6 @@ __all__ = [
     "__version__",
     "describe_paths",
     "open",
+    "parse_intrinsics",
     "render_model",
 ]

@@ -361,7 +361,9 @@ class ViewDB:
         band: int = 6,
         rotations: int = 12,
         pose: bool = True,
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: tuple[float, float, float, float] | str | Path | Sequence[Any] | None = None,
+        label_map: NDArray[Any] | str | Path | None = None,
+        label: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
 
@@ -370,12 +372,14 @@ class ViewDB:
         evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``, ``cs2``; the
         client half runs on ``client``, default this file); the pose of each result is
         chosen among its candidate same-shape views by SIFT or by outline (see
-        :mod:`viewdb.query`). ``intrinsics`` ``(fx, fy, cx, cy)`` give a perspective pose in
-        that camera's OpenCV frame.
+        :mod:`viewdb.query`). ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix, or a
+        JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the mesh
+        file's own frame and units. ``label_map`` + ``label`` pick the object out of a
+        label image instead of ``mask``.
         """
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and self.role == "full",
-                         intrinsics=intrinsics)
+                         intrinsics=intrinsics, label_map=label_map, label=label)
 
     def _forget(self, name: str) -> None:
         self._curves.clear()

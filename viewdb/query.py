@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,9 +29,21 @@ from numpy.typing import NDArray
 
 from .errors import FeatureError, ImageError, QueryError, ViewDBError
 from .features import distance_curve
-from .pose import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose
-from .query_image import LoadedImage, Segmentation, load_image, segment
+from .intrinsics import Intrinsics, parse_intrinsics
+from .pinhole import get_pinhole_renderer
+from .pose import (
+    GL_TO_CV,
+    CandidateView,
+    PoseConfig,
+    PoseEstimate,
+    QueryView,
+    estimate_pose,
+    rotation_to_view,
+)
+from .query_image import LoadedImage, Segmentation, label_mask, load_image, segment
+from .render import get_renderer
 from .search.plans import Candidate
+from .silhouette_pose import search_silhouette_pose, to_mesh_units
 
 if TYPE_CHECKING:
     from .api import ViewDB
@@ -70,7 +82,8 @@ class QueryMatch:
             out["pose"] = {
                 "azimuth": p.azimuth, "elevation": p.elevation, "inplane": p.inplane,
                 "method": p.method, "inliers": int(p.inliers), "scale": p.scale,
-                "score": p.score, "frame": p.frame,
+                "score": p.score, "frame": p.frame, "units": p.units, "refined": p.refined,
+                "iou": p.iou,
                 "rotation": [[float(x) for x in row] for row in p.rotation],
                 "translation": [float(x) for x in p.translation],
             }
@@ -164,10 +177,49 @@ def _pose(
             color=rendered.color,
         ))
     estimate = estimate_pose(query, candidates, config, intrinsics)
+    if intrinsics is not None:
+        if estimate.method == "shape":
+            estimate = _fit_silhouette(db, match.object, query, estimate, config, intrinsics)
+        return _in_mesh_units(db, match.object, estimate)
     if estimate.method == "shape":
         estimate = _refine_shape(db, match.object, query, candidates[estimate.candidate], estimate,
                                  config, intrinsics)
     return estimate
+
+
+#: Image size of the orthographic silhouettes the perspective silhouette search aligns.
+SILHOUETTE_SEARCH_SIZE = 128
+
+
+def _fit_silhouette(
+    db: ViewDB, name: str, query: QueryView, estimate: PoseEstimate, config: PoseConfig,
+    intrinsics: tuple[float, float, float, float],
+) -> PoseEstimate:
+    """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
+    fits the query's best (:func:`viewdb.silhouette_pose.search_silhouette_pose`), started
+    from evenly spread viewing directions and from the outline estimate."""
+    mesh = db.mesh(name)
+    ortho = get_renderer(replace(db.config.render, image_size=SILHOUETTE_SEARCH_SIZE))
+    pinhole = get_pinhole_renderer()
+    fit = search_silhouette_pose(
+        query.mask, intrinsics,
+        lambda h, v: ortho.render(mesh, h, v, shaded=False).mask,
+        lambda r, t, k, size: pinhole.render(mesh, r, t, k, size)[0],
+        SILHOUETTE_SEARCH_SIZE, db.config.render.xmag, ignore=query.ignore,
+        starts=[(estimate.rotation, estimate.translation)], config=config,
+    )
+    h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
+    width = query.mask.shape[1]
+    scale = 2.0 * intrinsics[0] / (width * float(fit.translation[2]))
+    return PoseEstimate(h, v, a, scale, fit.rotation, fit.translation, "shape", 0, estimate.candidate,
+                        "opencv", fit.iou, refined="silhouette", iou=fit.iou)
+
+
+def _in_mesh_units(db: ViewDB, name: str, estimate: PoseEstimate) -> PoseEstimate:
+    """A pinhole pose in the mesh file's own frame and units (``t = scale·t_n − R·centre``)."""
+    info = db.object(name)
+    t = to_mesh_units(estimate.rotation, estimate.translation, info.centre, info.scale)
+    return replace(estimate, translation=t, units="mesh")
 
 
 #: The off-grid shape refinement stops at this step (degrees).
@@ -218,12 +270,29 @@ def run_query(
     band: int = 6,
     rotations: int = 12,
     pose: bool = True,
-    intrinsics: tuple[float, float, float, float] | None = None,
+    intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
     pose_config: PoseConfig | None = None,
+    label_map: NDArray[Any] | str | Path | None = None,
+    label: int | None = None,
 ) -> QueryResult:
-    """Recognise the object a query image shows and estimate its pose (see module doc)."""
+    """Recognise the object a query image shows and estimate its pose (see module doc).
+
+    ``label_map`` + ``label`` pick the object out of a label image (its pixels equal to
+    ``label``; other labelled pixels may hide it and are left out of the perspective
+    silhouette fit), instead of ``mask``. ``intrinsics``: ``(fx, fy, cx, cy)``, a 3×3
+    matrix, ``"fx,fy,cx,cy"`` or a JSON/YAML file (:func:`viewdb.intrinsics.parse_intrinsics`).
+    """
     start = time.perf_counter()
+    if (label_map is None) != (label is None):
+        raise QueryError("a label map and a label go together: give both or neither")
+    if label_map is not None and mask is not None:
+        raise QueryError("give either a mask or a label map, not both")
+    camera = None if intrinsics is None else parse_intrinsics(intrinsics)
     loaded = image if isinstance(image, LoadedImage) else load_image(image)
+    ignore = None
+    if label_map is not None:
+        assert label is not None
+        mask, ignore = label_mask(label_map, label, loaded)
     seg: Segmentation = segment(loaded, mask)
     curves = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
     segmented = time.perf_counter()
@@ -241,13 +310,13 @@ def run_query(
     merged = _merge(per_turn, k)
     recognised = time.perf_counter()
     matches = []
-    query = QueryView(loaded.rgb, seg.mask)
+    query = QueryView(loaded.rgb, seg.mask, ignore)
     config = pose_config or PoseConfig()
     for rank, (c, angle) in enumerate(merged, 1):
         estimate, problem = None, None
         if pose:
             try:
-                estimate = _pose(db, query, c, config, intrinsics)
+                estimate = _pose(db, query, c, config, camera)
             except ViewDBError as exc:
                 problem = exc.message
         matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
