@@ -251,6 +251,9 @@ def query(
                                        "with --label picks one object.", dir_okay=False)
     ] = None,
     label: Annotated[int | None, typer.Option(help="The object's label in --label-map.", min=1)] = None,
+    rerank: Annotated[bool, typer.Option(
+        "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
+                         "silhouette fit.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
     """Recognise the object a photo shows and estimate its pose."""
@@ -266,7 +269,7 @@ def query(
         try:
             result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                rotations=rotations, pose=not no_pose, intrinsics=cam,
-                               label_map=label_map, label=label)
+                               label_map=label_map, label=label, rerank=rerank)
         finally:
             if side is not None:
                 side.close()
@@ -341,7 +344,8 @@ def demo(
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     out.print(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
-          no_pose=False, intrinsics=None, label_map=None, label=None, as_json=False)
+          no_pose=False, intrinsics=None, label_map=None, label=None, rerank=False,
+          as_json=False)
 
 
 def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:
