@@ -160,9 +160,12 @@ def _rerank(
         return m.pose.iou if m.pose is not None and m.pose.iou is not None else -1.0
 
     ranked = sorted(matches, key=lambda m: (-iou(m), m.rank))
+    # the full search for the best quick fits and for the plan's own first result (a quick
+    # fit can miss a thin part, e.g. a handle, and must not demote the right object alone)
+    full = {m.object for m in ranked[:RERANK_FULL]} | {m.object for m in matches if m.rank == 1}
     out = []
-    for i, m in enumerate(ranked):
-        if i < RERANK_FULL and m.pose is not None and m.pose.refined == "silhouette":
+    for m in ranked:
+        if m.object in full and m.pose is not None and m.pose.refined == "silhouette":
             info = db.object(m.object)
             # the quick pose, back in normalised units, starts the full search
             r = m.pose.rotation
@@ -382,8 +385,9 @@ def run_query(
 
     ``rerank`` (with intrinsics): the plan's k objects are re-ranked by how well their
     silhouette fits the query under a perspective pose (IoU): each is fitted quickly
-    (:data:`viewdb.silhouette_pose.QUICK`), the best :data:`RERANK_FULL` again with the
-    full search, and the results sorted by IoU (``distance`` stays the curve distance).
+    (:data:`viewdb.silhouette_pose.QUICK`), the best :data:`RERANK_FULL` and the plan's
+    first result again with the full search, and the results sorted by IoU (``distance``
+    stays the curve distance).
     """
     start = time.perf_counter()
     if (label_map is None) != (label is None):
