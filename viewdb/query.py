@@ -147,6 +147,14 @@ def rotated_curves(
     return out
 
 
+def _pose_mask(seg: Segmentation, mask: Any, label_map: Any) -> NDArray[np.bool_]:
+    """The silhouette the pose is fitted to: a label map's object keeps its holes (the
+    space inside a handle), which :func:`segment` fills for the outline's curve."""
+    if label_map is None:
+        return seg.mask
+    return seg.mask & np.asarray(mask, dtype=bool)
+
+
 #: Re-ranking: results fitted again with the full silhouette search after the quick one.
 RERANK_FULL = 1
 
@@ -310,7 +318,7 @@ def pose_object(
         assert label is not None
         mask, ignore = label_mask(label_map, label, loaded)
     seg = segment(loaded, mask)
-    query = QueryView(loaded.rgb, seg.mask, ignore)
+    query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
     estimate = _silhouette_estimate(db, name, query, pose_config or PoseConfig(), camera, None, ())
     return _in_mesh_units(db, name, estimate)
 
@@ -420,7 +428,7 @@ def run_query(
     merged = _merge(per_turn, k)
     recognised = time.perf_counter()
     matches = []
-    query = QueryView(loaded.rgb, seg.mask, ignore)
+    query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
     config = pose_config or PoseConfig()
     verify = rerank and pose and camera is not None
     for rank, (c, angle) in enumerate(merged, 1):
