@@ -2,6 +2,7 @@
 small catalogue and its pose is close to the ground truth."""
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,7 @@ BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "real_photos.py"
 def _bench():
     spec = importlib.util.spec_from_file_location("real_photos", BENCH)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
     spec.loader.exec_module(module)
     return module
 
