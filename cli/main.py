@@ -221,13 +221,16 @@ def render(
 def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
     if text is None:
         return None
+    if Path(text).suffix.lower() in (".json", ".yaml", ".yml") or Path(text).is_file():
+        return viewdb.parse_intrinsics(Path(text))  # a bad file is a reported error (exit 1)
     try:
         values = tuple(float(x) for x in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 4:
-        raise typer.BadParameter("must be fx,fy,cx,cy (four numbers)", param_hint="--intrinsics")
-    return values  # type: ignore[return-value]
+        raise typer.BadParameter("must be fx,fy,cx,cy (four numbers) or a JSON/YAML file",
+                                 param_hint="--intrinsics")
+    return viewdb.parse_intrinsics(",".join(str(v) for v in values))
 
 
 @app.command()
@@ -252,8 +255,18 @@ def query(
     band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
     no_pose: Annotated[bool, typer.Option("--no-pose", help="Skip pose estimation.")] = False,
     intrinsics: Annotated[
-        str | None, typer.Option(help="Camera intrinsics fx,fy,cx,cy (pose in that camera's frame).")
+        str | None, typer.Option(help="Camera intrinsics: fx,fy,cx,cy or a JSON/YAML file (fx, fy, cx, cy "
+                                      "or a 3x3 K); the pose is then in that camera's OpenCV frame, "
+                                      "in the mesh's own units.")
     ] = None,
+    label_map: Annotated[
+        Path | None, typer.Option(help="Label image (one integer label per pixel, 0 = background); "
+                                       "with --label picks one object.", dir_okay=False)
+    ] = None,
+    label: Annotated[int | None, typer.Option(help="The object's label in --label-map.", min=1)] = None,
+    rerank: Annotated[bool, typer.Option(
+        "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
+                         "silhouette fit.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     server: Annotated[
         str | None, typer.Option(help="URL of a viewdb server (viewdb serve); the client half runs "
@@ -271,15 +284,22 @@ def query(
     """
     if plan not in ("server", "cs1", "cs2"):
         raise typer.BadParameter("must be server, cs1 or cs2", param_hint="--plan")
+    if (label_map is None) != (label is None):
+        raise typer.BadParameter("--label-map and --label go together", param_hint="--label")
+    if label_map is not None and mask is not None:
+        raise typer.BadParameter("give --mask or --label-map, not both", param_hint="--mask")
     cam = _intrinsics(intrinsics)
     if server is not None:
         if client is None or db is not None:
             raise typer.BadParameter("with --server give --client FILE (and no --db)",
                                      param_hint="--server")
+        if rerank:
+            raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
         with viewdb.open(client, read_only=True) as side, \
                 viewdb.RemoteServer(server, token=token) as remote:
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
-                                rotations=rotations, pose=not no_pose, intrinsics=cam)
+                                rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                label_map=label_map, label=label)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -287,7 +307,8 @@ def query(
             side = viewdb.open(client, create=False) if client is not None else None
             try:
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
-                                   rotations=rotations, pose=not no_pose, intrinsics=cam)
+                                   rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                   label_map=label_map, label=label, rerank=rerank)
             finally:
                 if side is not None:
                     side.close()
@@ -404,7 +425,8 @@ def demo(
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     out.print(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
-          no_pose=False, intrinsics=None, as_json=False)
+          no_pose=False, intrinsics=None, label_map=None, label=None, rerank=False,
+          as_json=False)
 
 
 def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:

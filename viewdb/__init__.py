@@ -37,6 +37,7 @@ from .errors import (
 )
 from .http.client import RemoteServer
 from .ingest import FileOutcome, IngestProgress, IngestReport
+from .intrinsics import parse_intrinsics
 from .mesh import DEFAULT_MAX_FACES
 from .render import RenderedView
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
@@ -84,5 +85,6 @@ __all__ = [
     "__version__",
     "describe_paths",
     "open",
+    "parse_intrinsics",
     "render_model",
 ]

@@ -22,7 +22,8 @@ from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
 from .ingest import IngestProgress, IngestReport, run_ingest
 from .mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
-from .query import QueryResult, run_query
+from .pose import PoseEstimate
+from .query import QueryResult, pose_object, run_query
 from .remote import ServerTier
 from .render import RenderedView, get_renderer
 from .search.knn import SearchStats, TierArrays, knn, objects_within
@@ -414,7 +415,10 @@ class ViewDB:
         band: int = 6,
         rotations: int = 12,
         pose: bool = True,
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: tuple[float, float, float, float] | str | Path | Sequence[Any] | None = None,
+        label_map: NDArray[Any] | str | Path | None = None,
+        label: int | None = None,
+        rerank: bool = False,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
 
@@ -423,8 +427,11 @@ class ViewDB:
         evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``, ``cs2``; the
         client half runs on ``client``, default this file); the pose of each result is
         chosen among its candidate same-shape views by SIFT or by outline (see
-        :mod:`viewdb.query`). ``intrinsics`` ``(fx, fy, cx, cy)`` give a perspective pose in
-        that camera's OpenCV frame.
+        :mod:`viewdb.query`). ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix, or a
+        JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the mesh
+        file's own frame and units. ``label_map`` + ``label`` pick the object out of a
+        label image instead of ``mask``. ``rerank`` (with intrinsics) re-ranks the k results
+        by the IoU of their perspective silhouette fit.
 
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
@@ -434,7 +441,23 @@ class ViewDB:
             raise QueryError("give either a client file or a server, not both")
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and (self.role == "full" or server is not None),
-                         intrinsics=intrinsics, server=server)
+                         intrinsics=intrinsics, server=server, label_map=label_map, label=label,
+                         rerank=rerank)
+
+    def estimate_pose(
+        self,
+        image: str | Path | NDArray[Any],
+        name: str,
+        intrinsics: tuple[float, float, float, float] | str | Path | Sequence[Any],
+        *,
+        mask: NDArray[Any] | str | Path | None = None,
+        label_map: NDArray[Any] | str | Path | None = None,
+        label: int | None = None,
+    ) -> PoseEstimate:
+        """The pose of the known object ``name`` in a calibrated photo, from its silhouette
+        alone (no recognition): model-to-camera in the OpenCV frame, in the mesh file's own
+        frame and units (:func:`viewdb.query.pose_object`)."""
+        return pose_object(self, image, name, intrinsics, mask=mask, label_map=label_map, label=label)
 
     def _forget(self, name: str) -> None:
         self._curves.clear()

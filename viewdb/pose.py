@@ -167,6 +167,9 @@ class QueryView:
     color: NDArray[np.uint8] = field(repr=False)
     #: The object's pixels, bool (H, W).
     mask: NDArray[np.bool_] = field(repr=False)
+    #: Pixels that may hide the object (e.g. other labelled objects), bool (H, W) or None:
+    #: the perspective silhouette fit leaves them out.
+    ignore: NDArray[np.bool_] | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,8 +221,17 @@ class PoseEstimate:
     #: Inlier ratio for sift (inliers / query keypoints matched to any candidate); for
     #: shape 1 − the normalised symmetric chamfer distance of the outlines (mean distance /
     #: sqrt(query area)) − ``detail_weight`` × that of the internal edges (when used, see
-    #: :class:`PoseConfig`), clipped to [0, 1]: comparable between calls for one query.
+    #: :class:`PoseConfig`), clipped to [0, 1]: comparable between calls for one query;
+    #: for a perspective silhouette fit (``refined == "silhouette"``) its IoU.
     score: float
+    #: How the pose was refined in the pinhole camera: None, or "silhouette" (the IoU
+    #: search of :mod:`viewdb.silhouette_pose`).
+    refined: str | None = None
+    #: The silhouette IoU of the final pose (perspective fits only).
+    iou: float | None = None
+    #: "normalised" (model space of the views) or "mesh" (the mesh file's own frame and
+    #: units, ``original = centre + scale · normalised``): the units of ``translation``.
+    units: str = "normalised"
 
 
 # ---------------------------------------------------------------------- rotations

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,14 +29,29 @@ from numpy.typing import NDArray
 
 from .errors import FeatureError, ImageError, QueryError, ViewDBError
 from .features import distance_curve
-from .pose import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose
-from .query_image import LoadedImage, Segmentation, load_image, segment
+from .intrinsics import Intrinsics, parse_intrinsics
+from .pinhole import get_pinhole_renderer
+from .pose import (
+    GL_TO_CV,
+    CandidateView,
+    PoseConfig,
+    PoseEstimate,
+    QueryView,
+    estimate_pose,
+    rotation_to_view,
+)
+from .query_image import LoadedImage, Segmentation, label_mask, load_image, segment
+from .render import get_renderer
 from .search.plans import Candidate
+from .silhouette_pose import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
 
 if TYPE_CHECKING:
     from .api import ServerTier, ViewDB
 
-__all__ = ["QueryMatch", "QueryResult", "pose_matches", "rotated_curves", "run_query"]
+__all__ = [
+    "QueryMatch", "QueryResult", "completed_mask", "pose_matches", "pose_object", "rotated_curves",
+    "run_query",
+]
 
 #: Most candidate poses examined per result (a sphere has every grid view as one).
 MAX_POSE_CANDIDATES = 24
@@ -70,7 +85,8 @@ class QueryMatch:
             out["pose"] = {
                 "azimuth": p.azimuth, "elevation": p.elevation, "inplane": p.inplane,
                 "method": p.method, "inliers": int(p.inliers), "scale": p.scale,
-                "score": p.score, "frame": p.frame,
+                "score": p.score, "frame": p.frame, "units": p.units, "refined": p.refined,
+                "iou": p.iou,
                 "rotation": [[float(x) for x in row] for row in p.rotation],
                 "translation": [float(x) for x in p.translation],
             }
@@ -134,6 +150,72 @@ def rotated_curves(
     return out
 
 
+def _pose_mask(seg: Segmentation, mask: Any, label_map: Any) -> NDArray[np.bool_]:
+    """The silhouette the pose is fitted to: a label map's object keeps its holes (the
+    space inside a handle), which :func:`segment` fills for the outline's curve."""
+    if label_map is None:
+        return seg.mask
+    return seg.mask & np.asarray(mask, dtype=bool)
+
+
+#: Re-ranking: results fitted again with the full silhouette search after the quick one.
+RERANK_FULL = 1
+
+
+def _rerank(
+    db: ViewDB, query: QueryView, matches: list[QueryMatch], found: dict[str, Candidate],
+    config: PoseConfig, camera: tuple[float, float, float, float],
+) -> list[QueryMatch]:
+    """Sort the results by the IoU of their perspective silhouette fit (module doc)."""
+    def iou(m: QueryMatch) -> float:
+        return m.pose.iou if m.pose is not None and m.pose.iou is not None else -1.0
+
+    ranked = sorted(matches, key=lambda m: (-iou(m), m.rank))
+    # the full search for the best quick fits and for the plan's own first result (a quick
+    # fit can miss a thin part, e.g. a handle, and must not demote the right object alone)
+    full = {m.object for m in ranked[:RERANK_FULL]} | {m.object for m in matches if m.rank == 1}
+    out = []
+    for m in ranked:
+        if m.object in full and m.pose is not None and m.pose.refined == "silhouette":
+            info = db.object(m.object)
+            # the quick pose, back in normalised units, starts the full search
+            r = m.pose.rotation
+            t_n = (m.pose.translation + r @ np.asarray(info.centre)) / info.scale
+            try:
+                m = replace(m, pose=_pose(db, query, found[m.object], config, camera, None, [(r, t_n)]))
+            except ViewDBError as exc:
+                m = replace(m, pose=None, pose_error=exc.message)
+        out.append(m)
+    out.sort(key=lambda m: (-iou(m), m.rank))
+    return [replace(m, rank=i) for i, m in enumerate(out, 1)]
+
+
+def completed_mask(
+    mask: NDArray[np.bool_], ignore: NDArray[np.bool_] | None
+) -> NDArray[np.bool_] | None:
+    """The silhouette with the pixels that may hide it filled in where they lie inside its
+    convex hull (an occluder's bite out of a convex outline), or None when nothing is
+    filled: a second query shape for an object that other labelled objects occlude."""
+    if ignore is None or not ignore.any():
+        return None
+    points = cv2.findNonZero(mask.astype(np.uint8))
+    hull = np.zeros(mask.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(points), 1)
+    filled = ignore & (hull > 0) & ~mask
+    # only occluders that touch the object can hide part of it
+    if filled.sum() < HIDDEN_MIN_SHARE * mask.sum():
+        return None
+    n, labels = cv2.connectedComponents((mask | filled).astype(np.uint8), connectivity=8)
+    keep = labels == np.bincount(labels[mask]).argmax()
+    out = mask | (filled & keep)
+    return out if out.sum() > mask.sum() else None
+
+
+#: An occluder's pixels inside the silhouette's convex hull make a completed query shape
+#: only when they are at least this share of the silhouette's area.
+HIDDEN_MIN_SHARE = 0.02
+
+
 def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tuple[Candidate, float]]:
     best: dict[str, tuple[Candidate, float]] = {}
     for angle, found in per_turn:
@@ -145,7 +227,8 @@ def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tu
 
 def _pose(
     db: ViewDB, query: QueryView, match: Candidate, config: PoseConfig,
-    intrinsics: tuple[float, float, float, float] | None,
+    intrinsics: tuple[float, float, float, float] | None, search: SilhouetteConfig | None = None,
+    starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
 ) -> PoseEstimate:
     poses = db.candidate_poses(match.object, match.azimuth, match.elevation)
     # the matched view first, then the rest in their (deterministic) order
@@ -164,10 +247,90 @@ def _pose(
             color=rendered.color,
         ))
     estimate = estimate_pose(query, candidates, config, intrinsics)
+    if intrinsics is not None:
+        if estimate.method == "shape":
+            estimate = _fit_silhouette(db, match.object, query, estimate, config, intrinsics, search,
+                                       starts)
+        return _in_mesh_units(db, match.object, estimate)
     if estimate.method == "shape":
         estimate = _refine_shape(db, match.object, query, candidates[estimate.candidate], estimate,
                                  config, intrinsics)
     return estimate
+
+
+#: Image size of the orthographic silhouettes the perspective silhouette search aligns.
+SILHOUETTE_SEARCH_SIZE = 128
+
+
+def _fit_silhouette(
+    db: ViewDB, name: str, query: QueryView, estimate: PoseEstimate, config: PoseConfig,
+    intrinsics: tuple[float, float, float, float], search: SilhouetteConfig | None = None,
+    starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
+) -> PoseEstimate:
+    """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
+    fits the query's best (:func:`viewdb.silhouette_pose.search_silhouette_pose`), started
+    from evenly spread viewing directions and from the outline estimate."""
+    return _silhouette_estimate(db, name, query, config, intrinsics, search,
+                                [(estimate.rotation, estimate.translation), *starts], estimate.candidate)
+
+
+def _silhouette_estimate(
+    db: ViewDB, name: str, query: QueryView, config: PoseConfig,
+    intrinsics: tuple[float, float, float, float], search: SilhouetteConfig | None,
+    starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], candidate: int = 0,
+) -> PoseEstimate:
+    mesh = db.mesh(name)
+    ortho = get_renderer(replace(db.config.render, image_size=SILHOUETTE_SEARCH_SIZE))
+    pinhole = get_pinhole_renderer()
+    fit = search_silhouette_pose(
+        query.mask, intrinsics,
+        lambda h, v: ortho.render(mesh, h, v, shaded=False).mask,
+        lambda r, t, k, size: pinhole.render(mesh, r, t, k, size)[0],
+        SILHOUETTE_SEARCH_SIZE, db.config.render.xmag, ignore=query.ignore,
+        starts=starts, config=config, search=search,
+    )
+    h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
+    width = query.mask.shape[1]
+    scale = 2.0 * intrinsics[0] / (width * float(fit.translation[2]))
+    return PoseEstimate(h, v, a, scale, fit.rotation, fit.translation, "shape", 0, candidate,
+                        "opencv", fit.iou, refined="silhouette", iou=fit.iou)
+
+
+def pose_object(
+    db: ViewDB,
+    image: str | Path | NDArray[Any] | LoadedImage,
+    name: str,
+    intrinsics: Intrinsics | str | Path | Sequence[Any],
+    *,
+    mask: NDArray[Any] | str | Path | None = None,
+    label_map: NDArray[Any] | str | Path | None = None,
+    label: int | None = None,
+    pose_config: PoseConfig | None = None,
+) -> PoseEstimate:
+    """The pinhole pose of a *known* object ``name`` in a calibrated photo, from its
+    silhouette (no recognition): OpenCV frame, the mesh's own units."""
+    if (label_map is None) != (label is None):
+        raise QueryError("a label map and a label go together: give both or neither")
+    if label_map is not None and mask is not None:
+        raise QueryError("give either a mask or a label map, not both")
+    camera = parse_intrinsics(intrinsics)
+    db.object(name)  # NotFound for an unknown name
+    loaded = image if isinstance(image, LoadedImage) else load_image(image)
+    ignore = None
+    if label_map is not None:
+        assert label is not None
+        mask, ignore = label_mask(label_map, label, loaded)
+    seg = segment(loaded, mask)
+    query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
+    estimate = _silhouette_estimate(db, name, query, pose_config or PoseConfig(), camera, None, ())
+    return _in_mesh_units(db, name, estimate)
+
+
+def _in_mesh_units(db: ViewDB, name: str, estimate: PoseEstimate) -> PoseEstimate:
+    """A pinhole pose in the mesh file's own frame and units (``t = scale·t_n − R·centre``)."""
+    info = db.object(name)
+    t = to_mesh_units(estimate.rotation, estimate.translation, info.centre, info.scale)
+    return replace(estimate, translation=t, units="mesh")
 
 
 #: The off-grid shape refinement stops at this step (degrees).
@@ -234,19 +397,45 @@ def run_query(
     band: int = 6,
     rotations: int = 12,
     pose: bool = True,
-    intrinsics: tuple[float, float, float, float] | None = None,
+    intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
     pose_config: PoseConfig | None = None,
     server: ServerTier | None = None,
+    label_map: NDArray[Any] | str | Path | None = None,
+    label: int | None = None,
+    rerank: bool = False,
 ) -> QueryResult:
     """Recognise the object a query image shows and estimate its pose (see module doc).
+
+    ``label_map`` + ``label`` pick the object out of a label image (its pixels equal to
+    ``label``; other labelled pixels may hide it and are left out of the perspective
+    silhouette fit), instead of ``mask``. ``intrinsics``: ``(fx, fy, cx, cy)``, a 3×3
+    matrix, ``"fx,fy,cx,cy"`` or a JSON/YAML file (:func:`viewdb.intrinsics.parse_intrinsics`).
+
+    ``rerank`` (with intrinsics): the plan's k objects are re-ranked by how well their
+    silhouette fits the query under a perspective pose (IoU): each is fitted quickly
+    (:data:`viewdb.silhouette_pose.QUICK`), the best :data:`RERANK_FULL` and the plan's
+    first result again with the full search, and the results sorted by IoU (``distance``
+    stays the curve distance).
 
     With ``server`` (e.g. :class:`viewdb.http.RemoteServer`), ``db`` is the client file:
     the client half of the plan runs on it, the server half and the pose on ``server``.
     """
     start = time.perf_counter()
+    if (label_map is None) != (label is None):
+        raise QueryError("a label map and a label go together: give both or neither")
+    if label_map is not None and mask is not None:
+        raise QueryError("give either a mask or a label map, not both")
+    camera = None if intrinsics is None else parse_intrinsics(intrinsics)
     loaded = image if isinstance(image, LoadedImage) else load_image(image)
+    ignore = None
+    if label_map is not None:
+        assert label is not None
+        mask, ignore = label_mask(label_map, label, loaded)
     seg: Segmentation = segment(loaded, mask)
     curves = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
+    completed = completed_mask(seg.mask, ignore)
+    if completed is not None:
+        curves += rotated_curves(completed, db.config.features.curve_samples, rotations)
     segmented = time.perf_counter()
     per_turn = []
     client_ms = server_ms = 0.0
@@ -268,18 +457,31 @@ def run_query(
         trips += plan != "server" or server is not None
     merged = _merge(per_turn, k)
     recognised = time.perf_counter()
-    query = QueryView(loaded.rgb, seg.mask)
-    poses: list[tuple[PoseEstimate | None, str | None]] = [(None, None)] * len(merged)
-    if pose and server is not None and merged:
-        poses, exchange = server.poses(query, [c for c, _ in merged], intrinsics)
+    query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
+    matches: list[QueryMatch] = []
+    if pose and server is not None and merged:  # the server has the meshes: it poses
+        poses, exchange = server.poses(query, [c for c, _ in merged], camera)
         sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
         pose_server_ms = exchange.server_ms
         network_ms += exchange.wall_ms - exchange.server_ms
-    elif pose:
-        poses = pose_matches(db, query, [c for c, _ in merged], intrinsics, pose_config)
-    matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
-                          angle, *poses[rank - 1])
-               for rank, (c, angle) in enumerate(merged, 1)]
+        matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
+                              angle, *poses[rank - 1])
+                   for rank, (c, angle) in enumerate(merged, 1)]
+    else:
+        config = pose_config or PoseConfig()
+        verify = rerank and pose and camera is not None
+        for rank, (c, angle) in enumerate(merged, 1):
+            estimate, problem = None, None
+            if pose:
+                try:
+                    estimate = _pose(db, query, c, config, camera, QUICK if verify else None)
+                except ViewDBError as exc:
+                    problem = exc.message
+            matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
+                                      c.mirrored, angle, estimate, problem))
+        if verify:
+            assert camera is not None
+            matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)
     end = time.perf_counter()
     remote = {} if server is None else {"network": network_ms, "pose_server": pose_server_ms}
     name = loaded.path or (str(image) if isinstance(image, (str, Path)) else "<array>")

@@ -110,6 +110,7 @@ __all__ = [
     "METHODS",
     "LoadedImage",
     "Segmentation",
+    "label_mask",
     "load_image",
     "query_curve",
     "segment",
@@ -529,6 +530,52 @@ def _explicit_mask(mask: np.ndarray | str | os.PathLike[str], image: LoadedImage
             f"mask is {fg.shape[1]}x{fg.shape[0]} pixels but the image is {w}x{h}", where
         )
     return fg
+
+
+def label_mask(
+    label_map: np.ndarray | str | os.PathLike[str], label: int, image: LoadedImage | None = None
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Pick one object out of a label image: ``(pixels == label, other labelled pixels)``.
+
+    ``label_map`` is a single-channel image file (8- or 16-bit PNG/TIFF, or a palette PNG,
+    whose indices are the labels) or a 2-D integer array; 0 is background. The second mask
+    holds the pixels of every other non-zero label (objects that may hide this one).
+
+    Raises
+    ------
+    ImageError
+        Unreadable file, not single-channel, a size other than ``image``'s, or ``label``
+        absent from the map (the message lists the labels present).
+    """
+    where = str(label_map) if isinstance(label_map, (str, os.PathLike)) else (image.path if image else None)
+    if isinstance(label_map, (str, os.PathLike)):
+        path = Path(label_map)
+        if not path.is_file():
+            raise ImageError("label map not found", path)
+        try:
+            with Image.open(path) as im:
+                _check_size(im.width, im.height, MAX_PIXELS, str(path))
+                arr = np.asarray(im)
+        except (OSError, UnidentifiedImageError, ValueError) as exc:
+            raise ImageError(f"cannot read the label map: {_describe(exc)}", path) from exc
+    else:
+        arr = np.asarray(label_map)
+    if arr.ndim == 3 and arr.shape[2] >= 3 and (arr[:, :, :3] == arr[:, :, :1]).all():
+        arr = arr[:, :, 0]  # a grey image saved as RGB
+    if arr.ndim != 2 or not (np.issubdtype(arr.dtype, np.integer) or arr.dtype == np.bool_):
+        raise ImageError(f"a label map must be one channel of integer labels, got {arr.dtype} "
+                         f"{arr.shape}", where)
+    if image is not None and arr.shape != (image.height, image.width):
+        raise ImageError(f"label map is {arr.shape[1]}x{arr.shape[0]} pixels but the image is "
+                         f"{image.width}x{image.height}", where)
+    if int(label) <= 0:
+        raise ImageError(f"label must be a positive integer (0 is background), got {label}", where)
+    chosen = arr == int(label)
+    if not chosen.any():
+        present = [int(v) for v in np.unique(arr) if v != 0]
+        listed = ", ".join(str(v) for v in present[:20]) or "none"
+        raise ImageError(f"label {label} is not in the label map (labels present: {listed})", where)
+    return chosen, (arr != 0) & ~chosen
 
 
 def _largest_filled(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:

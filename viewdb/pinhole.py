@@ -1,0 +1,145 @@
+"""Rendering a mesh through a pinhole camera (intrinsics) at a given pose.
+
+The views of a database are orthographic (:mod:`viewdb.render`); a real photo is a
+perspective one. This module renders the silhouette (and depth) of a normalised mesh as a
+calibrated camera would see it, so a pose can be checked and refined against a photo's
+mask and overlays can be drawn.
+
+Frames: the pose is **model-to-camera in the OpenCV frame** (x right, y down, z forward),
+``x_cam = R · x_model + t``; intrinsics ``(fx, fy, cx, cy)`` in pixels with pixel centres on
+integers (OpenCV). A :class:`Window` renders a rectangle of the photo, optionally
+downscaled, so a pose search renders only the pixels around the object.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import RenderError
+from .gl import pyrender_module
+from .mesh import NormalisedMesh
+from .render import _offscreen, _reraise_interrupt
+
+__all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
+
+#: OpenCV camera frame → OpenGL camera frame (flip y and z).
+CV_TO_GL = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class Window:
+    """A square window of a photo: its top-left corner ``(x0, y0)`` and side in photo
+    pixels, rendered at ``size × size`` pixels."""
+
+    x0: float
+    y0: float
+    side: float
+    size: int
+
+    @property
+    def factor(self) -> float:
+        """Window pixels per photo pixel."""
+        return self.size / self.side
+
+    def intrinsics(self, fx: float, fy: float, cx: float, cy: float) -> tuple[float, float, float, float]:
+        """The photo's intrinsics for this window (OpenCV pixel centres on integers)."""
+        f = self.factor
+        return (fx * f, fy * f, (cx - self.x0 + 0.5) * f - 0.5, (cy - self.y0 + 0.5) * f - 0.5)
+
+    def crop(self, image: NDArray[np.generic]) -> NDArray[np.float32]:
+        """``image`` (H, W) resampled onto this window (area average; 0 outside the photo)."""
+        import cv2
+
+        f = self.factor
+        # window pixel (i, j) centre = photo ((i + 0.5)/f - 0.5 + x0, ...)
+        m = np.array([[f, 0.0, (0.5 - self.x0) * f - 0.5], [0.0, f, (0.5 - self.y0) * f - 0.5]])
+        src = np.asarray(image, dtype=np.float32)
+        if f < 1.0:  # pre-blur so the nearest samples are area averages
+            k = int(math.ceil(1.0 / f)) | 1
+            src = cv2.blur(src, (k, k))
+        return cv2.warpAffine(src, m, (self.size, self.size), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+
+    @staticmethod
+    def around(mask: NDArray[np.bool_], size: int, margin: float = 0.35) -> Window:
+        """The square window around ``mask``'s bounding box, grown by ``margin`` of its side."""
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        y0, y1, x0, x1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        side = max(y1 - y0, x1 - x0) * (1.0 + 2.0 * margin)
+        cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+        return Window(float(cx - side / 2.0), float(cy - side / 2.0), float(side), int(size))
+
+
+class PinholeRenderer:
+    """Renders one mesh at a time through an intrinsics camera; keeps its scene between calls."""
+
+    def __init__(self) -> None:
+        self._mesh: NormalisedMesh | None = None
+        self._scene = None
+        self._mesh_node = None
+        self._camera_node = None
+
+    def _use_mesh(self, mesh: NormalisedMesh) -> None:
+        if self._mesh is mesh:
+            return
+        pyrender = pyrender_module()
+        try:
+            scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
+            geometry = mesh.geometry
+            self._mesh_node = scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=False))
+        except Exception as exc:
+            _reraise_interrupt(exc)
+            raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
+        self._scene = scene
+        self._camera_node = None
+        self._mesh = mesh
+
+    def render(
+        self, mesh: NormalisedMesh, rotation: NDArray[np.floating], translation: NDArray[np.floating],
+        intrinsics: tuple[float, float, float, float], size: int,
+    ) -> tuple[NDArray[np.bool_], NDArray[np.float32]]:
+        """Silhouette (bool) and depth (camera z, 0 off the object) of ``mesh`` at the
+        OpenCV pose ``(rotation, translation)`` for a ``size × size`` image with
+        ``intrinsics`` ``(fx, fy, cx, cy)`` (e.g. :meth:`Window.intrinsics`)."""
+        pyrender = pyrender_module()
+        self._use_mesh(mesh)
+        fx, fy, cx, cy = (float(x) for x in intrinsics)
+        t = np.asarray(translation, dtype=np.float64).reshape(3)
+        # near and far planes around the object (radius 1 in model units)
+        znear = max(1e-3, float(t[2]) - 1.5) if t[2] > 1.6 else max(1e-3, float(t[2]) * 0.05)
+        zfar = float(t[2]) + 1.5
+        camera = pyrender.IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5, znear=znear, zfar=zfar)
+        assert self._scene is not None
+        if self._camera_node is not None:
+            self._scene.remove_node(self._camera_node)
+        self._camera_node = self._scene.add(camera, pose=np.eye(4))
+        pose = np.eye(4)
+        pose[:3, :3] = CV_TO_GL @ np.asarray(rotation, dtype=np.float64)
+        pose[:3, 3] = CV_TO_GL @ t
+        self._scene.set_pose(self._mesh_node, pose)
+        gl = _offscreen(size)
+        try:
+            depth = gl.render(self._scene, flags=pyrender.RenderFlags.DEPTH_ONLY
+                              | pyrender.RenderFlags.SKIP_CULL_FACES)
+        except Exception as exc:
+            _reraise_interrupt(exc)
+            raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
+        depth = np.asarray(depth, dtype=np.float32)
+        return depth > 0, depth
+
+
+@dataclass
+class _Cache:
+    renderer: PinholeRenderer = field(default_factory=PinholeRenderer)
+
+
+_CACHE = _Cache()
+
+
+def get_pinhole_renderer() -> PinholeRenderer:
+    """This process's pinhole renderer (created once)."""
+    return _CACHE.renderer

@@ -1,0 +1,354 @@
+"""Pose of a texture-less object in a calibrated photo from its silhouette alone.
+
+A mesh without texture gives SIFT nothing to match, and its outline seen orthographically
+from the view grid is ambiguous. With the camera's intrinsics the silhouette says much
+more: a full perspective pose predicts exactly which pixels the object covers. This module
+finds that pose in two steps.
+
+1. **Orthographic search.** The mesh's silhouette is rendered from evenly spread viewing
+   directions (a Fibonacci sphere, :data:`SEARCH_DIRECTIONS`) and each outline is aligned to
+   the query's in the image plane (centroid, area, in-plane angle by the symmetric chamfer
+   distance of :mod:`viewdb.pose`), giving ranked weak-perspective hypotheses
+   ``(h, v, inplane, magnification, origin pixel)``.
+2. **Lift and refine.** Each hypothesis is lifted to the pinhole camera (below), then the
+   6-DoF pose is refined by a pattern search that maximises the silhouette IoU between the
+   mesh rendered through the intrinsics (:mod:`viewdb.pinhole`) and the query mask, in a
+   window around the object. The best few hypotheses are refined coarsely, the best of
+   those finely.
+
+Lifting (weak perspective → pinhole). An orthographic view ``(h, v)`` turned by ``α`` in
+the image and magnified ``λ`` (query pixels per view pixel) puts ``λ · S / (2 · xmag)``
+query pixels on one model unit, so the model origin lies at depth ``z = f · 2 · xmag /
+(λ · S)`` (``f`` the focal length in pixels) on the ray through the pixel where the
+alignment puts the origin. That ray is not the optical axis: an object off the image
+centre is seen *along the ray*, so the view's rotation is composed with the rotation
+``R_ray`` that turns the optical axis onto the ray: ``R = R_ray · diag(1, −1, −1) ·
+R_z(α) · R_x(v) · R_y(−h)``. The refinement keeps this split: it moves the origin's pixel
+and depth, and the rotation relative to the ray.
+
+Occlusion: pixels given in ``ignore`` (e.g. other labelled objects that may hide this
+one) count neither for nor against a pose.
+
+Poses are model-to-camera in the OpenCV frame, in normalised model units (see
+:mod:`viewdb.camera`); :func:`to_mesh_units` converts to the mesh's own frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import FeatureError, PoseError
+from .pinhole import Window
+from .pose import (
+    GL_TO_CV,
+    CandidateView,
+    PoseConfig,
+    _align_shape,
+    _outline,
+    view_rotation,
+)
+
+__all__ = [
+    "QUICK",
+    "SilhouetteConfig",
+    "SilhouetteFit",
+    "fibonacci_directions",
+    "lift_alignment",
+    "ray_rotation",
+    "search_silhouette_pose",
+    "to_mesh_units",
+]
+
+#: Viewing directions rendered for the orthographic search (about 20° apart).
+SEARCH_DIRECTIONS = 100
+#: Hypotheses (direction + in-plane alignment) lifted and refined coarsely ...
+COARSE_STARTS = 8
+#: ... and the best of them refined finely.
+FINE_STARTS = 2
+#: Window sizes (pixels) of the coarse and fine IoU refinement.
+COARSE_SIZE = 96
+FINE_SIZE = 160
+#: Pattern-search steps: rotation (radians), origin pixel (window pixels), log depth.
+START_STEPS = (0.12, 3.0, 0.06)
+COARSE_MIN_STEPS = (0.02, 0.75, 0.01)
+FINE_MIN_STEPS = (0.004, 0.2, 0.002)
+#: Most IoU evaluations (renders) per refinement.
+MAX_EVALUATIONS = 400
+
+@dataclass(frozen=True)
+class SilhouetteConfig:
+    """Tunables of :func:`search_silhouette_pose` (defaults: the module constants)."""
+
+    directions: int = SEARCH_DIRECTIONS
+    coarse_starts: int = COARSE_STARTS
+    fine_starts: int = FINE_STARTS
+    coarse_size: int = COARSE_SIZE
+    fine_size: int = FINE_SIZE
+    max_evaluations: int = MAX_EVALUATIONS
+
+    def __post_init__(self) -> None:
+        if not (self.directions >= 1 and self.coarse_starts >= 1 and self.fine_starts >= 0):
+            raise ValueError("need directions >= 1, coarse_starts >= 1, fine_starts >= 0")
+        if not (16 <= self.coarse_size <= 1024 and 16 <= self.fine_size <= 1024):
+            raise ValueError("window sizes must be in [16, 1024]")
+
+
+#: A quicker search, for checking many candidate objects (about 4x fewer renders).
+QUICK = SilhouetteConfig(directions=40, coarse_starts=3, fine_starts=0, coarse_size=80)
+
+
+OrthoRender = Callable[[float, float], NDArray[np.bool_]]
+PinholeRender = Callable[[NDArray[np.float64], NDArray[np.float64], tuple[float, float, float, float], int],
+                         NDArray[np.bool_]]
+
+
+@dataclass(frozen=True, eq=False)
+class SilhouetteFit:
+    """A pinhole pose (OpenCV frame, normalised model units) and how well it fits."""
+
+    rotation: NDArray[np.float64]
+    translation: NDArray[np.float64]
+    #: Silhouette IoU with the query mask (ignored pixels left out), at the fine window.
+    iou: float
+    #: The orthographic hypothesis it started from: azimuth, elevation, in-plane angle.
+    start: tuple[float, float, float]
+    #: Renders used in all.
+    renders: int
+
+
+def fibonacci_directions(n: int) -> list[tuple[float, float]]:
+    """``n`` evenly spread viewing directions as ``(azimuth, elevation)`` degrees."""
+    out = []
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    for i in range(n):
+        y = 1.0 - 2.0 * (i + 0.5) / n
+        theta = golden * i
+        r = math.sqrt(max(0.0, 1.0 - y * y))
+        x, z = r * math.sin(theta), r * math.cos(theta)
+        out.append((math.degrees(math.atan2(x, z)) % 360.0, math.degrees(math.asin(y)) % 360.0))
+    return out
+
+
+def ray_rotation(u: float, w: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The smallest rotation turning the optical axis (0, 0, 1) onto the ray through pixel
+    ``(u, w)`` of a camera with matrix ``k``."""
+    d = np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
+    d /= np.linalg.norm(d)
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    s, c = float(np.linalg.norm(axis)), float(d[2])
+    if s < 1e-12:
+        return np.eye(3)
+    return _rodrigues(axis / s * math.atan2(s, c))
+
+
+def _rodrigues(w: NDArray[np.float64]) -> NDArray[np.float64]:
+    theta = float(np.linalg.norm(w))
+    if theta < 1e-12:
+        return np.eye(3)
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]) / theta
+    return np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
+
+
+def lift_alignment(
+    azimuth: float, elevation: float, inplane: float, lam: float, origin_px: Sequence[float],
+    image_size: int, xmag: float, k: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The pinhole pose ``(R, t)`` (OpenCV, normalised units) of an orthographic alignment:
+    view ``(azimuth, elevation)`` turned by ``inplane`` counter-clockwise, magnified ``lam``
+    query pixels per view pixel, model origin at query pixel ``origin_px`` (module doc)."""
+    u, w = float(origin_px[0]), float(origin_px[1])
+    f = (k[0, 0] + k[1, 1]) / 2.0
+    z = f * 2.0 * xmag / (lam * image_size)
+    r_rel = GL_TO_CV @ view_rotation(azimuth, elevation, inplane)
+    rotation = ray_rotation(u, w, k) @ r_rel
+    translation = z * np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
+    return rotation, translation
+
+
+def to_mesh_units(
+    rotation: NDArray[np.floating], translation: NDArray[np.floating],
+    centre: Sequence[float], scale: float,
+) -> NDArray[np.float64]:
+    """The translation of a normalised-units pinhole pose in the mesh's own frame and units
+    (``original = centre + scale · normalised``): ``t = scale · t_n − R · centre``. The
+    rotation is the same in both frames."""
+    r = np.asarray(rotation, dtype=np.float64)
+    return float(scale) * np.asarray(translation, dtype=np.float64) - r @ np.asarray(centre, np.float64)
+
+
+class _Objective:
+    """1 − IoU of the rendered silhouette and the query's, in one window."""
+
+    def __init__(self, render: PinholeRender, query: NDArray[np.bool_], ignore: NDArray[np.bool_] | None,
+                 window: Window, k: NDArray[np.float64]) -> None:
+        self.render, self.window, self.k = render, window, k
+        self.cam = window.intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
+        self.query = np.clip(window.crop(query.astype(np.float32)), 0.0, 1.0)
+        if ignore is not None and ignore.any():
+            self.valid = window.crop(ignore.astype(np.float32)) < 0.5
+        else:
+            self.valid = np.ones(self.query.shape, bool)
+        self.q = np.where(self.valid, self.query, 0.0)
+        self.evaluations = 0
+
+    def pose(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        r_rel, u0, w0, z0 = base
+        u, w, z = u0 + p[3] / self.window.factor, w0 + p[4] / self.window.factor, z0 * math.exp(p[5])
+        rotation = ray_rotation(u, w, self.k) @ _rodrigues(p[:3]) @ r_rel
+        k = self.k
+        translation = z * np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
+        return rotation, translation
+
+    def iou(self, rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> float:
+        if not translation[2] > 1e-6:
+            return 0.0
+        self.evaluations += 1
+        r = self.render(rotation, translation, self.cam, self.window.size)
+        r = np.where(self.valid, r, False)
+        inter = float(np.minimum(self.q, r).sum())
+        union = float(np.maximum(self.q, r).sum())
+        return inter / union if union > 0 else 0.0
+
+
+def _base(rotation: NDArray[np.float64], translation: NDArray[np.float64], k: NDArray[np.float64]
+          ) -> tuple[NDArray[np.float64], float, float, float]:
+    """Split a pinhole pose into (rotation relative to the origin's ray, pixel, depth)."""
+    t = np.asarray(translation, dtype=np.float64)
+    u = k[0, 0] * t[0] / t[2] + k[0, 2]
+    w = k[1, 1] * t[1] / t[2] + k[1, 2]
+    return ray_rotation(u, w, k).T @ rotation, u, w, float(t[2])
+
+
+def _pattern_search(
+    objective: _Objective, rotation: NDArray[np.float64], translation: NDArray[np.float64],
+    min_steps: Sequence[float], start_steps: Sequence[float] = START_STEPS,
+    max_evaluations: int = MAX_EVALUATIONS,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Compass search over (ω, pixel, log depth) maximising the IoU; a step that improves is
+    taken again along the same direction; steps halve when no direction improves."""
+    base = _base(rotation, translation, objective.k)
+    p = np.zeros(6)
+    best = objective.iou(*objective.pose(p, base))
+    steps = np.array([start_steps[0]] * 3 + [start_steps[1]] * 2 + [start_steps[2]])
+    floor = np.array([min_steps[0]] * 3 + [min_steps[1]] * 2 + [min_steps[2]])
+    start = objective.evaluations
+    while objective.evaluations - start < max_evaluations:
+        improved = False
+        for i in range(6):
+            if steps[i] < floor[i]:
+                continue
+            for sign in (1.0, -1.0):
+                trial = p.copy()
+                trial[i] += sign * steps[i]
+                value = objective.iou(*objective.pose(trial, base))
+                if value > best + 1e-6:
+                    p, best, improved = trial, value, True
+                    while objective.evaluations - start < max_evaluations:  # keep going that way
+                        trial = p.copy()
+                        trial[i] += sign * steps[i]
+                        value = objective.iou(*objective.pose(trial, base))
+                        if not value > best + 1e-6:
+                            break
+                        p, best = trial, value
+                    break
+        if not improved:
+            if np.all(steps < floor):
+                break
+            steps = steps / 2.0
+            if np.all(steps < floor):
+                break
+    rotation, translation = objective.pose(p, base)
+    return rotation, translation, best
+
+
+@dataclass(frozen=True)
+class _Start:
+    cost: float
+    azimuth: float
+    elevation: float
+    inplane: float
+    rotation: NDArray[np.float64]
+    translation: NDArray[np.float64]
+
+
+def search_silhouette_pose(
+    query: NDArray[np.bool_],
+    intrinsics: tuple[float, float, float, float],
+    render_ortho: OrthoRender,
+    render_pinhole: PinholeRender,
+    image_size: int,
+    xmag: float = 1.0,
+    *,
+    ignore: NDArray[np.bool_] | None = None,
+    directions: Sequence[tuple[float, float]] | None = None,
+    starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
+    config: PoseConfig | None = None,
+    search: SilhouetteConfig | None = None,
+) -> SilhouetteFit:
+    """The pinhole pose of a mesh whose silhouette is ``query`` (module doc).
+
+    ``render_ortho(h, v)`` renders the mesh's orthographic silhouette (``image_size``
+    square, half-extent ``xmag``) in the viewdb convention; ``render_pinhole(R, t, K, S)``
+    its silhouette at an OpenCV pose through intrinsics ``K = (fx, fy, cx, cy)`` in an
+    ``S × S`` image. ``starts`` adds pinhole poses to refine (e.g. from SIFT).
+
+    Raises
+    ------
+    PoseError
+        An empty query or no direction with a silhouette.
+    """
+    config = config or PoseConfig()
+    search = search or SilhouetteConfig()
+    mask = np.asarray(query, dtype=bool)
+    if not mask.any():
+        raise PoseError("the query mask is empty: no object to estimate a pose for")
+    fx, fy, cx, cy = (float(x) for x in intrinsics)
+    k = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    try:
+        outline = _outline(mask, config.contour_samples)
+    except FeatureError as exc:
+        raise PoseError(f"the query silhouette has no usable contour: {exc}") from exc
+    found: list[_Start] = []
+    empty = np.zeros((0, 5), np.float32)
+    for h, v in directions if directions is not None else fibonacci_directions(search.directions):
+        view = render_ortho(h, v)
+        try:
+            view_outline = _outline(view, config.contour_samples)
+        except FeatureError:
+            continue
+        cand = CandidateView(h, v, False, empty, np.zeros((0, 128), np.uint8), np.zeros((0, 3), np.float32),
+                             view, image_size, xmag)
+        for res in _align_shape(outline, view_outline, cand, config)[:2]:
+            rot, t = lift_alignment(h, v, res.angle, res.lam, res.origin_px, image_size, xmag, k)
+            found.append(_Start(res.cost, h, v, res.angle, rot, t))
+    if not found and not starts:
+        raise PoseError("no viewing direction gives a silhouette to align the query with")
+    found.sort(key=lambda s: s.cost)
+    chosen = [(s.rotation, s.translation, (s.azimuth, s.elevation, s.inplane))
+              for s in found[:search.coarse_starts]]
+    chosen += [(np.asarray(r, np.float64), np.asarray(t, np.float64), (math.nan,) * 3) for r, t in starts]
+    coarse = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.coarse_size), k)
+    refined = []
+    for rot, t, origin in chosen:
+        r2, t2, iou = _pattern_search(coarse, rot, t, COARSE_MIN_STEPS, START_STEPS, search.max_evaluations)
+        refined.append((iou, r2, t2, origin))
+    refined.sort(key=lambda x: -x[0])
+    if search.fine_starts == 0:
+        iou, rot, t, origin = refined[0]
+        return SilhouetteFit(rot, t, iou, origin, coarse.evaluations + len(found))
+    fine = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.fine_size), k)
+    best: SilhouetteFit | None = None
+    for _, rot, t, origin in refined[:search.fine_starts]:
+        r2, t2, iou = _pattern_search(fine, rot, t, FINE_MIN_STEPS, COARSE_MIN_STEPS,
+                                      search.max_evaluations)
+        if best is None or iou > best.iou:
+            best = SilhouetteFit(r2, t2, iou, origin, 0)
+    assert best is not None
+    return SilhouetteFit(best.rotation, best.translation, best.iou, best.start,
+                         coarse.evaluations + fine.evaluations + len(found))
