@@ -85,13 +85,16 @@ def test_sigkill_many_times(tmp_path):
     print(f"{runs} kills; objects present after each: {counts}")
 
 
-def _reader_script(db, seconds):
+def _reader_script(db, seconds, total):
     return (
         "import sys, time, numpy as np, viewdb\n"
         f"db = viewdb.open({str(db)!r}, create=False)\n"
         "rng = np.random.default_rng(0); n = 0; seen = set()\n"
-        f"end = time.time() + {seconds}\n"
-        "while time.time() < end:\n"
+        f"end = time.time() + {seconds}; limit = time.time() + 300\n"
+        "first = len(db.objects())\n"
+        "# search for a while, and on until a new object has arrived (a loaded machine ingests slowly)\n"
+        f"while time.time() < limit and (time.time() < end\n"
+        f"                               or first < {total} and max(seen, default=first) <= first):\n"
         "    q = 1 + 0.2 * np.cos(np.linspace(0, 6.283, 128, endpoint=False) * rng.integers(1, 4)"
         " + rng.uniform(0, 6.283))\n"
         "    hits, _ = db.search(q, k=3)\n"
@@ -108,7 +111,7 @@ def test_readers_keep_searching_while_an_ingest_writes(tmp_path):
     assert first.returncode == 0, first.stderr
     writer = subprocess.Popen(_ingest_cmd(db, files[2:]), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
-    reader = subprocess.run([sys.executable, "-c", _reader_script(db, 8)], capture_output=True,
+    reader = subprocess.run([sys.executable, "-c", _reader_script(db, 8, len(files))], capture_output=True,
                             text=True, timeout=300)
     _, werr = writer.communicate(timeout=600)
     assert writer.returncode == 0, werr
