@@ -178,3 +178,42 @@ def test_curves_bounded_by_earlier_curves_merge_to_the_unbounded_merge(tiered_db
         got, want = top(merged), top(unbounded)
         assert [o for o, _ in got] == [o for o, _ in want]
         np.testing.assert_allclose([d for _, d in got], [d for _, d in want], rtol=0, atol=1e-9)
+
+
+def test_a_stale_client_file_cannot_make_cs1_wrong(tmp_path):
+    # the client file is exported, then the full file replaces an object with another
+    # shape under the same name: the client's distances for it no longer bound anything
+    from tests.conftest import sample
+
+    full, client = tmp_path / "full.db", tmp_path / "client.db"
+    with viewdb.open(full, gap=30, image_size=96, client_gap=90) as db:
+        db.ingest([sample(n) for n in ("arrow", "car", "mug", "chair")])
+        db.export_client(client)
+    moved = tmp_path / "arrow.off"  # same name, the cone's shape
+    moved.write_bytes(sample("cone").read_bytes())
+    with viewdb.open(full, create=False) as db, viewdb.open(client, create=False) as side:
+        old_arrow = side.search_tier("sparse")[0]
+        rows = [i for i, o in enumerate(old_arrow.owner) if old_arrow.names[o] == "arrow"]
+        assert db.ingest([moved]).counts()["replaced"] == 1
+        assert db.object("arrow").content_hash != side.object("arrow").content_hash
+        checked = 0
+        for row in rows[:6]:
+            q = old_arrow.curves[row]  # a view of the old arrow: the stale client's best match
+            mine, _ = side.client_candidates(q, 3)
+            assert mine[0].object == "arrow" and mine[0].version == side.object("arrow").content_hash
+            server = db.recognise(q, 3, plan="server")
+            cs1 = db.recognise(q, 3, plan="cs1", client=side)
+            _same(cs1.results, server.results)
+            checked += 1
+        assert checked
+
+
+def test_candidates_of_objects_the_server_lacks_are_not_bounds(tiered_db):
+    with viewdb.open(tiered_db, create=False) as db:
+        arrays, _ = db.search_tier("full")
+        rng = np.random.default_rng(5)
+        for _ in range(5):
+            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
+            strangers = [viewdb.Candidate(f"gone{i}", 1e-6 * i, 0.0, 0.0, False) for i in range(3)]
+            reply = db.refine(viewdb.RefineRequest(q, 6, 3, strangers))
+            _same(reply.results, brute_force_knn(q, arrays, 3, 6))

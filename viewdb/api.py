@@ -293,11 +293,14 @@ class ViewDB:
     def refine(self, request: RefineRequest) -> ServerReply:
         """The server half of CS1 (Algorithm 3): exact, the same answer as ``plan="server"``
         whenever the client's candidates come from this file's sparse tier (or a client
-        file exported from it)."""
+        file exported from it); candidates of objects this file lacks, or holds in another
+        version (a client file exported before the object was replaced), are not used as
+        bounds, so a stale client file cannot make the answer wrong."""
         self._full_tier_only()
         q = self._query_curve(request.curve, request.k, "full")
         with self._tier_reader().snapshot() as reader:
-            found, stats = refine(reader.tier("full"), replace(request, curve=q))
+            versions = reader.object_versions()
+            found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
             angles = reader.view_angles([n.view for n in found])
         return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
 
@@ -516,7 +519,8 @@ class ViewDB:
                 raise QueryError("the database holds no views", self.path)
             found, stats = knn(q, source, k, band)
             angles = reader.view_angles([n.view for n in found])
-        return neighbours_to_candidates(found, angles), stats
+            versions = reader.object_versions()
+        return neighbours_to_candidates(found, angles, versions), stats
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, *, band: int = 6, tier: str = "full"

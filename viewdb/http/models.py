@@ -37,6 +37,11 @@ class CandidateModel(_Strict):
     azimuth: float
     elevation: float
     mirrored: bool = False
+    version: str | None = Field(
+        default=None, max_length=128,
+        description="content hash of the object's mesh in the file the distance comes from: "
+                    "a server ignores the bounds of objects it holds in another version",
+    )
 
 
 class RefineRequestModel(_Strict):

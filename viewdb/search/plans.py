@@ -23,7 +23,7 @@ Everything a client sends or receives is a plain dataclass with ``to_dict``/``fr
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -80,17 +80,25 @@ def _curve(x: Any, samples: int | None = None) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class Candidate:
-    """An object with its best view found so far and that view's exact distance."""
+    """An object with its best view found so far and that view's exact distance.
+
+    ``version`` is the content hash of the object's mesh in the file the distance comes
+    from (a client file names it, so a server can tell a stale client's bounds; None:
+    unknown)."""
 
     object: str
     distance: float
     azimuth: float
     elevation: float
     mirrored: bool
+    version: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
-                "elevation": self.elevation, "mirrored": self.mirrored}
+        out = {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
+               "elevation": self.elevation, "mirrored": self.mirrored}
+        if self.version is not None:
+            out["version"] = self.version
+        return out
 
     @classmethod
     def from_dict(cls, data: Any) -> Candidate:
@@ -106,8 +114,13 @@ class Candidate:
             distance = _finite(data["distance"], "candidate distance")
             if distance < 0:
                 raise QueryError("candidate distance must be >= 0")
+            version = data.get("version")
+            if version is not None and not (
+                isinstance(version, str) and 0 < len(version) <= 128 and version.isalnum()
+            ):
+                raise QueryError("candidate version must be a short alphanumeric string")
             return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
-                       _finite(data["elevation"], "candidate elevation"), mirrored)
+                       _finite(data["elevation"], "candidate elevation"), mirrored, version)
         except KeyError as exc:
             raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
 
@@ -198,11 +211,22 @@ class ServerReply:
 
 
 def refine(
-    source: TierSource, request: RefineRequest
+    source: TierSource, request: RefineRequest, versions: Mapping[str, str] | None = None
 ) -> tuple[list[Neighbour], SearchStats]:
     """CS1's server half (Algorithm 3): exact k-NN on ``source`` (the full tier) bounded by
-    the client's k-th distance and its per-object distances."""
-    client = sorted(request.client, key=lambda c: c.distance)
+    the client's k-th distance and its per-object distances.
+
+    A client distance bounds the server's only if the server holds the same object: a
+    candidate whose object the server lacks, or whose ``version`` differs from the
+    server's (``versions``: object name → content hash; a client file exported before
+    the object was replaced) is not used, so a stale client file makes the answer no
+    less exact, only the bounds looser."""
+    client = sorted(
+        (c for c in request.client
+         if source.object_index(c.object) is not None
+         and (c.version is None or versions is None or versions.get(c.object) == c.version)),
+        key=lambda c: c.distance,
+    )
     upper = client[request.k - 1].distance if len(client) >= request.k else math.inf
     known: dict[int, float] = {}
     for c in client:
@@ -273,7 +297,11 @@ def walk(
 
 
 def neighbours_to_candidates(
-    found: Sequence[Neighbour], angles: dict[int, tuple[float, float]]
+    found: Sequence[Neighbour], angles: dict[int, tuple[float, float]],
+    versions: Mapping[str, str] | None = None,
 ) -> list[Candidate]:
-    """k-NN results as candidates, given ``view id -> (azimuth, elevation)``."""
-    return [Candidate(n.object, n.distance, *angles[n.view], n.mirrored) for n in found]
+    """k-NN results as candidates, given ``view id -> (azimuth, elevation)`` (and the
+    objects' content hashes, ``versions``)."""
+    return [Candidate(n.object, n.distance, *angles[n.view], n.mirrored,
+                      None if versions is None else versions.get(n.object))
+            for n in found]

@@ -312,6 +312,10 @@ class TierReader:
             out.update((int(i), (float(a), float(e))) for i, a, e in rows)
         return out
 
+    def object_versions(self) -> dict[str, str]:
+        """``object name -> content hash`` of every object (inside :meth:`snapshot`)."""
+        return dict(self.conn.execute("SELECT name, content_hash FROM objects"))
+
     def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:
         """Every view of tier ``name`` in memory (the brute-force reference and the flat
         scan), with ``(view id, azimuth, elevation)`` per row; inside :meth:`snapshot`."""
