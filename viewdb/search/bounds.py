@@ -219,40 +219,45 @@ def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
+    # squared Fourier_Dist of point ``coords[row]`` to the box [lo, hi]
+    s = 0.0
+    for j in range(coords.shape[1]):
+        p = coords[row, j]
+        e = max(lo[j] - p, 0.0) + max(p - hi[j], 0.0)
+        s += e * e
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compiled
+    # squared LB_Keogh of curve ``curves[row]`` against [lower, upper], abandoned (some
+    # value > limit2) as soon as it passes ``limit2``
+    s = 0.0
+    for t in range(curves.shape[1]):
+        x = curves[row, t]
+        if x > upper[t]:
+            e = x - upper[t]
+            s += e * e
+        elif x < lower[t]:
+            e = lower[t] - x
+            s += e * e
+        if s > limit2:
+            return s
+    return s
+
+
+@njit(cache=True, nogil=True)
 def _group_bounds_kernel(  # pragma: no cover - compiled
     lower, upper, mlower, mupper, blo, bhi, mblo, mbhi, coords, curves
 ):
     n = curves.shape[0]
-    length = curves.shape[1]
-    d = coords.shape[1]
     out = np.empty(2 * n)
     for i in range(n):
-        fd = 0.0
-        fdm = 0.0
-        for j in range(d):
-            p = coords[i, j]
-            g = max(blo[j] - p, 0.0) + max(p - bhi[j], 0.0)
-            fd += g * g
-            g = max(mblo[j] - p, 0.0) + max(p - mbhi[j], 0.0)
-            fdm += g * g
-        lb = 0.0
-        lbm = 0.0
-        for t in range(length):
-            v = curves[i, t]
-            if v > upper[t]:
-                e = v - upper[t]
-                lb += e * e
-            elif v < lower[t]:
-                e = lower[t] - v
-                lb += e * e
-            if v > mupper[t]:
-                e = v - mupper[t]
-                lbm += e * e
-            elif v < mlower[t]:
-                e = mlower[t] - v
-                lbm += e * e
-        out[i] = math.sqrt(max(fd, lb))
-        out[n + i] = math.sqrt(max(fdm, lbm))
+        out[i] = math.sqrt(max(_fourier_dist2(coords, i, blo, bhi),
+                               _lb_keogh2(curves, i, lower, upper, np.inf)))
+        out[n + i] = math.sqrt(max(_fourier_dist2(coords, i, mblo, mbhi),
+                                   _lb_keogh2(curves, i, mlower, mupper, np.inf)))
     return out
 
 

@@ -45,7 +45,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .bounds import _cascade_env_kernel, _dtw_kernel
+from .bounds import _cascade_env_kernel, _dtw_kernel, _fourier_dist2, _lb_keogh2
 
 __all__ = ["DONE", "EXHAUSTED", "NEED", "RADIUS", "WIDEN_ABS", "WIDEN_REL", "refine_groups", "scan_all"]
 
@@ -131,7 +131,6 @@ def _refine_kernel(  # pragma: no cover - compiled
     bound, exact, exact_row, exact_mirrored, k, cap, stats, hkey, hcode, hsize,
 ):
     n_samples = q.shape[0]
-    d = coords.shape[1]
     scratch = np.empty(n_samples)
     U = _kth(bound, k, cap)
     size = hsize[0]
@@ -168,21 +167,9 @@ def _refine_kernel(  # pragma: no cover - compiled
                 continue  # it can neither enter the result nor improve its object
             if (code & 2) == 0:  # a Fourier point: its curve's LB_Keogh comes next
                 stats[2] += 1
-                low = mlower if mirrored else lower
-                up = mupper if mirrored else upper
-                limit2 = limit * limit
-                lb = 0.0
-                for t in range(n_samples):
-                    x = curves[row, t]
-                    if x > up[t]:
-                        e = x - up[t]
-                        lb += e * e
-                    elif x < low[t]:
-                        e = low[t] - x
-                        lb += e * e
-                    if lb > limit2:
-                        break
-                if lb > limit2:
+                lb = _lb_keogh2(curves, row, mlower if mirrored else lower,
+                                mupper if mirrored else upper, limit * limit)
+                if lb > limit * limit:
                     continue
                 lb = math.sqrt(lb)
                 if lb > top:  # queue the curve behind what is now smaller
@@ -221,13 +208,7 @@ def _refine_kernel(  # pragma: no cover - compiled
         for slot in range(2 * n):
             mirrored = slot >= n
             row = s + (slot - n if mirrored else slot)
-            lo_box = mblo if mirrored else blo
-            hi_box = mbhi if mirrored else bhi
-            fd = 0.0
-            for j in range(d):
-                p = coords[row, j]
-                e = max(lo_box[j] - p, 0.0) + max(p - hi_box[j], 0.0)
-                fd += e * e
+            fd = _fourier_dist2(coords, row, mblo if mirrored else blo, mbhi if mirrored else bhi)
             if fd > limit2:
                 continue
             # a point's key is at least its group's (both bound every view of the group)
