@@ -8,7 +8,9 @@ perspective camera, with random lighting, a plain random background, pixel noise
 JPEG compression (:mod:`viewdb.bench.photos`, the same generator as ``viewdb bench``'s
 photo protocol; same seed ⇒ same photos). The photo is segmented automatically, as a user's
 would be, and queried with every plan (12 in-plane turns); reported per plan: the CMC
-(rank 1..k identification rate) and the median query time. With ``--pose-photos N`` the
+(rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
+each photo with its exact silhouette (rendered depth > 0) as the mask, to separate
+segmentation errors from recognition errors. With ``--pose-photos N`` the
 first N photos of **textured, asymmetric** objects (symmetry type with no generator; a
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
@@ -26,13 +28,28 @@ import cv2
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
+from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
+from viewdb.camera import camera_pose
+from viewdb.gl import pyrender_module
 from viewdb.pose import rotation_angle, view_rotation
+from viewdb.render import _offscreen, pyrender_mesh
 
 
 def direction(azimuth: float, elevation: float) -> np.ndarray:
     h, v = math.radians(azimuth), math.radians(elevation)
     return np.array([math.sin(h) * math.cos(v), math.sin(v), math.cos(h) * math.cos(v)])
+
+
+def true_mask(mesh, spec: PhotoSpec) -> np.ndarray:
+    """The photo's exact silhouette: the same perspective camera, depth > 0."""
+    pyrender = pyrender_module()
+    scene = pyrender.Scene()
+    scene.add(pyrender_mesh(mesh))
+    camera = pyrender.PerspectiveCamera(yfov=math.radians(spec.fov), aspectRatio=1.0,
+                                        znear=max(0.05, spec.distance - 1.5), zfar=spec.distance + 1.5)
+    scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
+    flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
+    return np.asarray(_offscreen(spec.image_size).render(scene, flags=flags)) > 0
 
 
 def textured(mesh) -> bool:
@@ -54,13 +71,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--plans", default="server,cs1,cs2")
+    parser.add_argument("--true-mask", action="store_true", help="also query with the exact silhouette")
     args = parser.parse_args()
     plans = args.plans.split(",")
     db = viewdb.open(args.db, read_only=True)
     names = [o.name for o in db.objects()]
     rng = np.random.default_rng(args.seed)
-    ranks = {p: [] for p in plans}
-    times = {p: [] for p in plans}
+    runs = plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
+    ranks = {p: [] for p in runs}
+    times = {p: [] for p in runs}
     pose_rows = []
     eligible: dict[str, bool] = {}
     for i in range(args.photos):
@@ -70,17 +89,20 @@ def main() -> None:
         jpeg = encode_jpeg(render_photo(mesh, spec), spec.jpeg_quality)
         photo = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
         line = [f"{i:3d} {name:32s}"]
-        for plan in plans:
+        exact = true_mask(mesh, spec) if args.true_mask else None
+        for run in runs:
+            plan = run.split("+")[0]
             start = time.perf_counter()
             try:
-                result = db.query(photo, k=args.k, plan=plan, pose=False)
+                result = db.query(photo, k=args.k, plan=plan, pose=False,
+                                  mask=exact if run.endswith("+mask") else None)
                 found = [m.object for m in result.results]
                 rank = found.index(name) + 1 if name in found else 0
             except viewdb.ViewDBError as exc:
                 rank, found = 0, [f"error: {exc}"]
-            times[plan].append(time.perf_counter() - start)
-            ranks[plan].append(rank)
-            line.append(f"{plan} {rank or '-'}")
+            times[run].append(time.perf_counter() - start)
+            ranks[run].append(rank)
+            line.append(f"{run} {rank or '-'}")
         if name not in eligible:
             sym = db.symmetry(name)
             eligible[name] = bool(sym is not None and not sym.generators and textured(mesh))
@@ -103,11 +125,11 @@ def main() -> None:
                 line.append("pose: top result wrong or no pose")
         print("  ".join(line), flush=True)
     print(f"\n{args.photos} photos, {len(names)} objects, seed {args.seed}, k = {args.k}")
-    for plan in plans:
-        r = np.array(ranks[plan])
+    for run in runs:
+        r = np.array(ranks[run])
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
-        print(f"{plan:6s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[plan]) * 1e3:.0f} ms "
-              f"(segmentation + {12} turns, no pose)")
+        print(f"{run:11s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
+              "(segmentation + 12 turns, no pose)")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "
