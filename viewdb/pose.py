@@ -960,6 +960,29 @@ class _QueryDetail:
 
 
 # ---------------------------------------------------------------------- the estimate
+#: A query object smaller than the candidate views by at least this factor is enlarged
+#: before SIFT, by at most the second (see :func:`_sift_upscale`).
+MIN_SIFT_UPSCALE = 1.5
+MAX_SIFT_UPSCALE = 3.0
+
+
+def _sift_upscale(extent: float, candidates: Sequence[CandidateView]) -> float:
+    """How much to enlarge the query before SIFT so that its object is about as large as
+    in the candidate views (a photo's object often spans a fraction of the views' size,
+    and SIFT then finds few keypoints that match); only when it is at least
+    :data:`MIN_SIFT_UPSCALE` times smaller, by at most :data:`MAX_SIFT_UPSCALE`."""
+    sizes = []
+    for c in candidates:
+        rows, cols = np.flatnonzero(c.mask.any(axis=1)), np.flatnonzero(c.mask.any(axis=0))
+        if len(rows):
+            sizes.append(max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
+    if not sizes or extent <= 0:
+        return 1.0
+    ratio = float(np.median(sizes)) / extent
+    # about the views' size already: as it is (interpolation only adds edge keypoints)
+    return 1.0 if ratio < MIN_SIFT_UPSCALE else min(ratio, MAX_SIFT_UPSCALE)
+
+
 def estimate_pose(
     query: QueryView,
     candidates: Sequence[CandidateView],
@@ -1017,7 +1040,8 @@ def estimate_pose(
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     extent = float(max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
 
-    keypoints, descriptors = extract_sift(color, mask, config.max_keypoints)
+    keypoints, descriptors = extract_sift(color, mask, config.max_keypoints,
+                                          _sift_upscale(extent, candidates))
     found = _sift_pose(_Query(keypoints, width, height, k_matrix), descriptors, candidates,
                        extent, config)
     if found is not None and found[1] >= config.min_inliers:

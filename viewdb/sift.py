@@ -56,13 +56,20 @@ CROP_MARGIN = 24
 
 
 def extract_sift(
-    image: NDArray[np.uint8], mask: NDArray[np.bool_] | None, max_keypoints: int
+    image: NDArray[np.uint8], mask: NDArray[np.bool_] | None, max_keypoints: int,
+    upscale: float = 1.0,
 ) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
     """Detect SIFT keypoints inside ``mask`` and describe them.
+
+    ``upscale`` > 1 enlarges the image (bicubic) before detection: a small object in a
+    photo then shows its texture at about the scale of the stored views, which gives many
+    more keypoints that match (positions and sizes are returned in the original pixels).
 
     Returns ``(keypoints (n, 5) float32, descriptors (n, 128) uint8)``; ``n`` may be 0
     (texture-less views often give no keypoints), never ``None``.
     """
+    if not upscale >= 1.0:
+        raise ValueError(f"upscale must be >= 1, got {upscale}")
     sift = _SIFT.get(max_keypoints)
     if sift is None:
         sift = _SIFT[max_keypoints] = cv2.SIFT_create(nfeatures=max_keypoints)
@@ -80,12 +87,19 @@ def extract_sift(
         x0, x1 = max(cols[0] - CROP_MARGIN, 0), min(cols[-1] + 1 + CROP_MARGIN, w)
         gray = gray[y0:y1, x0:x1]
         cv_mask = mask[y0:y1, x0:x1].astype(np.uint8)
+    if upscale > 1.0:
+        gray = cv2.resize(gray, None, fx=upscale, fy=upscale, interpolation=cv2.INTER_CUBIC)
+        if cv_mask is not None:
+            cv_mask = cv2.resize(cv_mask, (gray.shape[1], gray.shape[0]),
+                                 interpolation=cv2.INTER_NEAREST)
     kps, desc = sift.detectAndCompute(np.ascontiguousarray(gray), cv_mask)
     if desc is None or not kps:
         return np.zeros((0, 5), np.float32), np.zeros((0, 128), np.uint8)
     kps, desc = kps[:max_keypoints], desc[:max_keypoints]
+    f = float(upscale)
     keypoints = np.array(
-        [(k.pt[0] + x0, k.pt[1] + y0, k.size, k.angle, k.response) for k in kps],
+        [((k.pt[0] + 0.5) / f - 0.5 + x0, (k.pt[1] + 0.5) / f - 0.5 + y0, k.size / f, k.angle,
+          k.response) for k in kps],
         dtype=np.float32,
     )
     return keypoints, np.clip(np.rint(desc), 0, 255).astype(np.uint8)
