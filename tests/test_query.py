@@ -38,10 +38,9 @@ def query_db(tmp_path_factory):
 
 @pytest.mark.parametrize("name, h, v, turn, scale", [
     ("cube_dice", 37, 22, 25, 0.8), ("car", 200, 15, -30, 0.9),
-    pytest.param("chair", 110, 40, 60, 0.7, marks=pytest.mark.xfail(
-        strict=True, reason="known limit, tracked in issue 5: this texture-less view's front/back twins "
-        "share an outline, both are ~20° from the truth, and the internal-edge score prefers "
-        "the wrong one (72° off)")),
+    # texture-less, and its matched view's front/back twins share an outline ~20° from the
+    # truth: found among the object's next nearest views (NEAR_VIEWS; 72° off without them)
+    ("chair", 110, 40, 60, 0.7),
     ("l_bracket", 200, 30, 40, 0.8),
 ])
 def test_an_off_grid_turned_scaled_photo_is_recognised_and_posed(query_db, name, h, v, turn, scale):

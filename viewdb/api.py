@@ -37,6 +37,7 @@ from .search.plans import (
     refine,
     walk,
 )
+from .search.refine import scan_all
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
@@ -321,13 +322,7 @@ class ViewDB:
     def _grid_curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float64] | None:
         """The curve of grid view (h, v) of ``name`` from the stored views (a pruned view is
         its stand-in's curve, reversed if mirrored); None where there is no silhouette."""
-        curves = self._curves.get(name)
-        if curves is None:
-            curves = self._curves[name] = self._store.object_curves(name)
-            while len(self._curves) > CURVE_CACHE_OBJECTS:
-                self._curves.popitem(last=False)
-        else:
-            self._curves.move_to_end(name)
+        curves = self._stored_curves(name)
         try:
             stored, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
         except KeyError:
@@ -337,6 +332,17 @@ class ViewDB:
             return None
         out = np.asarray(curve, np.float64)
         return np.ascontiguousarray(np.roll(out[::-1], 1)) if mirrored else out
+
+    def _stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
+        """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
+        curves = self._curves.get(name)
+        if curves is None:
+            curves = self._curves[name] = self._store.object_curves(name)
+            while len(self._curves) > CURVE_CACHE_OBJECTS:
+                self._curves.popitem(last=False)
+        else:
+            self._curves.move_to_end(name)
+        return curves
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
@@ -575,6 +581,21 @@ class ViewDB:
                 plan = plan_without_skimming(self.config.gap)
             self._plans[name] = plan
         return plan
+
+    def nearest_views(
+        self, name: str, curve: NDArray[np.floating], n: int, *, band: int = 6
+    ) -> list[tuple[float, float, float]]:
+        """The ``n`` stored views of object ``name`` nearest to a query curve, as
+        ``(azimuth, elevation, distance)`` (the exact distance, either orientation), best
+        first: the other views a photo might show when its silhouette is ambiguous."""
+        q = self._query_curve(curve, 1, "full")
+        stored = self._stored_curves(name)
+        if not stored:
+            return []
+        keys = list(stored)
+        distances = scan_all(q, np.stack([np.asarray(stored[key], np.float64) for key in keys]), band)
+        order = np.argsort(distances, kind="stable")[:n]
+        return [(keys[i][0], keys[i][1], float(distances[i])) for i in order]
 
     def candidate_poses(self, name: str, azimuth: float, elevation: float) -> list[CandidatePose]:
         """Every grid view with the same or the mirrored silhouette as grid view (h, v).

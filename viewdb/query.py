@@ -225,14 +225,28 @@ def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tu
     return sorted(best.values(), key=lambda x: (x[0].distance, x[0].object))[:k]
 
 
+#: Besides the matched view's same-shape poses, those of the object's next nearest views
+#: (by the query curve) are candidates too: a silhouette often matches several sides of
+#: an object about equally, and SIFT can tell them apart.
+NEAR_VIEWS = 4
+
+
 def _pose(
     db: ViewDB, query: QueryView, match: Candidate, config: PoseConfig,
     intrinsics: tuple[float, float, float, float] | None, search: SilhouetteConfig | None = None,
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
+    curve: NDArray[np.float64] | None = None,
 ) -> PoseEstimate:
     poses = db.candidate_poses(match.object, match.azimuth, match.elevation)
     # the matched view first, then the rest in their (deterministic) order
     poses.sort(key=lambda p: (p.azimuth, p.elevation) != (match.azimuth, match.elevation))
+    if curve is not None:
+        seen = {(p.azimuth, p.elevation) for p in poses}
+        for h, v, _ in db.nearest_views(match.object, curve, NEAR_VIEWS):
+            for p in db.candidate_poses(match.object, h, v):
+                if (p.azimuth, p.elevation) not in seen:
+                    seen.add((p.azimuth, p.elevation))
+                    poses.append(p)
     candidates = []
     for p in poses[:MAX_POSE_CANDIDATES]:
         try:
@@ -470,11 +484,13 @@ def run_query(
     else:
         config = pose_config or PoseConfig()
         verify = rerank and pose and camera is not None
+        by_angle = {angle: curve for angle, curve in curves[:rotations]}  # the plain silhouette's
         for rank, (c, angle) in enumerate(merged, 1):
             estimate, problem = None, None
             if pose:
                 try:
-                    estimate = _pose(db, query, c, config, camera, QUICK if verify else None)
+                    estimate = _pose(db, query, c, config, camera, QUICK if verify else None,
+                                     curve=by_angle.get(angle))
                 except ViewDBError as exc:
                     problem = exc.message
             matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
