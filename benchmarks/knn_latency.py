@@ -1,6 +1,8 @@
 """k-NN latency and pruning power through the stored R-trees, against two exact baselines.
 
-    python benchmarks/knn_latency.py DB [--queries 50] [--r 6] [--tier full]
+    python benchmarks/knn_latency.py DB [DB ...] [--queries 50] [--r 6] [--tier full]
+
+(several files, e.g. the skimmed and the unskimmed paper-scale catalogues, in one run)
 
 Two query sets, same seed ⇒ same queries:
 
@@ -100,15 +102,21 @@ def open_to_first_result(path: str, tier: str, r: int) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("db")
+    parser.add_argument("db", nargs="+")
     parser.add_argument("--queries", type=int, default=50)
     parser.add_argument("--brute", type=int, default=3, help="queries per set also run by brute force")
     parser.add_argument("--r", type=int, default=6)
     parser.add_argument("--tier", default="full", choices=["full", "sparse"])
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    print("fresh process:", open_to_first_result(args.db, args.tier, args.r))
-    with viewdb.open(args.db, create=False) as db:
+    for path in args.db:
+        print(f"== {path}")
+        run(path, args)
+
+
+def run(path: str, args: argparse.Namespace) -> None:
+    print("fresh process:", open_to_first_result(path, args.tier, args.r))
+    with viewdb.open(path, read_only=True) as db:
         start = time.perf_counter()
         tier, _ = db.search_tier(args.tier)
         load = time.perf_counter() - start
