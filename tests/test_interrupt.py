@@ -24,14 +24,24 @@ def test_sigint_mid_ingest_exits_130_and_leaves_whole_objects(tmp_path, jobs):
     )
     # wait until at least one object is committed, then interrupt
     deadline = time.time() + 120
-    while time.time() < deadline:
-        time.sleep(0.3)
+    seen, problems = 0, []
+    while time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+        conn = None
         try:
-            with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5) as conn:
-                if conn.execute("SELECT count(*) FROM objects").fetchone()[0] >= 1:
-                    break
-        except sqlite3.Error:
-            pass
+            conn = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5)
+            seen = conn.execute("SELECT count(*) FROM objects").fetchone()[0]
+        except sqlite3.Error as exc:
+            problems.append(str(exc))
+        finally:
+            if conn is not None:
+                conn.close()
+        if seen >= 1:
+            break
+    assert proc.poll() is None, (
+        f"the ingest ended before it could be interrupted (objects seen {seen}; "
+        f"poll errors {sorted(set(problems))[:3]})"
+    )
     os.kill(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
