@@ -446,7 +446,8 @@ def run_query(
         assert label is not None
         mask, ignore = label_mask(label_map, label, loaded)
     seg: Segmentation = segment(loaded, mask)
-    curves = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
+    plain = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
+    curves = list(plain)
     completed = completed_mask(seg.mask, ignore)
     if completed is not None:
         curves += rotated_curves(completed, db.config.features.curve_samples, rotations)
@@ -484,7 +485,7 @@ def run_query(
     else:
         config = pose_config or PoseConfig()
         verify = rerank and pose and camera is not None
-        by_angle = {angle: curve for angle, curve in curves[:rotations]}  # the plain silhouette's
+        by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
         for rank, (c, angle) in enumerate(merged, 1):
             estimate, problem = None, None
             if pose:
