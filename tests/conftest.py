@@ -87,3 +87,21 @@ def tiered_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
         report = db.ingest([sample(n) for n in TIERED_DB_MODELS])
     assert not report.failed, report.failed
     return path
+
+
+def mixed_query_curves(db, rng, count):
+    """Query curves for plan tests, half of each kind: a stored curve with noise (mirrored
+    half the time), and the silhouette of a random object at a random off-grid angle."""
+
+    from viewdb.features import distance_curve, mirror_curve
+
+    arrays, _ = db.search_tier("full")
+    out = []
+    for i in range(count):
+        if i % 2:
+            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
+            out.append(mirror_curve(q) if rng.random() < 0.5 else q)
+        else:
+            name = arrays.names[rng.integers(len(arrays.names))]
+            out.append(distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128))
+    return out

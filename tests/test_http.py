@@ -21,8 +21,8 @@ from hypothesis import strategies as st
 from PIL import Image
 
 import viewdb
+from tests.conftest import mixed_query_curves
 from tests.serving import ServerProcess, request
-from viewdb.features import distance_curve, mirror_curve
 from viewdb.http import models
 from viewdb.http.wire import PoseRequest, decode_query, encode_query
 from viewdb.pose import QueryView
@@ -74,17 +74,7 @@ def photo(db, name, h, v, turn):
     return img
 
 
-def _curves(db, rng, count):
-    arrays, _ = db.search_tier("full")
-    out = []
-    for i in range(count):
-        if i % 2:
-            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
-            out.append(mirror_curve(q) if rng.random() < 0.5 else q)
-        else:
-            name = arrays.names[rng.integers(len(arrays.names))]
-            out.append(distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128))
-    return out
+_curves = mixed_query_curves
 
 
 # ----------------------------------------------------------------------------- exactness

@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from viewdb.features import distance_curve, mirror_curve
+from tests.conftest import mixed_query_curves
+from viewdb.features import mirror_curve
 from viewdb.search.bounds import dtw
 from viewdb.search.knn import brute_force_knn
 
@@ -22,17 +23,7 @@ def client_file(tiered_db, tmp_path_factory):
     return out
 
 
-def _queries(db, rng, count):
-    arrays, _ = db.search_tier("full")
-    out = []
-    for i in range(count):
-        if i % 2:
-            q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
-            out.append(mirror_curve(q) if rng.random() < 0.5 else q)
-        else:
-            name = arrays.names[rng.integers(len(arrays.names))]
-            out.append(distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128))
-    return out
+_queries = mixed_query_curves
 
 
 def _same(a, b):
