@@ -205,20 +205,6 @@ def _envelope_kernel(q, r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
-    s = 0.0
-    for i in range(c.shape[0]):
-        v = c[i]
-        if v > upper[i]:
-            d = v - upper[i]
-            s += d * d
-        elif v < lower[i]:
-            d = lower[i] - v
-            s += d * d
-    return math.sqrt(s)
-
-
-@njit(cache=True, nogil=True)
 def _fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
     # squared Fourier_Dist of point ``coords[row]`` to the box [lo, hi]
     s = 0.0
@@ -245,6 +231,11 @@ def _lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compile
         if s > limit2:
             return s
     return s
+
+
+@njit(cache=True, nogil=True)
+def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
+    return math.sqrt(_lb_keogh2(c.reshape(1, c.shape[0]), 0, lower, upper, np.inf))
 
 
 @njit(cache=True, nogil=True)
