@@ -260,6 +260,7 @@ class TierReader:
         self._lock = threading.Lock()
         self._tiers: dict[str, StoredTier] = {}
         self._version: int | None = None
+        self._versions: dict[str, str] | None = None
 
     def close(self) -> None:
         with self._lock:
@@ -270,6 +271,7 @@ class TierReader:
         for tier in self._tiers.values():
             tier.close()
         self._tiers = {}
+        self._versions = None
 
     @contextmanager
     def snapshot(self) -> Iterator[TierReader]:
@@ -313,8 +315,11 @@ class TierReader:
         return out
 
     def object_versions(self) -> dict[str, str]:
-        """``object name -> content hash`` of every object (inside :meth:`snapshot`)."""
-        return dict(self.conn.execute("SELECT name, content_hash FROM objects"))
+        """``object name -> content hash`` of every object (inside :meth:`snapshot`; read
+        once per version of the file, like the tiers)."""
+        if self._versions is None:
+            self._versions = dict(self.conn.execute("SELECT name, content_hash FROM objects"))
+        return self._versions
 
     def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:
         """Every view of tier ``name`` in memory (the brute-force reference and the flat
