@@ -177,13 +177,12 @@ class StoredTier:
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         los = np.stack([query.box[0], query.mirrored_box[0]]) - radius
         his = np.stack([query.box[1], query.mirrored_box[1]]) + radius
-        at = np.searchsorted(self._ids, self.index.intersection_many(los, his))
+        at = np.searchsorted(self._ids, self.index.intersection_many(los, his)).astype(np.int64)
         at = at[~seen[at]]
         if not len(at):
-            return at.astype(np.int64), np.zeros(0)
-        _, keys = query.group_keys(self._lo, self._hi, self._curve_lo, self._curve_hi,
-                                   at.astype(np.int64))
-        return at.astype(np.int64), keys
+            return at, np.zeros(0)
+        _, keys = query.group_keys(self._lo, self._hi, self._curve_lo, self._curve_hi, at)
+        return at, keys
 
     def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
         missing = groups[~self._loaded[groups]]
