@@ -1,7 +1,7 @@
 """Recognition and pose accuracy on synthetic photographs, per plan (issue 5's benchmark).
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
-                                           [--pose-photos 20]
+                                           [--pose-photos 20] [--true-mask] [--outline]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
 perspective camera, with random lighting, a plain random background, pixel noise and
@@ -10,7 +10,8 @@ photo protocol; same seed ⇒ same photos). The photo is segmented automatically
 would be, and queried with every plan (12 in-plane turns); reported per plan: the CMC
 (rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
 each photo with its exact silhouette (rendered depth > 0) as the mask, to separate
-segmentation errors from recognition errors. With ``--pose-photos N`` the
+segmentation errors from recognition errors; ``--outline`` also queries without the colour
+re-ranking (:mod:`viewdb.colour`), ranking by outline alone as the paper does. With ``--pose-photos N`` the
 first N photos of **textured, asymmetric** objects (symmetry type with no generator; a
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
@@ -72,12 +73,15 @@ def main() -> None:
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--plans", default="server,cs1,cs2")
     parser.add_argument("--true-mask", action="store_true", help="also query with the exact silhouette")
+    parser.add_argument("--outline", action="store_true",
+                        help="also query without the colour re-ranking (outline alone, the paper's way)")
     args = parser.parse_args()
     plans = args.plans.split(",")
     db = viewdb.open(args.db, read_only=True)
     names = [o.name for o in db.objects()]
     rng = np.random.default_rng(args.seed)
-    runs = plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
+    runs = (plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
+            + ([f"{p}+outline" for p in plans] if args.outline else []))
     ranks = {p: [] for p in runs}
     times = {p: [] for p in runs}
     pose_rows = []
@@ -95,7 +99,8 @@ def main() -> None:
             start = time.perf_counter()
             try:
                 result = db.query(photo, k=args.k, plan=plan, pose=False,
-                                  mask=exact if run.endswith("+mask") else None)
+                                  mask=exact if run.endswith("+mask") else None,
+                                  colour=not run.endswith("+outline"))
                 found = [m.object for m in result.results]
                 rank = found.index(name) + 1 if name in found else 0
             except viewdb.ViewDBError as exc:
@@ -128,8 +133,8 @@ def main() -> None:
     for run in runs:
         r = np.array(ranks[run])
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
-        print(f"{run:11s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
-              "(segmentation + 12 turns, no pose)")
+        print(f"{run:14s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
+              "(segmentation + 12 turns + colour, no pose)")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "

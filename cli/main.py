@@ -267,6 +267,8 @@ def query(
     rerank: Annotated[bool, typer.Option(
         "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
                          "silhouette fit.")] = False,
+    no_colour: Annotated[bool, typer.Option(
+        "--no-colour", help="Rank by outline alone (the paper's way), not re-ranked by colour.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     server: Annotated[
         str | None, typer.Option(help="URL of a viewdb server (viewdb serve); the client half runs "
@@ -299,7 +301,7 @@ def query(
                 viewdb.RemoteServer(server, token=token) as remote:
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                label_map=label_map, label=label)
+                                label_map=label_map, label=label, colour=not no_colour)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -308,7 +310,8 @@ def query(
             try:
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                   label_map=label_map, label=label, rerank=rerank)
+                                   label_map=label_map, label=label, rerank=rerank,
+                                   colour=not no_colour)
             finally:
                 if side is not None:
                     side.close()
@@ -319,12 +322,13 @@ def query(
     network = f", network {t['network']:.0f}" if "network" in t else ""
     out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
               f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
-              f"server {t['server']:.0f}, pose {t['pose']:.0f}{network})")
-    table = Table("rank", "object", "distance", "view h/v", "pose h/v/in-plane", "method", "inliers")
+              f"server {t['server']:.0f}, colour {t['colour']:.0f}, pose {t['pose']:.0f}{network})")
+    table = Table("rank", "object", "distance", "colour", "view h/v", "pose h/v/in-plane", "method",
+                  "inliers")
     for r in result.results:
         p = r.pose
         table.add_row(
-            str(r.rank), r.object, f"{r.distance:.3f}",
+            str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
             f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}",
             f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
             p.method if p else "-", str(p.inliers) if p else "-",

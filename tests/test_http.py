@@ -81,9 +81,10 @@ _curves = mixed_query_curves
 def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote):
     _, client_path = files
     with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
-        cases = [("mug", 47, 22, 30, "cs1", True), ("car", 200, 15, -40, "cs2", False),
-                 ("l_bracket", 120, 40, 10, "server", False)]
-        for name, h, v, turn, plan, pose in cases:
+        # the mug and the car are coloured, the bracket grey (no colour re-ranking)
+        cases = [("mug", 47, 22, 30, "cs1", True, True), ("car", 200, 15, -40, "cs2", False, True),
+                 ("l_bracket", 120, 40, 10, "server", False, False)]
+        for name, h, v, turn, plan, pose, coloured in cases:
             img = photo(full, name, h, v, turn)
             kw = dict(k=2, plan=plan, rotations=6, pose=pose)
             local = full.query(img, client=client if plan != "server" else None, **kw)
@@ -93,7 +94,9 @@ def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote
             if pose:
                 assert there.results[0].pose is not None
             t, x = there.timing_ms, there.transfer
-            assert x["round_trips"] == 6 + bool(pose) and x["bytes_sent"] > 0 and x["bytes_received"] > 0
+            # 6 turns, the colour signatures (a photo with colour), the pose
+            assert any(m.colour is not None for m in there.results) == coloured
+            assert x["round_trips"] == 6 + coloured + pose and x["bytes_sent"] > 0 and x["bytes_received"] > 0
             assert t["server"] > 0 and t["network"] >= 0 and t["total"] >= t["segment"]
             if plan == "server":
                 assert t["client"] < 1.0  # nothing runs on the client's tier
@@ -282,7 +285,9 @@ def test_cli_query_against_the_server_equals_the_local_query(tiered_db, files, s
     assert main(["query", *common, "--db", str(tiered_db), "--client", str(client)]) == 0
     local = json.loads(capsys.readouterr().out)
     assert there["results"] == local["results"] and there["results"][0]["object"] == "car"
-    assert there["transfer"]["round_trips"] == 4 and "network" in there["timing_ms"]
+    # 4 turns and the colour signatures (the car is coloured)
+    assert there["results"][0]["colour_distance"] is not None
+    assert there["transfer"]["round_trips"] == 4 + 1 and "network" in there["timing_ms"]
 
 
 def test_cli_errors_for_remote_queries(files, server, tmp_path, capsys):

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import grid_views, normalise_angle
+from .colour import carries_colour, colour_signature
 from .config import BuildConfig, RenderConfig
 from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
@@ -60,6 +61,9 @@ __all__ = [
 
 #: How many decoded meshes a database keeps in memory for :meth:`ViewDB.render`.
 MESH_CACHE_SIZE = 8
+#: Views whose colour signatures stay cached, and the size they are rendered at.
+COLOUR_CACHE_VIEWS = 4096
+COLOUR_RENDER_SIZE = 96
 #: How many regenerated (pruned or off-grid) views a database keeps in memory.
 VIEW_CACHE_SIZE = 256
 #: How many objects' stored curves a database keeps in memory for CS2 walks.
@@ -204,6 +208,7 @@ class ViewDB:
         self._reader: TierReader | None = None
         self._role: str | None = None
         self._curves: OrderedDict[str, dict[tuple[float, float], NDArray[np.float32]]] = OrderedDict()
+        self._colours: OrderedDict[tuple[str, float, float], NDArray[np.float32] | None] = OrderedDict()
 
     @property
     def path(self) -> Path:
@@ -428,6 +433,7 @@ class ViewDB:
         label_map: NDArray[Any] | str | Path | None = None,
         label: int | None = None,
         rerank: bool = False,
+        colour: bool = True,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
 
@@ -440,7 +446,9 @@ class ViewDB:
         JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the mesh
         file's own frame and units. ``label_map`` + ``label`` pick the object out of a
         label image instead of ``mask``. ``rerank`` (with intrinsics) re-ranks the k results
-        by the IoU of their perspective silhouette fit.
+        by the IoU of their perspective silhouette fit. ``colour``: a photo with colour
+        re-ranks the plan's best objects by how well their colours match too
+        (:mod:`viewdb.colour`); ``colour=False`` ranks by outline alone, as the paper does.
 
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
@@ -451,7 +459,7 @@ class ViewDB:
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and (self.role == "full" or server is not None),
                          intrinsics=intrinsics, server=server, label_map=label_map, label=label,
-                         rerank=rerank)
+                         rerank=rerank, colour=colour)
 
     def estimate_pose(
         self,
@@ -471,6 +479,8 @@ class ViewDB:
     def _forget(self, name: str) -> None:
         self._curves.clear()
         self._meshes.pop(name, None)
+        for key in [k for k in self._colours if k[0] == name]:
+            del self._colours[key]
         self._plans.pop(name, None)
         for key in [k for k in self._regenerated if k[0] == name]:
             del self._regenerated[key]
@@ -667,6 +677,30 @@ class ViewDB:
         else:
             self._meshes.move_to_end(name)
         return mesh
+
+    def view_colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> list[NDArray[np.float32] | None]:
+        """The colour signatures (:func:`viewdb.colour.colour_signature`) of views
+        ``(object, azimuth, elevation)``, rendered from the stored meshes (cached); None for
+        an object whose mesh has no colour of its own (:func:`viewdb.colour.carries_colour`)."""
+        renderer = get_renderer(replace(self.config.render, image_size=COLOUR_RENDER_SIZE))
+        out: list[NDArray[np.float32] | None] = []
+        for name, azimuth, elevation in views:
+            key = (name, float(azimuth), float(elevation))
+            if key not in self._colours:
+                mesh = self.mesh(name)
+                signature = None
+                if carries_colour(mesh):
+                    view = renderer.render(mesh, azimuth, elevation)
+                    signature = colour_signature(view.color, view.mask)
+                self._colours[key] = signature
+                while len(self._colours) > COLOUR_CACHE_VIEWS:
+                    self._colours.popitem(last=False)
+            else:
+                self._colours.move_to_end(key)
+            out.append(self._colours[key])
+        return out
 
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone."""

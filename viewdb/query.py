@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .colour import colour_signature, has_colour, rerank, reranked_score
 from .errors import FeatureError, ImageError, QueryError, ViewDBError
 from .features import distance_curve
 from .intrinsics import Intrinsics, parse_intrinsics
@@ -72,12 +73,22 @@ class QueryMatch:
     pose: PoseEstimate | None = None
     #: Why there is no pose (e.g. a client file without meshes), if there is none.
     pose_error: str | None = None
+    #: Colour distance between the photo and the matched view (:mod:`viewdb.colour`),
+    #: None when the results were not re-ranked by colour.
+    colour: float | None = None
+
+    @property
+    def score(self) -> float:
+        """What the results are ranked by: ``distance``, lengthened by the colour
+        mismatch when there is one (:func:`viewdb.colour.reranked_score`)."""
+        return self.distance if self.colour is None else reranked_score(self.distance, self.colour)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "rank": self.rank, "object": self.object, "distance": self.distance,
             "view": {"azimuth": self.azimuth, "elevation": self.elevation,
                      "mirrored": self.mirrored, "inplane": self.inplane},
+            "colour_distance": self.colour, "score": self.score,
             "pose": None,
         }
         p = self.pose
@@ -223,6 +234,21 @@ def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tu
             if c.object not in best or c.distance < best[c.object][0].distance:
                 best[c.object] = (c, angle)
     return sorted(best.values(), key=lambda x: (x[0].distance, x[0].object))[:k]
+
+
+#: Objects the plan finds (at least k) before the colour re-ranking keeps the best k.
+COLOUR_POOL = 5
+
+
+def _by_colour(
+    merged: list[tuple[Candidate, float]], query: NDArray[np.float32],
+    signatures: Sequence[NDArray[np.float32] | None],
+) -> tuple[list[tuple[Candidate, float]], dict[str, float]]:
+    """``merged`` re-ranked by colour (:func:`viewdb.colour.rerank`) and the colour
+    distance of each object that has one."""
+    order, colours = rerank([c.distance for c, _ in merged], query, signatures)
+    known = {c.object: d for (c, _), d in zip(merged, colours, strict=True) if d is not None}
+    return [merged[i] for i in order], known
 
 
 #: Besides the matched view's same-shape poses, those of the object's next nearest views
@@ -387,14 +413,23 @@ def _refine_shape(
 def pose_matches(
     db: ViewDB, query: QueryView, matches: Sequence[Candidate],
     intrinsics: tuple[float, float, float, float] | None = None, config: PoseConfig | None = None,
+    curves: Sequence[NDArray[np.float64] | None] | None = None,
 ) -> list[tuple[PoseEstimate | None, str | None]]:
     """``(pose, None)`` or ``(None, why not)`` for each match, from the full file ``db``
-    (what a server does for a remote client's ``pose`` request)."""
+    (what a server does for a remote client's ``pose`` request). ``curves``: per match,
+    the query's curve at the turn that matched (adds its nearest views' poses), or None."""
     config = config or PoseConfig()
+    samples = db.config.features.curve_samples
+    if curves is not None and len(curves) != len(matches):
+        raise QueryError(f"got {len(curves)} curves for {len(matches)} matches")
+    for curve in curves or ():
+        if curve is not None and len(curve) != samples:
+            raise QueryError(f"a curve has {len(curve)} samples; this file's curves have {samples}")
     out: list[tuple[PoseEstimate | None, str | None]] = []
-    for c in matches:
+    for i, c in enumerate(matches):
         try:
-            out.append((_pose(db, query, c, config, intrinsics), None))
+            out.append((_pose(db, query, c, config, intrinsics,
+                              curve=None if curves is None else curves[i]), None))
         except ViewDBError as exc:
             out.append((None, exc.message))
     return out
@@ -417,6 +452,7 @@ def run_query(
     label_map: NDArray[Any] | str | Path | None = None,
     label: int | None = None,
     rerank: bool = False,
+    colour: bool = True,
 ) -> QueryResult:
     """Recognise the object a query image shows and estimate its pose (see module doc).
 
@@ -430,6 +466,10 @@ def run_query(
     (:data:`viewdb.silhouette_pose.QUICK`), the best :data:`RERANK_FULL` and the plan's
     first result again with the full search, and the results sorted by IoU (``distance``
     stays the curve distance).
+
+    ``colour``: when the photo has colour, the plan's best :data:`COLOUR_POOL` (at least
+    k) objects are re-ranked by outline distance times colour mismatch (:mod:`viewdb.colour`;
+    needs the meshes: a full file or a server) and the best k kept.
 
     With ``server`` (e.g. :class:`viewdb.http.RemoteServer`), ``db`` is the client file:
     the client half of the plan runs on it, the server half and the pose on ``server``.
@@ -452,17 +492,19 @@ def run_query(
     if completed is not None:
         curves += rotated_curves(completed, db.config.features.curve_samples, rotations)
     segmented = time.perf_counter()
+    recolour = colour and (server is not None or db.role == "full") and has_colour(loaded.rgb)
+    pool = max(k, COLOUR_POOL) if recolour else k
     per_turn = []
     client_ms = server_ms = 0.0
     sent = received = trips = 0
     network_ms = pose_server_ms = 0.0
     for angle, curve in curves:
         # the turns so far bound this one's search (the merged result is unchanged)
-        prior = [c for c, _ in _merge(per_turn, k)]
+        prior = [c for c, _ in _merge(per_turn, pool)]
         if server is None:
-            found = db.recognise(curve, k, band=band, plan=plan, client=client, prior=prior)
+            found = db.recognise(curve, pool, band=band, plan=plan, client=client, prior=prior)
         else:
-            found = db.recognise(curve, k, band=band, plan=plan, server=server, prior=prior)
+            found = db.recognise(curve, pool, band=band, plan=plan, server=server, prior=prior)
         per_turn.append((angle, found.results))
         client_ms += found.client_ms
         server_ms += found.server_ms
@@ -470,22 +512,35 @@ def run_query(
         sent += found.bytes_sent
         received += found.bytes_received
         trips += plan != "server" or server is not None
-    merged = _merge(per_turn, k)
-    recognised = time.perf_counter()
+    merged = _merge(per_turn, pool)
+    searched = time.perf_counter()
     query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
+    colours: dict[str, float] = {}
+    if recolour and merged:
+        views = [(c.object, c.azimuth, c.elevation) for c, _ in merged]
+        if server is None:
+            signatures = db.view_colours(views)
+        else:
+            signatures, exchange = server.colours(views)
+            sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
+            network_ms += exchange.wall_ms - exchange.server_ms
+        merged, colours = _by_colour(merged, colour_signature(query.color, query.mask), signatures)
+    merged = merged[:k]
+    recognised = time.perf_counter()
     matches: list[QueryMatch] = []
+    by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
     if pose and server is not None and merged:  # the server has the meshes: it poses
-        poses, exchange = server.poses(query, [c for c, _ in merged], camera)
+        poses, exchange = server.poses(query, [c for c, _ in merged], camera,
+                                       [by_angle.get(angle) for _, angle in merged])
         sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
         pose_server_ms = exchange.server_ms
         network_ms += exchange.wall_ms - exchange.server_ms
         matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
-                              angle, *poses[rank - 1])
+                              angle, *poses[rank - 1], colour=colours.get(c.object))
                    for rank, (c, angle) in enumerate(merged, 1)]
     else:
         config = pose_config or PoseConfig()
         verify = rerank and pose and camera is not None
-        by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
         for rank, (c, angle) in enumerate(merged, 1):
             estimate, problem = None, None
             if pose:
@@ -495,7 +550,7 @@ def run_query(
                 except ViewDBError as exc:
                     problem = exc.message
             matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
-                                      c.mirrored, angle, estimate, problem))
+                                      c.mirrored, angle, estimate, problem, colours.get(c.object)))
         if verify:
             assert camera is not None
             matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)
@@ -506,7 +561,8 @@ def run_query(
         image=name, plan=plan, k=k, results=matches,
         timing_ms={
             "segment": (segmented - start) * 1e3, "client": client_ms, "server": server_ms,
-            "pose": (end - recognised) * 1e3, "total": (end - start) * 1e3, **remote,
+            "colour": (recognised - searched) * 1e3, "pose": (end - recognised) * 1e3,
+            "total": (end - start) * 1e3, **remote,
         },
         segmentation=seg.method,
         transfer={"bytes_sent": sent, "bytes_received": received, "round_trips": trips},

@@ -12,6 +12,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+from numpy.typing import NDArray
+
 from .pose import PoseEstimate, QueryView
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 
@@ -40,9 +43,19 @@ class ServerTier(Protocol):
         """CS2's neighbour walk."""
         ...
 
+    def colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
+        """The colour signatures (:func:`viewdb.colour.colour_signature`) of stored views
+        ``(object, azimuth, elevation)``, rendered from the server's meshes (None: the
+        object's mesh has no colour)."""
+        ...
+
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,
+        curves: Sequence[NDArray[np.float64] | None] | None = None,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
-        """``(pose, None)`` or ``(None, why not)`` per match, from the segmented query."""
+        """``(pose, None)`` or ``(None, why not)`` per match, from the segmented query
+        (and per match the query's curve at the turn that matched, or None)."""
         ...

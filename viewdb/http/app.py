@@ -7,6 +7,7 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
                   ``server`` plan's exact k-NN
 ``POST /walk``    CS2's server half (Algorithm 4)
 ``POST /pose``    the pose of given matches from the segmented query image
+``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
@@ -51,7 +52,7 @@ from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..query import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models
-from .wire import PoseReply, PoseRequest, decode_query
+from .wire import ColourReply, ColourRequest, PoseReply, PoseRequest, decode_query
 
 __all__ = ["DEFAULT_MAX_BODY", "DEFAULT_MAX_IMAGE_BODY", "app_from_env", "create_app"]
 
@@ -302,15 +303,26 @@ def create_app(
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
         query = _parse(lambda: decode_query(req.image))
-        poses, ms = await run(lambda db: pose_matches(db, query, req.matches, req.intrinsics))
+        poses, ms = await run(lambda db: pose_matches(db, query, req.matches, req.intrinsics,
+                                                          curves=req.curves))
         return PoseReply(poses, {"server_ms": ms}).to_dict()
+
+    @app.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
+              responses={200: {"model": models.ColourReplyModel}, **_ERRORS},
+              summary="Colour signatures of stored views, to re-rank results by colour")
+    async def colours(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: ColourRequest.from_dict(data))
+        signatures, ms = await run(lambda db: db.view_colours(req.views))
+        return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
             schema = get_openapi(title=app.title, version=app.version, description=app.description,
                                  routes=app.routes)
             components = schema.setdefault("components", {}).setdefault("schemas", {})
-            for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel):
+            for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
+                          models.ColourRequestModel):
                 doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
                 components.update(doc.pop("$defs", {}))
                 components[model.__name__] = doc

@@ -19,11 +19,13 @@ import urllib.parse
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from ..errors import QueryError, ServerError
 from ..pose import PoseEstimate, QueryView
 from ..remote import Exchange
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
-from .wire import PoseReply, PoseRequest
+from .wire import ColourReply, ColourRequest, PoseReply, PoseRequest
 
 __all__ = ["RemoteServer"]
 
@@ -148,14 +150,26 @@ class RemoteServer:
         reply, exchange = self.request("POST", "/walk", request.to_dict())
         return _parse_reply(ServerReply.from_dict, reply, self.url), exchange
 
+    def colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[np.ndarray | None], Exchange]:
+        if not views:
+            return [], Exchange(0, 0, 0.0, 0.0)
+        reply, exchange = self.request("POST", "/colours", ColourRequest(list(views)).to_dict())
+        signatures = _parse_reply(ColourReply.from_dict, reply, self.url).signatures
+        if len(signatures) != len(views):
+            raise ServerError(f"server sent {len(signatures)} colour signatures, not {len(views)}", self.url)
+        return signatures, exchange
+
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,
+        curves: Sequence[np.ndarray | None] | None = None,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         if not matches:
             return [], Exchange(0, 0, 0.0, 0.0)
-        reply, exchange = self.request("POST", "/pose",
-                                       PoseRequest.from_query(query, matches, intrinsics).to_dict())
+        reply, exchange = self.request(
+            "POST", "/pose", PoseRequest.from_query(query, matches, intrinsics, curves).to_dict())
         poses = _parse_reply(PoseReply.from_dict, reply, self.url).poses
         if len(poses) != len(matches):
             raise ServerError(f"server posed {len(poses)} matches, not {len(matches)}", self.url)

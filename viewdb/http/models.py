@@ -74,6 +74,9 @@ class PoseRequestModel(_Strict):
     intrinsics: list[float] | None = Field(
         default=None, min_length=4, max_length=4,
         description="fx, fy, cx, cy for a perspective (OpenCV-frame) pose; null: orthographic")
+    curves: list[list[float] | None] | None = Field(
+        default=None, description="per match, the query's distance curve at the in-plane turn that "
+                                  "matched (its nearest views add pose candidates), or null")
 
 
 class PoseModel(_Strict):
@@ -97,6 +100,25 @@ class PoseEntryModel(_Strict):
 
 class PoseReplyModel(_Strict):
     poses: list[PoseEntryModel]
+    stats: dict[str, float]
+
+
+class ColourViewModel(_Strict):
+    object: str
+    azimuth: float
+    elevation: float
+
+
+class ColourRequestModel(_Strict):
+    """The stored views whose colour signatures the client needs."""
+
+    views: list[ColourViewModel] = Field(min_length=1, max_length=MAX_K)
+
+
+class ColourReplyModel(_Strict):
+    signatures: list[list[float] | None] = Field(
+        description="per view, its rg chromaticity histogram (16 x 16, row by row, sums to 1); "
+                    "null when the object's mesh has no colour")
     stats: dict[str, float]
 
 

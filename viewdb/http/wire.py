@@ -24,12 +24,16 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from ..colour import BINS
 from ..errors import QueryError
 from ..pose import PoseEstimate, QueryView
 from ..query_image import MAX_PIXELS, MIN_SIDE
-from ..search.plans import MAX_K, Candidate, _candidates, _finite
+from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
 
-__all__ = ["PoseReply", "PoseRequest", "decode_query", "encode_query", "pose_from_dict", "pose_to_dict"]
+__all__ = [
+    "ColourReply", "ColourRequest", "PoseReply", "PoseRequest", "decode_query", "encode_query",
+    "pose_from_dict", "pose_to_dict",
+]
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -144,19 +148,26 @@ class PoseRequest:
     image: bytes = field(repr=False)
     matches: list[Candidate]
     intrinsics: tuple[float, float, float, float] | None = None
+    #: Per match, the query's distance curve at the in-plane turn that matched (its
+    #: nearest views add pose candidates, :data:`viewdb.query.NEAR_VIEWS`), or None.
+    curves: list[np.ndarray | None] | None = field(default=None, repr=False)
 
     @classmethod
     def from_query(
         cls, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,
+        curves: Sequence[np.ndarray | None] | None = None,
     ) -> PoseRequest:
         return cls(encode_query(query), list(matches), _intrinsics(
-            None if intrinsics is None else [float(v) for v in intrinsics]))
+            None if intrinsics is None else [float(v) for v in intrinsics]),
+            None if curves is None else list(curves))
 
     def to_dict(self) -> dict[str, Any]:
         return {"image": base64.b64encode(self.image).decode("ascii"),
                 "matches": [c.to_dict() for c in self.matches],
-                "intrinsics": None if self.intrinsics is None else list(self.intrinsics)}
+                "intrinsics": None if self.intrinsics is None else list(self.intrinsics),
+                "curves": None if self.curves is None else [
+                    None if c is None else [float(x) for x in c] for c in self.curves]}
 
     @classmethod
     def from_dict(cls, data: Any) -> PoseRequest:
@@ -173,7 +184,12 @@ class PoseRequest:
             matches = _candidates(data["matches"], MAX_K)
             if not matches:
                 raise QueryError("matches must not be empty")
-            return cls(raw, matches, _intrinsics(data.get("intrinsics")))
+            curves = data.get("curves")
+            if curves is not None:
+                if not isinstance(curves, list) or len(curves) != len(matches):
+                    raise QueryError("curves must be null or one per match")
+                curves = [None if c is None else _curve(c) for c in curves]
+            return cls(raw, matches, _intrinsics(data.get("intrinsics")), curves)
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -202,5 +218,66 @@ class PoseReply:
             if error is not None and not isinstance(error, str):
                 raise QueryError("pose error must be a string")
             out.append((None if pose is None else pose_from_dict(pose), error))
+        stats = data.get("stats", {})
+        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+
+
+@dataclass(frozen=True)
+class ColourRequest:
+    """Client → server: the views ``(object, azimuth, elevation)`` whose colour signatures
+    (:mod:`viewdb.colour`) the client needs to re-rank its results."""
+
+    views: list[tuple[str, float, float]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"views": [{"object": o, "azimuth": h, "elevation": v} for o, h, v in self.views]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ColourRequest:
+        if not isinstance(data, dict) or not isinstance(data.get("views"), list):
+            raise QueryError("request must be an object with a views list")
+        items = data["views"]
+        if not 1 <= len(items) <= MAX_K:
+            raise QueryError(f"views must hold 1 to {MAX_K} entries, not {len(items)}")
+        views = []
+        for item in items:
+            if not isinstance(item, dict) or not isinstance(item.get("object"), str):
+                raise QueryError("each view must be an object with an object name")
+            try:
+                views.append((item["object"], _finite(item["azimuth"], "azimuth"),
+                              _finite(item["elevation"], "elevation")))
+            except KeyError as exc:
+                raise QueryError(f"view lacks {exc.args[0]!r}") from exc
+        return cls(views)
+
+
+@dataclass(frozen=True)
+class ColourReply:
+    """Server → client: one colour signature (``BINS`` × ``BINS``, row by row) per view,
+    or None for an object whose mesh has no colour."""
+
+    signatures: list[np.ndarray | None]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"signatures": [None if s is None else [float(x) for x in np.asarray(s, np.float32).ravel()]
+                               for s in self.signatures],
+                "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ColourReply:
+        if not isinstance(data, dict) or not isinstance(data.get("signatures"), list):
+            raise QueryError("reply must be an object with a signatures list")
+        out: list[np.ndarray | None] = []
+        for item in data["signatures"]:
+            if item is None:
+                out.append(None)
+                continue
+            if not isinstance(item, list) or len(item) != BINS * BINS:
+                raise QueryError(f"each signature must be a list of {BINS * BINS} numbers")
+            values = np.array([_finite(x, "signature") for x in item], np.float32)
+            if (values < 0).any():
+                raise QueryError("signature values must not be negative")
+            out.append(values.reshape(BINS, BINS))
         stats = data.get("stats", {})
         return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})

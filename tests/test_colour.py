@@ -1,0 +1,181 @@
+"""Colour signatures and the colour re-ranking of query results (viewdb.colour)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import viewdb
+from tests.conftest import sample
+from viewdb.colour import carries_colour, colour_distance, colour_signature, has_colour, rerank
+from viewdb.config import BuildConfig, IndexConfig, RenderConfig
+from viewdb.http.wire import ColourReply, ColourRequest
+
+
+def patch(rgb: tuple[int, int, int], size: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    img = np.zeros((size, size, 3), np.uint8)
+    img[:] = rgb
+    mask = np.zeros((size, size), bool)
+    mask[8:-8, 8:-8] = True
+    return img, mask
+
+
+def test_a_signature_is_a_distribution_and_equal_colours_are_at_distance_zero():
+    img, mask = patch((200, 40, 30))
+    s = colour_signature(img, mask)
+    assert s.shape == (16, 16) and s.dtype == np.float32
+    assert s.sum() == pytest.approx(1.0, abs=1e-5) and (s >= 0).all()
+    assert colour_distance(s, colour_signature(img, mask)) == pytest.approx(0.0, abs=1e-6)
+    for primary in ((255, 0, 0), (0, 255, 0), (0, 0, 255)):  # the range's edges count
+        assert colour_signature(*patch(primary)).sum() == pytest.approx(1.0, abs=1e-5)
+
+
+def test_pixels_off_the_mask_do_not_count():
+    img, mask = patch((200, 40, 30))
+    other = img.copy()
+    other[~mask] = (20, 40, 220)  # a blue background around the same red object
+    assert colour_distance(colour_signature(img, mask), colour_signature(other, mask)) < 0.05
+
+
+@settings(max_examples=40, deadline=None)
+@given(hue=st.integers(0, 179), light=st.floats(0.45, 1.0))
+def test_darker_light_keeps_a_colour_and_another_hue_is_far(hue, light):
+    """Lightness is left out: the same paint under dimmer light stays close, while the
+    opposite hue (same saturation and value) is far."""
+    def paint(h: int, value: float) -> np.ndarray:
+        hsv = np.uint8([[[h, 230, round(255 * value)]]])
+        return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0, 0]
+
+    base, mask = patch(tuple(int(x) for x in paint(hue, 1.0)))
+    dim, _ = patch(tuple(int(x) for x in paint(hue, light)))
+    opposite, _ = patch(tuple(int(x) for x in paint((hue + 90) % 180, 1.0)))
+    s = colour_signature(base, mask)
+    near = colour_distance(s, colour_signature(dim, mask))
+    far = colour_distance(s, colour_signature(opposite, mask))
+    assert near < far and far > 0.6
+
+
+def test_an_empty_signature_shares_nothing():
+    img, mask = patch((10, 200, 10))
+    empty = colour_signature(img, np.zeros_like(mask))
+    assert not empty.any()
+    assert colour_distance(empty, colour_signature(img, mask)) == 1.0
+
+
+def test_grey_images_have_no_colour():
+    grey = np.dstack([np.tile(np.arange(64, dtype=np.uint8) * 4, (64, 1))] * 3)
+    assert not has_colour(grey)
+    assert not has_colour(grey[:, :, 0])
+    tinted = grey.copy()
+    tinted[20:40, 20:40] = (180, 60, 40)
+    assert has_colour(tinted)
+
+
+def test_colour_messages_round_trip_and_reject_bad_input():
+    views = [("mug", 30.0, -20.0), ("car", 0.0, 10.0)]
+    assert ColourRequest.from_dict(ColourRequest(views).to_dict()).views == views
+    sigs = [colour_signature(*patch((200, 40, 30))), colour_signature(*patch((30, 40, 200)))]
+    back = ColourReply.from_dict(ColourReply(sigs, {"server_ms": 1.0}).to_dict())
+    assert all(np.array_equal(a, b) for a, b in zip(back.signatures, sigs, strict=True))
+    for bad in ({}, {"views": []}, {"views": [{"object": "mug", "azimuth": "x", "elevation": 0}]},
+                {"views": [{"object": 3, "azimuth": 0, "elevation": 0}]},
+                {"views": [{"object": "mug", "azimuth": 0}]}):
+        with pytest.raises(viewdb.QueryError):
+            ColourRequest.from_dict(bad)
+    for bad in ({}, {"signatures": [[0.5] * 3]}, {"signatures": [[-1.0] * 256]},
+                {"signatures": [[float("nan")] * 256]}):
+        with pytest.raises(viewdb.QueryError):
+            ColourReply.from_dict(bad)
+
+
+# ------------------------------------------------------------------- re-ranking queries
+@pytest.fixture(scope="module")
+def twins_db(tmp_path_factory):
+    """The same bracket twice, painted red (``a_red``) and blue (``b_blue``): equal
+    outlines from every side, so only colour tells them apart."""
+    folder = tmp_path_factory.mktemp("twins")
+    paths = []
+    for name, rgba in (("a_red", (210, 30, 30, 255)), ("b_blue", (30, 60, 210, 255))):
+        mesh = trimesh.load(sample("l_bracket"), force="mesh")
+        mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=np.tile(rgba, (len(mesh.faces), 1)))
+        path = folder / f"{name}.ply"
+        mesh.export(path)
+        paths.append(path)
+    db_path = folder / "twins.db"
+    config = BuildConfig(gap=30, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=90))
+    with viewdb.open(db_path, config=config) as db:
+        report = db.ingest(paths)
+    assert not report.failed, report.failed
+    return db_path
+
+
+def _photo(db, name, h, v):
+    view = db.render(name, h, v)
+    img = np.full(view.color.shape, 170, np.uint8)
+    img[view.mask] = view.color[view.mask]
+    return img
+
+
+def test_colour_tells_apart_objects_of_the_same_shape(twins_db):
+    with viewdb.open(twins_db, read_only=True) as db:
+        img = _photo(db, "b_blue", 47, 22)
+        outline = db.query(img, k=2, rotations=4, pose=False, colour=False)
+        coloured = db.query(img, k=2, rotations=4, pose=False)
+    # by outline alone the twins tie, and the name breaks the tie: the wrong one first
+    assert [m.object for m in outline.results] == ["a_red", "b_blue"]
+    assert outline.results[0].distance == pytest.approx(outline.results[1].distance, rel=1e-6)
+    assert all(m.colour is None for m in outline.results)
+    # with colour the photographed one wins; distances stay the outline's
+    assert [m.object for m in coloured.results] == ["b_blue", "a_red"]
+    assert coloured.results[0].colour < 0.3 < coloured.results[1].colour
+    assert coloured.results[0].distance == pytest.approx(outline.results[1].distance)
+    assert coloured.results[0].score < coloured.results[1].score
+    assert coloured.timing_ms["colour"] > 0
+
+
+def test_a_grey_photo_is_ranked_by_outline_alone(twins_db):
+    with viewdb.open(twins_db, read_only=True) as db:
+        grey = cv2.cvtColor(cv2.cvtColor(_photo(db, "b_blue", 47, 22), cv2.COLOR_RGB2GRAY),
+                            cv2.COLOR_GRAY2RGB)
+        result = db.query(grey, k=2, rotations=4, pose=False)
+    assert [m.object for m in result.results] == ["a_red", "b_blue"]
+    assert all(m.colour is None for m in result.results)
+
+
+def test_k_one_still_re_ranks_among_the_pool(twins_db):
+    """With k = 1 the plan still finds the colour pool's objects, so the photographed
+    twin, second by outline, is the one answer."""
+    with viewdb.open(twins_db, read_only=True) as db:
+        result = db.query(_photo(db, "b_blue", 200, -30), k=1, rotations=4, pose=False)
+    assert [m.object for m in result.results] == ["b_blue"]
+
+
+def test_view_colours_of_an_unknown_object_is_a_clear_error(twins_db):
+    with viewdb.open(twins_db, read_only=True) as db, pytest.raises(viewdb.NotFound, match="nope"):
+        db.view_colours([("nope", 0.0, 0.0)])
+
+
+def test_a_result_without_colour_counts_as_the_pools_mean_mismatch():
+    red = colour_signature(*patch((210, 30, 30)))
+    blue = colour_signature(*patch((30, 60, 210)))
+    # outline distances 1.0, 1.1, 1.2: the red one matches, the blue one does not, the
+    # third has no colour and is scored with the mean of the two colour distances
+    order, colours = rerank([1.0, 1.1, 1.2], blue, [red, blue, None])
+    assert colours[2] is None and colours[1] == pytest.approx(0.0, abs=1e-6) and colours[0] > 0.9
+    neutral = (colours[0] + colours[1]) / 2
+    scores = [1.0 * (1 + colours[0]), 1.1 * (1 + colours[1]), 1.2 * (1 + neutral)]
+    assert order == sorted(range(3), key=lambda i: scores[i])
+    assert rerank([1.0, 0.5], blue, [None, None]) == ([0, 1], [None, None])
+
+
+def test_only_meshes_with_colour_of_their_own_carry_colour(twins_db, tiered_db):
+    with viewdb.open(twins_db, read_only=True) as db:
+        assert carries_colour(db.mesh("b_blue"))
+    with viewdb.open(tiered_db, read_only=True) as db:
+        assert not carries_colour(db.mesh("l_bracket"))  # an STL: no colour at all
+        assert db.view_colours([("l_bracket", 0.0, 0.0)]) == [None]
+        assert carries_colour(db.mesh("mug"))

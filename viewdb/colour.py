@@ -1,0 +1,130 @@
+"""Colour signatures: which colours an object shows, to tell apart equal outlines.
+
+A silhouette cannot tell an apple from a lemon, a bowl seen from below from an orange, or
+two boxes of the same size. Their colours can. A *colour signature* is the object's
+chromaticity histogram: each pixel's share of red and of green in its sum,
+``r = R / (R + G + B)`` and ``g = G / (R + G + B)``, in
+:data:`BINS` × :data:`BINS` bins over [0, 1], smoothed by one bin and normalised to sum 1.
+Chromaticity does not change when light scales all three channels alike, so the light's
+strength and the shading of a face matter little (pixels too dark to have a colour are
+left out); the pixels next to the outline are left out too, since they mix the object
+with the background.
+
+The query engine re-ranks its results by their outline distance times
+``1 + COLOUR_WEIGHT * colour distance`` (:func:`reranked_score`), where the colour
+distance is the Bhattacharyya distance between the photo's signature and that of the
+result's matched view, rendered from the mesh (0 = the same colours, 1 = none shared).
+A photo without colour (greyscale, or every pixel nearly neutral: :func:`has_colour`)
+is not re-ranked. A mesh whose file gives no colour (no texture, no vertex or face
+colours, only a neutral grey material: :func:`carries_colour`) has no signature: a grey
+render says nothing about the real object's paint, so such a result counts as mismatched
+as the pool's others on average (:func:`rerank`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
+    "reranked_score", "rerank",
+]
+
+#: Histogram bins per chromaticity channel (r and g, each over [0, 1]).
+BINS = 16
+#: How much a full colour mismatch (distance 1) lengthens the outline distance: × (1 + w).
+COLOUR_WEIGHT = 1.0
+#: A photo has colour when at least this share of its pixels are at least
+#: :data:`CHROMA_MIN` away from neutral grey in the a*b* plane.
+COLOURED_SHARE = 0.01
+CHROMA_MIN = 12.0
+#: Fewest object pixels (after leaving out the outline) a signature is made of.
+MIN_PIXELS = 20
+#: Pixels whose R + G + B is below this are too dark to have a colour (unless the
+#: object has too few others).
+DARK_SUM = 30
+#: Upper end of the histogram's range: just above 1, so that pure red (r = 1) counts.
+TOP = 1.0 + 1e-6
+
+
+def colour_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_]) -> NDArray[np.float32]:
+    """The chromaticity histogram (``BINS`` × ``BINS``, sums to 1) of ``rgb`` where ``mask``.
+
+    The outline's pixels and too dark ones are left out when enough pixels remain. An
+    empty mask gives an all-zero histogram (it shares no colour with anything).
+    """
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    if np.count_nonzero(inner) < MIN_PIXELS:
+        inner = np.asarray(mask, bool)
+    x = np.asarray(rgb[:, :, :3], np.float32)
+    total = x.sum(axis=2)
+    lit = inner & (total >= DARK_SUM)
+    if np.count_nonzero(lit) >= MIN_PIXELS:
+        inner = lit
+    chroma = np.ascontiguousarray(x[:, :, :2] / np.maximum(total, 1.0)[:, :, None])
+    hist = cv2.calcHist([chroma], [0, 1], inner.astype(np.uint8), [BINS, BINS], [0.0, TOP, 0.0, TOP])
+    hist = cv2.GaussianBlur(hist, (3, 3), 0)
+    mass = float(hist.sum())
+    return (hist / mass if mass > 0 else hist).astype(np.float32)
+
+
+def colour_distance(a: NDArray[np.float32], b: NDArray[np.float32]) -> float:
+    """Bhattacharyya distance of two signatures: 0 for equal ones, 1 for disjoint or empty."""
+    if not a.any() or not b.any():
+        return 1.0
+    return float(np.clip(cv2.compareHist(a, b, cv2.HISTCMP_BHATTACHARYYA), 0.0, 1.0))
+
+
+def has_colour(rgb: NDArray[np.uint8]) -> bool:
+    """Whether the image shows any colour (not greyscale or nearly so)."""
+    if rgb.ndim != 3 or rgb.shape[2] < 3:
+        return False
+    lab = cv2.cvtColor(np.ascontiguousarray(rgb[:, :, :3]), cv2.COLOR_RGB2LAB).astype(np.float32)
+    chroma = np.hypot(lab[:, :, 1] - 128.0, lab[:, :, 2] - 128.0)
+    return float(np.mean(chroma >= CHROMA_MIN)) >= COLOURED_SHARE
+
+
+def reranked_score(distance: float, colour: float, weight: float = COLOUR_WEIGHT) -> float:
+    """The outline distance lengthened by the colour mismatch: ``d × (1 + weight × colour)``."""
+    return distance * (1.0 + weight * colour)
+
+
+def carries_colour(mesh: Any) -> bool:
+    """Whether a normalised mesh (:class:`viewdb.mesh.NormalisedMesh`) has colour of its
+    own: a texture image, vertex or face colours, or a material colour that is not grey."""
+    for geometry in mesh.scene.geometry.values():
+        visual = geometry.visual
+        if visual.kind in ("vertex", "face"):
+            return True
+        material = getattr(visual, "material", None)
+        if material is None:
+            continue
+        if any(getattr(material, key, None) is not None for key in ("baseColorTexture", "image")):
+            return True
+        factor = getattr(material, "baseColorFactor", None)
+        if factor is not None and np.ptp(np.asarray(factor, np.float64)[:3]) > 0:
+            return True
+    return False
+
+
+def rerank(
+    distances: Sequence[float], query: NDArray[np.float32],
+    signatures: Sequence[NDArray[np.float32] | None],
+) -> tuple[list[int], list[float | None]]:
+    """The order of results (indices) by :func:`reranked_score`, ties kept in the given
+    order, and each one's colour distance (None: its mesh has no colour). A result
+    without a signature is scored with the mean colour distance of those with one; when
+    none has one the order is unchanged."""
+    colours = [None if s is None else colour_distance(query, s) for s in signatures]
+    known = [c for c in colours if c is not None]
+    if not known:
+        return list(range(len(distances))), colours
+    neutral = float(np.mean(known))
+    order = sorted(range(len(distances)), key=lambda i: (
+        reranked_score(distances[i], neutral if colours[i] is None else colours[i]), i))
+    return order, colours
