@@ -134,7 +134,7 @@ def main() -> None:
         r = np.array(ranks[run])
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
         print(f"{run:14s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
-              "(segmentation + 12 turns + colour, no pose)")
+              f"(segmentation + 12 turns{'' if run.endswith('+outline') else ' + colour'}, no pose)")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "

@@ -164,12 +164,13 @@ def test_a_result_without_colour_counts_as_the_pools_mean_mismatch():
     blue = colour_signature(*patch((30, 60, 210)))
     # outline distances 1.0, 1.1, 1.2: the red one matches, the blue one does not, the
     # third has no colour and is scored with the mean of the two colour distances
-    order, colours = rerank([1.0, 1.1, 1.2], blue, [red, blue, None])
+    order, colours, scores = rerank([1.0, 1.1, 1.2], blue, [red, blue, None])
     assert colours[2] is None and colours[1] == pytest.approx(0.0, abs=1e-6) and colours[0] > 0.9
     neutral = (colours[0] + colours[1]) / 2
-    scores = [1.0 * (1 + colours[0]), 1.1 * (1 + colours[1]), 1.2 * (1 + neutral)]
-    assert order == sorted(range(3), key=lambda i: scores[i])
-    assert rerank([1.0, 0.5], blue, [None, None]) == ([0, 1], [None, None])
+    expected = [1.0 * (1 + colours[0]), 1.1 * (1 + colours[1]), 1.2 * (1 + neutral)]
+    assert scores == pytest.approx(expected)
+    assert order == sorted(range(3), key=lambda i: expected[i])
+    assert rerank([1.0, 0.5], blue, [None, None]) == ([1, 0], [None, None], [1.0, 0.5])
 
 
 def test_only_meshes_with_colour_of_their_own_carry_colour(twins_db, tiered_db):

@@ -115,16 +115,14 @@ def carries_colour(mesh: Any) -> bool:
 def rerank(
     distances: Sequence[float], query: NDArray[np.float32],
     signatures: Sequence[NDArray[np.float32] | None],
-) -> tuple[list[int], list[float | None]]:
-    """The order of results (indices) by :func:`reranked_score`, ties kept in the given
-    order, and each one's colour distance (None: its mesh has no colour). A result
-    without a signature is scored with the mean colour distance of those with one; when
-    none has one the order is unchanged."""
+) -> tuple[list[int], list[float | None], list[float]]:
+    """The order of results (indices) by score, ties kept in the given order; each one's
+    colour distance (None: its mesh has no colour) and score (:func:`reranked_score`). A
+    result without a signature is scored with the mean colour distance of those with one;
+    when none has one the scores are the distances."""
     colours = [None if s is None else colour_distance(query, s) for s in signatures]
     known = [c for c in colours if c is not None]
-    if not known:
-        return list(range(len(distances))), colours
-    neutral = float(np.mean(known))
-    order = sorted(range(len(distances)), key=lambda i: (
-        reranked_score(distances[i], neutral if colours[i] is None else colours[i]), i))
-    return order, colours
+    neutral = float(np.mean(known)) if known else 0.0
+    scores = [reranked_score(d, neutral if c is None else c) for d, c in zip(distances, colours, strict=True)]
+    order = sorted(range(len(distances)), key=lambda i: (scores[i], i))
+    return order, colours, scores

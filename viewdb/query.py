@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .colour import colour_signature, has_colour, rerank, reranked_score
+from .colour import colour_signature, has_colour, rerank
 from .errors import FeatureError, ImageError, QueryError, ViewDBError
 from .features import distance_curve
 from .intrinsics import Intrinsics, parse_intrinsics
@@ -74,14 +74,17 @@ class QueryMatch:
     #: Why there is no pose (e.g. a client file without meshes), if there is none.
     pose_error: str | None = None
     #: Colour distance between the photo and the matched view (:mod:`viewdb.colour`),
-    #: None when the results were not re-ranked by colour.
+    #: None when the results were not re-ranked by colour or the mesh has no colour.
     colour: float | None = None
+    #: What the results are ranked by when re-ranked by colour
+    #: (:func:`viewdb.colour.rerank`); None: by ``distance`` alone.
+    colour_score: float | None = None
 
     @property
     def score(self) -> float:
         """What the results are ranked by: ``distance``, lengthened by the colour
-        mismatch when there is one (:func:`viewdb.colour.reranked_score`)."""
-        return self.distance if self.colour is None else reranked_score(self.distance, self.colour)
+        mismatch when they were re-ranked by colour."""
+        return self.distance if self.colour_score is None else self.colour_score
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -243,12 +246,12 @@ COLOUR_POOL = 5
 def _by_colour(
     merged: list[tuple[Candidate, float]], query: NDArray[np.float32],
     signatures: Sequence[NDArray[np.float32] | None],
-) -> tuple[list[tuple[Candidate, float]], dict[str, float]]:
-    """``merged`` re-ranked by colour (:func:`viewdb.colour.rerank`) and the colour
-    distance of each object that has one."""
-    order, colours = rerank([c.distance for c, _ in merged], query, signatures)
-    known = {c.object: d for (c, _), d in zip(merged, colours, strict=True) if d is not None}
-    return [merged[i] for i in order], known
+) -> tuple[list[tuple[Candidate, float]], dict[str, tuple[float | None, float]]]:
+    """``merged`` re-ranked by colour (:func:`viewdb.colour.rerank`), and each object's
+    colour distance (None: its mesh has no colour) and score."""
+    order, colours, scores = rerank([c.distance for c, _ in merged], query, signatures)
+    by_object = {c.object: (d, sc) for (c, _), d, sc in zip(merged, colours, scores, strict=True)}
+    return [merged[i] for i in order], by_object
 
 
 #: Besides the matched view's same-shape poses, those of the object's next nearest views
@@ -515,7 +518,7 @@ def run_query(
     merged = _merge(per_turn, pool)
     searched = time.perf_counter()
     query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
-    colours: dict[str, float] = {}
+    colours: dict[str, tuple[float | None, float]] = {}
     if recolour and merged:
         views = [(c.object, c.azimuth, c.elevation) for c, _ in merged]
         if server is None:
@@ -536,7 +539,7 @@ def run_query(
         pose_server_ms = exchange.server_ms
         network_ms += exchange.wall_ms - exchange.server_ms
         matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
-                              angle, *poses[rank - 1], colour=colours.get(c.object))
+                              angle, *poses[rank - 1], *colours.get(c.object, (None, None)))
                    for rank, (c, angle) in enumerate(merged, 1)]
     else:
         config = pose_config or PoseConfig()
@@ -550,7 +553,8 @@ def run_query(
                 except ViewDBError as exc:
                     problem = exc.message
             matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
-                                      c.mirrored, angle, estimate, problem, colours.get(c.object)))
+                                      c.mirrored, angle, estimate, problem,
+                                      *colours.get(c.object, (None, None))))
         if verify:
             assert camera is not None
             matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)
