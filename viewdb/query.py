@@ -9,6 +9,10 @@ all of them, remembering the turn that matched. Each turn is one search by the c
 plan (:meth:`viewdb.ViewDB.recognise`); CS1 stays exact per turn, so CS1 still equals the
 ``server`` plan.
 
+A photo with colour then has the plan's best :data:`COLOUR_POOL` objects re-ranked by
+outline distance times colour mismatch against each one's matched view
+(:mod:`viewdb.colour`), and the best k kept.
+
 For each of the top results the candidate same-shape poses of the matched view (the
 paper's eqs. 1–2) are fetched or regenerated from the mesh, and :mod:`viewdb.pose` picks
 the pose by SIFT (ratio test + RANSAC, then a full 6-DoF fit) or, for texture-less

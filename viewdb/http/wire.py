@@ -1,4 +1,5 @@
-"""The pose messages between a client and ``viewdb serve``, and the query image codec.
+"""The pose and colour messages between a client and ``viewdb serve``, and the query
+image codec.
 
 A client holds no meshes and no SIFT features, so it sends the server the query image
 already segmented: one lossless PNG whose alpha channel is the object mask (the server
