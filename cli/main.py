@@ -323,12 +323,13 @@ def query(
     out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
               f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
               f"server {t['server']:.0f}, colour {t['colour']:.0f}, pose {t['pose']:.0f}{network})")
-    table = Table("rank", "object", "distance", "colour", "view h/v", "pose h/v/in-plane", "method",
-                  "inliers")
+    table = Table("rank", "object", "distance", "colour", "score", "view h/v", "pose h/v/in-plane",
+                  "method", "inliers")
     for r in result.results:
         p = r.pose
         table.add_row(
             str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
+            f"{r.score:.3f}",
             f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}",
             f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
             p.method if p else "-", str(p.inliers) if p else "-",
