@@ -66,6 +66,10 @@ COLOUR_CACHE_VIEWS = 4096
 COLOUR_RENDER_SIZE = 96
 #: How many regenerated (pruned or off-grid) views a database keeps in memory.
 VIEW_CACHE_SIZE = 256
+#: How many renders (:meth:`ViewDB.render`, about 0.5 MB each) a database keeps: posing a
+#: result renders its candidate views, then walks off the grid around the best, and
+#: the walk's steps overlap.
+RENDER_CACHE_SIZE = 64
 #: How many objects' stored curves a database keeps in memory for CS2 walks.
 CURVE_CACHE_OBJECTS = 64
 
@@ -209,6 +213,7 @@ class ViewDB:
         self._role: str | None = None
         self._curves: OrderedDict[str, dict[tuple[float, float], NDArray[np.float32]]] = OrderedDict()
         self._colours: OrderedDict[tuple[str, float, float], NDArray[np.float32] | None] = OrderedDict()
+        self._renders: OrderedDict[tuple[str, float, float], RenderedView] = OrderedDict()
 
     @property
     def path(self) -> Path:
@@ -482,8 +487,9 @@ class ViewDB:
         for key in [k for k in self._colours if k[0] == name]:
             del self._colours[key]
         self._plans.pop(name, None)
-        for key in [k for k in self._regenerated if k[0] == name]:
-            del self._regenerated[key]
+        for cache in (self._regenerated, self._renders):
+            for key in [k for k in cache if k[0] == name]:
+                del cache[key]
 
     # ------------------------------------------------------------------ reading
     def _info(self, row: ObjectRow) -> ObjectInfo:
@@ -703,8 +709,20 @@ class ViewDB:
         return out
 
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
-        """Render any view of a stored object from the database alone."""
-        return get_renderer(self.config.render).render(self.mesh(name), azimuth, elevation)
+        """Render any view of a stored object from the database alone (the last
+        :data:`RENDER_CACHE_SIZE` are kept; their arrays are read-only)."""
+        key = (name, normalise_angle(azimuth), normalise_angle(elevation))
+        view = self._renders.get(key)
+        if view is not None:
+            self._renders.move_to_end(key)
+            return view
+        view = get_renderer(self.config.render).render(self.mesh(name), key[1], key[2])
+        for array in (view.color, view.mask, view.depth, view.pose):
+            array.setflags(write=False)
+        self._renders[key] = view
+        while len(self._renders) > RENDER_CACHE_SIZE:
+            self._renders.popitem(last=False)
+        return view
 
     def check(self, progress: Callable[[int, int], None] | None = None) -> CheckReport:
         """Verify the file (see :mod:`viewdb.storage.integrity`); findings are in the report."""

@@ -56,8 +56,9 @@ shaded render.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -170,6 +171,16 @@ class QueryView:
     #: Pixels that may hide the object (e.g. other labelled objects), bool (H, W) or None:
     #: the perspective silhouette fit leaves them out.
     ignore: NDArray[np.bool_] | None = field(default=None, repr=False)
+    #: What :func:`estimate_pose` derives from the query (SIFT features, outline, internal
+    #: edges), kept for its next calls: a query's results and their refinements are
+    #: posed against the same photo. So a QueryView's arrays must not change once used.
+    _derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key: Any, make: Callable[[], Any]) -> Any:
+        """``make()``, computed once per ``key`` for this query."""
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
 
 @dataclass(frozen=True, eq=False)
@@ -1040,10 +1051,14 @@ def estimate_pose(
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     extent = float(max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
 
-    keypoints, descriptors = extract_sift(color, mask, config.max_keypoints,
-                                          _sift_upscale(extent, candidates))
-    found = _sift_pose(_Query(keypoints, width, height, k_matrix), descriptors, candidates,
-                       extent, config)
+    found = None
+    if any(len(c.descriptors) for c in candidates):  # else nothing to match (e.g. refining)
+        upscale = _sift_upscale(extent, candidates)
+        keypoints, descriptors = query.derived(
+            ("sift", config.max_keypoints, upscale),
+            lambda: extract_sift(color, mask, config.max_keypoints, upscale))
+        found = _sift_pose(_Query(keypoints, width, height, k_matrix), descriptors, candidates,
+                           extent, config)
     if found is not None and found[1] >= config.min_inliers:
         hyp, support, ratio = found
         if k_matrix is None:
@@ -1054,15 +1069,16 @@ def estimate_pose(
             frame = "opencv"
         return PoseEstimate(h, v, a, hyp.scale, hyp.rotation, hyp.translation, "sift", support,
                             hyp.candidate, frame, ratio)
-    return _shape_pose(color, mask, candidates, config, k_matrix)
+    return _shape_pose(query, color, mask, candidates, config, k_matrix)
 
 
 def _shape_pose(
-    color: NDArray[np.uint8], mask: NDArray[np.bool_], candidates: Sequence[CandidateView],
-    config: PoseConfig, k_matrix: NDArray[np.float64] | None,
+    query: QueryView, color: NDArray[np.uint8], mask: NDArray[np.bool_],
+    candidates: Sequence[CandidateView], config: PoseConfig, k_matrix: NDArray[np.float64] | None,
 ) -> PoseEstimate:
     try:
-        outline = _outline(mask, config.contour_samples)
+        outline = query.derived(("outline", config.contour_samples),
+                                lambda: _outline(mask, config.contour_samples))
     except FeatureError as exc:
         raise PoseError(f"the query silhouette has no usable contour: {exc}") from exc
     hyps: list[tuple[float, int, _ShapeResult]] = []
@@ -1077,7 +1093,8 @@ def _shape_pose(
         raise PoseError("no candidate view has a silhouette to align the query with")
     hyps.sort(key=lambda x: x[0])  # stable: ties keep the candidates' order
     use_detail = config.detail_weight > 0 and all(candidates[i].color is not None for i in views)
-    query_detail = _QueryDetail(color, mask, outline.area) if use_detail else None
+    query_detail = (query.derived(("detail",), lambda: _QueryDetail(color, mask, outline.area))
+                    if use_detail else None)
     if query_detail is None or not query_detail.active:
         cost, index, res = hyps[0]
     else:
