@@ -254,6 +254,8 @@ def query(
     ] = 12,
     band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
     no_pose: Annotated[bool, typer.Option("--no-pose", help="Skip pose estimation.")] = False,
+    pose_top: Annotated[int | None, typer.Option(
+        help="Pose only the best N results (default: all k; about 0.4 s each).", min=0)] = None,
     intrinsics: Annotated[
         str | None, typer.Option(help="Camera intrinsics: fx,fy,cx,cy or a JSON/YAML file (fx, fy, cx, cy "
                                       "or a 3x3 K); the pose is then in that camera's OpenCV frame, "
@@ -301,7 +303,8 @@ def query(
                 viewdb.RemoteServer(server, token=token) as remote:
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                label_map=label_map, label=label, colour=not no_colour)
+                                label_map=label_map, label=label, colour=not no_colour,
+                                pose_top=pose_top)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -311,7 +314,7 @@ def query(
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
                                    label_map=label_map, label=label, rerank=rerank,
-                                   colour=not no_colour)
+                                   colour=not no_colour, pose_top=pose_top)
             finally:
                 if side is not None:
                     side.close()
@@ -430,7 +433,7 @@ def demo(
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     out.print(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
-          no_pose=False, intrinsics=None, label_map=None, label=None, rerank=False,
+          no_pose=False, pose_top=None, intrinsics=None, label_map=None, label=None, rerank=False,
           as_json=False)
 
 

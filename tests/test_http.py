@@ -82,17 +82,19 @@ def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote
     _, client_path = files
     with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
         # the mug and the car are coloured, the bracket grey (no colour re-ranking)
-        cases = [("mug", 47, 22, 30, "cs1", True, True), ("car", 200, 15, -40, "cs2", False, True),
-                 ("l_bracket", 120, 40, 10, "server", False, False)]
-        for name, h, v, turn, plan, pose, coloured in cases:
+        # (pose_top 1: the server poses the first result only)
+        cases = [("mug", 47, 22, 30, "cs1", True, True, None), ("car", 200, 15, -40, "cs2", True, True, 1),
+                 ("l_bracket", 120, 40, 10, "server", False, False, None)]
+        for name, h, v, turn, plan, pose, coloured, top in cases:
             img = photo(full, name, h, v, turn)
-            kw = dict(k=2, plan=plan, rotations=6, pose=pose)
+            kw = dict(k=2, plan=plan, rotations=6, pose=pose, pose_top=top)
             local = full.query(img, client=client if plan != "server" else None, **kw)
             there = client.query(img, server=remote, **kw)
             assert there.to_dict()["results"] == local.to_dict()["results"], plan
             assert len(there.results) == 2
             if pose:
                 assert there.results[0].pose is not None
+                assert (there.results[1].pose is None) == (top == 1)
             t, x = there.timing_ms, there.transfer
             # 6 turns, the colour signatures (a photo with colour), the pose
             assert any(m.colour is not None for m in there.results) == coloured

@@ -17,10 +17,12 @@ from viewdb.camera import camera_direction, camera_pose, grid_views, normalise_a
 from viewdb.errors import PoseError
 from viewdb.pose import (
     GL_TO_CV,
+    SHAPE_NEAR_WINDOW,
     CandidateView,
     PoseConfig,
     QueryView,
     estimate_pose,
+    inplane_angle,
     rotation_angle,
     rotation_to_view,
     rotation_z,
@@ -101,6 +103,11 @@ def test_inplane_angle_is_counter_clockwise_on_screen(alpha, h, v):
     np.testing.assert_allclose(pixels(view_rotation(h, v, alpha)), turned, atol=1e-9)
     np.testing.assert_allclose(view_rotation(h, v, alpha), rotation_z(alpha) @ view_rotation(h, v),
                                atol=1e-12)
+
+
+@given(st.floats(-179, 179), angles, angles)
+def test_inplane_angle_recovers_the_turn_of_a_view(alpha, h, v):
+    assert inplane_angle(view_rotation(h, v, alpha), h, v) == pytest.approx(alpha, abs=1e-6)
 
 
 def test_rotation_angle():
@@ -304,6 +311,23 @@ def test_shape_fallback_for_a_texture_less_query(pose_db, h0, v0):
     assert est.scale == pytest.approx(true_scale, rel=0.02)
     assert np.abs(est.translation - true_t).max() <= 0.02
     assert 0.9 < est.score <= 1.0
+
+
+@pytest.mark.parametrize("offset", [-12.0, 0.0, 9.0])
+def test_shape_fallback_near_a_known_turn(pose_db, offset):
+    """``inplane_near`` (refining a known pose) searches only near that turn: near the true
+    one it finds the same pose as the full search; 90° away it cannot reach it."""
+    query, (rot, _, _), _ = make_query(pose_db, "l_bracket", 30, 30, 37.3, 0.85, (5, -8))
+    cands = neighbourhood(pose_db, "l_bracket", 30, 30)
+    full = estimate_pose(flat(query), cands)
+    near = estimate_pose(flat(query), cands, inplane_near=37.3 + offset)
+    assert near.method == "shape" and near.candidate == full.candidate
+    assert rotation_angle(near.rotation, full.rotation) <= 0.6
+    far = estimate_pose(flat(query), cands, inplane_near=37.3 + 90.0)
+    reach = SHAPE_NEAR_WINDOW + PoseConfig().coarse_step  # the fine search's last step
+    assert angle_gap(inplane_angle(far.rotation, cands[far.candidate].azimuth,
+                                   cands[far.candidate].elevation), 37.3 + 90.0) <= reach + 1e-6
+    assert rotation_angle(far.rotation, rot) > 30.0
 
 
 @pytest.mark.parametrize(("h0", "v0"), [(30, 30), (120, 60), (240, 330)])

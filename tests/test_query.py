@@ -96,6 +96,26 @@ def test_query_json_has_the_contract_shape(query_db, tmp_path, capsys):
     assert set(data["timing_ms"]) >= {"segment", "client", "server", "pose", "total"}
 
 
+def test_pose_top_poses_only_the_best_results(query_db, tmp_path, capsys):
+    with viewdb.open(query_db, create=False) as db:
+        img, _ = photo(db, "car", 200, 15, -30, 0.9)
+        every = db.query(img, k=3)
+        top = db.query(img, k=3, pose_top=1)
+        assert [m.object for m in top.results] == [m.object for m in every.results]
+        assert all(m.pose is not None for m in every.results)
+        assert top.results[0].pose is not None and np.allclose(top.results[0].pose.rotation,
+                                                               every.results[0].pose.rotation)
+        assert [m.pose for m in top.results[1:]] == [None, None]
+        assert all(m.pose is None for m in db.query(img, k=3, pose_top=0).results)
+        with pytest.raises(viewdb.QueryError, match="pose_top"):
+            db.query(img, k=3, pose_top=-1)
+    path = tmp_path / "car.png"
+    cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+    assert main(["query", str(path), "--db", str(query_db), "-k", "2", "--pose-top", "1", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["results"][0]["pose"] is not None and data["results"][1]["pose"] is None
+
+
 @pytest.mark.parametrize("content, problem", [
     (b"", "empty"), (b"not an image at all", ""), (None, "no object"),
 ])

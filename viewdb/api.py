@@ -439,6 +439,7 @@ class ViewDB:
         label: int | None = None,
         rerank: bool = False,
         colour: bool = True,
+        pose_top: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
 
@@ -454,6 +455,8 @@ class ViewDB:
         by the IoU of their perspective silhouette fit. ``colour``: a photo with colour
         re-ranks the plan's best objects by how well their colours match too
         (:mod:`viewdb.colour`); ``colour=False`` ranks by outline alone, as the paper does.
+        ``pose_top``: pose only the best this many results (default all k; about 0.4 s
+        each).
 
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
@@ -464,7 +467,7 @@ class ViewDB:
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and (self.role == "full" or server is not None),
                          intrinsics=intrinsics, server=server, label_map=label_map, label=label,
-                         rerank=rerank, colour=colour)
+                         rerank=rerank, colour=colour, pose_top=pose_top)
 
     def estimate_pose(
         self,

@@ -78,6 +78,7 @@ __all__ = [
     "PoseEstimate",
     "QueryView",
     "estimate_pose",
+    "inplane_angle",
     "rotation_angle",
     "rotation_to_view",
     "rotation_z",
@@ -257,6 +258,13 @@ def view_rotation(azimuth: float, elevation: float, inplane: float = 0.0) -> NDA
     """Model-to-camera rotation ``R_z(α) · R_x(v) · R_y(−h)`` of view ``(h, v)`` turned by
     ``α`` counter-clockwise in the image; ``α = 0`` gives ``camera_pose(h, v)[:3, :3]ᵀ``."""
     return rotation_z(inplane) @ rotation_x(elevation) @ rotation_y(-azimuth)
+
+
+def inplane_angle(rotation: NDArray[np.float64], azimuth: float, elevation: float) -> float:
+    """The in-plane angle ``α`` (degrees) that best writes ``rotation`` (viewdb frame) as
+    ``view_rotation(azimuth, elevation, α)``: exact when the rotation views that direction."""
+    m = np.asarray(rotation, np.float64) @ view_rotation(azimuth, elevation).T
+    return math.degrees(math.atan2(m[1, 0], m[0, 0]))
 
 
 def _angle_gap(a: float, b: float) -> float:
@@ -755,6 +763,9 @@ def _chamfer(query: _Outline, view: _Outline, lam: float, angles: NDArray[np.flo
 #: turned (a square, a rectangle) the internal edges can choose the turn too.
 SHAPE_ANGLES = 4
 SHAPE_ANGLE_SLACK = 0.05
+#: Shape fallback near a known pose (``inplane_near``): the in-plane angles searched lie
+#: within this many degrees of it.
+SHAPE_NEAR_WINDOW = 15.0
 #: Shape fallback: the internal edges decide among the alignments whose outline distance
 #: is within this ratio (plus margin) of the best; an outline that fits clearly worse is
 #: not rescued by its edges (thin objects have few edges inside, and a candidate view far
@@ -793,19 +804,27 @@ def _similarity(query: _Outline, view: _Outline, lam: float, angle: float) -> ND
 
 
 def _align_shape(
-    query: _Outline, view: _Outline, cand: CandidateView, config: PoseConfig
+    query: _Outline, view: _Outline, cand: CandidateView, config: PoseConfig,
+    near: float | None = None,
 ) -> list[_ShapeResult]:
     """The in-plane alignments of a view's outline to the query's, best first: every local
     minimum of the coarse angle search within :data:`SHAPE_ANGLE_SLACK` of the best (at
-    most :data:`SHAPE_ANGLES`), each refined by the fine step."""
+    most :data:`SHAPE_ANGLES`), each refined by the fine step. With ``near``, only the
+    best angle within :data:`SHAPE_NEAR_WINDOW` of it."""
     lam = math.sqrt(query.area / view.area)
     norm = math.sqrt(query.area)
-    coarse = np.arange(0.0, 360.0, config.coarse_step)
-    cost = _chamfer(query, view, lam, coarse) / norm
-    minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
-    minima = minima[np.argsort(cost[minima], kind="stable")]
-    minima = minima[cost[minima] <= cost[minima[0]] + SHAPE_ANGLE_SLACK]
-    minima = minima[:SHAPE_ANGLES]
+    if near is None:
+        coarse = np.arange(0.0, 360.0, config.coarse_step)
+        cost = _chamfer(query, view, lam, coarse) / norm
+        minima = np.flatnonzero((cost <= np.roll(cost, 1)) & (cost <= np.roll(cost, -1)))
+        minima = minima[np.argsort(cost[minima], kind="stable")]
+        minima = minima[cost[minima] <= cost[minima[0]] + SHAPE_ANGLE_SLACK]
+        minima = minima[:SHAPE_ANGLES]
+    else:
+        half = math.floor(SHAPE_NEAR_WINDOW / config.coarse_step) * config.coarse_step
+        coarse = near + np.arange(-half, half + 1e-9, config.coarse_step)
+        cost = _chamfer(query, view, lam, coarse) / norm
+        minima = np.array([int(np.argmin(cost))])
     # refine every minimum in one batch of angles
     steps = np.arange(-config.coarse_step, config.coarse_step + 1e-9, config.fine_step)
     fine = (coarse[minima][:, None] + steps[None, :]).ravel()
@@ -999,6 +1018,8 @@ def estimate_pose(
     candidates: Sequence[CandidateView],
     config: PoseConfig | None = None,
     intrinsics: tuple[float, float, float, float] | None = None,
+    *,
+    inplane_near: float | None = None,
 ) -> PoseEstimate:
     """The pose of the object in ``query``, choosing among ``candidates``.
 
@@ -1028,6 +1049,10 @@ def estimate_pose(
     weighted by ``config.detail_weight``): silhouettes that agree (a chair from the front
     and from the back, the faces of a cube) are told apart by their creases, shading and
     texture. The best alignment gives the pose at that candidate's grid direction.
+    ``inplane_near`` (degrees, for refining a known pose over nearby views): the outline is
+    aligned only at in-plane angles within :data:`SHAPE_NEAR_WINDOW` of it, plus the fine
+    search's one coarse step (the angle of
+    ``R_z`` in ``rotation = R_z(angle) · view_rotation(h, v)`` of each candidate).
 
     Raises
     ------
@@ -1069,12 +1094,13 @@ def estimate_pose(
             frame = "opencv"
         return PoseEstimate(h, v, a, hyp.scale, hyp.rotation, hyp.translation, "sift", support,
                             hyp.candidate, frame, ratio)
-    return _shape_pose(query, color, mask, candidates, config, k_matrix)
+    return _shape_pose(query, color, mask, candidates, config, k_matrix, inplane_near)
 
 
 def _shape_pose(
     query: QueryView, color: NDArray[np.uint8], mask: NDArray[np.bool_],
     candidates: Sequence[CandidateView], config: PoseConfig, k_matrix: NDArray[np.float64] | None,
+    near: float | None = None,
 ) -> PoseEstimate:
     try:
         outline = query.derived(("outline", config.contour_samples),
@@ -1088,7 +1114,8 @@ def _shape_pose(
             views[index] = _outline(np.asarray(cand.mask, dtype=bool), config.contour_samples)
         except FeatureError:
             continue
-        hyps.extend((res.cost, index, res) for res in _align_shape(outline, views[index], cand, config))
+        hyps.extend((res.cost, index, res)
+                    for res in _align_shape(outline, views[index], cand, config, near))
     if not hyps:
         raise PoseError("no candidate view has a silhouette to align the query with")
     hyps.sort(key=lambda x: x[0])  # stable: ties keep the candidates' order
