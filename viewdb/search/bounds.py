@@ -75,6 +75,19 @@ permutation ``P`` of the samples ``LB_Keogh(L, U, P c) = LB_Keogh(P^-1 L, P^-1 U
 the mirror is an involution (``P^-1 = P``), so the mirrored bound is LB_Keogh of the
 stored curve against the *mirrored envelope* (:func:`group_bounds`).
 
+Segment means (LB_PAA)
+----------------------
+Split the samples into consecutive segments ``J`` of widths ``w_J``; let ``m_J`` be the
+mean of ``c`` over ``J`` and ``[L_J, U_J] = [min L, max U]`` over ``J``.  Then
+``LB_PAA^2 = sum_J w_J dist(m_J, [L_J, U_J])^2 <= LB_Keogh^2`` (Keogh et al., "Dimensionality
+reduction for fast similarity search", KAIS 3, 2001, for the envelope): for ``t`` in ``J``,
+``dist(c_t, [L_t, U_t]) >= dist(c_t, [L_J, U_J])``, and ``x -> dist(x, I)^2`` is convex, so
+by Jensen the mean of ``dist(c_t, [L_J, U_J])^2`` over ``J`` is at least
+``dist(m_J, [L_J, U_J])^2``.  It costs one term per segment instead of per sample, and is
+far tighter than ``Fourier_Dist`` (whose box relaxes the envelope globally): with 32
+segments of 128-sample curves it passes 3-18 % of the views that ``Fourier_Dist`` passes
+at a query's 5th distance.  Mirrored views use the mirrored envelope, as for LB_Keogh.
+
 Group bounds
 ------------
 A group's curves lie in their per-sample range ``[glo, ghi]`` (a box in the curve space,
@@ -117,11 +130,18 @@ __all__ = [
     "lb_keogh_many",
     "lb_keogh_reverse",
     "lb_kim",
+    "lb_paa",
     "mindist",
     "mindist_many",
     "mirror_box",
     "mirror_coordinates",
+    "paa_edges",
+    "paa_envelope",
+    "paa_means",
 ]
+
+#: Segments of the LB_PAA bound (fewer when a curve has fewer samples).
+PAA_SEGMENTS = 32
 
 
 # ---------------------------------------------------------------------------------------
@@ -212,6 +232,24 @@ def _fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
         p = coords[row, j]
         e = max(lo[j] - p, 0.0) + max(p - hi[j], 0.0)
         s += e * e
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _lb_paa2(means, row, lo, hi, widths, limit2):  # pragma: no cover - compiled
+    # squared LB_PAA of the segment means ``means[row]`` against the segment envelope
+    # [lo, hi], abandoned (some value > limit2) as soon as it passes ``limit2``
+    s = 0.0
+    for j in range(means.shape[1]):
+        x = means[row, j]
+        if x > hi[j]:
+            e = x - hi[j]
+            s += widths[j] * e * e
+        elif x < lo[j]:
+            e = lo[j] - x
+            s += widths[j] * e * e
+        if s > limit2:
+            return s
     return s
 
 
@@ -540,6 +578,48 @@ def lb_keogh_many(L: np.ndarray, U: np.ndarray, C: np.ndarray) -> NDArray[np.flo
         raise ValueError("envelope must have L <= U")
     d = np.maximum(Ca - Ua, 0.0) + np.maximum(La - Ca, 0.0)
     return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
+def paa_edges(n: int, segments: int = PAA_SEGMENTS) -> NDArray[np.int64]:
+    """Boundaries ``(S + 1,)`` of ``S = min(segments, n)`` near-equal consecutive segments
+    of ``n`` samples (first 0, last ``n``)."""
+    if n < 1 or segments < 1:
+        raise ValueError(f"need n >= 1 and segments >= 1, got {n}, {segments}")
+    s = min(segments, n)
+    return np.round(np.linspace(0, n, s + 1)).astype(np.int64)
+
+
+def paa_means(curves: np.ndarray, edges: np.ndarray) -> NDArray[np.float64]:
+    """Each curve's mean over each segment: ``(V, N)`` (or ``(N,)``) → ``(V, S)`` float64."""
+    c = np.asarray(curves, dtype=np.float64)
+    flat = c.ndim == 1
+    c = c[None, :] if flat else c
+    e = np.asarray(edges, dtype=np.int64)
+    out = np.add.reduceat(c, e[:-1], axis=1) / np.diff(e)
+    return out[0] if flat else np.ascontiguousarray(out)
+
+
+def paa_envelope(
+    L: np.ndarray, U: np.ndarray, edges: np.ndarray
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The envelope's range over each segment and the segment widths: ``(lo, hi, widths)``,
+    each ``(S,)`` (``lo_J = min L``, ``hi_J = max U`` over segment ``J``)."""
+    La, Ua = _seq(L, "L"), _seq(U, "U")
+    _same_shape(("L", La), ("U", Ua))
+    e = np.asarray(edges, dtype=np.int64)
+    if e[0] != 0 or e[-1] != len(La) or np.any(np.diff(e) < 1):
+        raise ValueError(f"edges must rise from 0 to {len(La)}")
+    return (np.minimum.reduceat(La, e[:-1]), np.maximum.reduceat(Ua, e[:-1]),
+            np.diff(e).astype(np.float64))
+
+
+def lb_paa(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray, means: np.ndarray) -> float:
+    """LB_PAA (module doc): a lower bound of ``LB_Keogh(L, U, c)`` from ``c``'s segment
+    means and :func:`paa_envelope` ``(lo, hi, widths)``."""
+    m = _seq(means, "means")
+    lo_a, hi_a, w = _seq(lo, "lo"), _seq(hi, "hi"), _seq(widths, "widths")
+    _same_shape(("lo", lo_a), ("hi", hi_a), ("widths", w), ("means", m))
+    return math.sqrt(_lb_paa2(m.reshape(1, -1), 0, lo_a, hi_a, w, np.inf))
 
 
 def lb_keogh_reverse(q: np.ndarray, c: np.ndarray, r: int) -> float:

@@ -45,6 +45,9 @@ from .bounds import (
     envelope_box,
     fourier_coordinates,
     mirror_box,
+    paa_edges,
+    paa_envelope,
+    paa_means,
 )
 from .grouping import INDEXED_COEFFICIENTS, group_points, indexed_coordinates, indexed_rows, padded_mbr
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, WIDEN_ABS, WIDEN_REL, refine_groups
@@ -103,6 +106,10 @@ class QueryBoxes:
     mirrored_upper: NDArray[np.float64]
     box: tuple[NDArray[np.float64], NDArray[np.float64]]
     mirrored_box: tuple[NDArray[np.float64], NDArray[np.float64]]
+    #: The envelope's (and mirrored envelope's) range per segment and the segment widths
+    #: (:func:`~viewdb.search.bounds.paa_envelope`, segments :func:`paa_edges` of N).
+    segments: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+    mirrored_segments: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
     @classmethod
     def of(cls, curve: NDArray[np.floating], band: int) -> QueryBoxes:
@@ -112,8 +119,11 @@ class QueryBoxes:
         lo, hi = envelope_box(lower, upper, fourier_coordinates(m, len(q)))
         mlo, mhi = mirror_box(lo, hi)
         rows = indexed_rows(m)
-        return cls(q, band, lower, upper, mirror_curve(lower), mirror_curve(upper),
-                   (lo[rows], hi[rows]), (mlo[rows], mhi[rows]))
+        mlower, mupper = mirror_curve(lower), mirror_curve(upper)
+        edges = paa_edges(len(q))
+        return cls(q, band, lower, upper, mlower, mupper,
+                   (lo[rows], hi[rows]), (mlo[rows], mhi[rows]),
+                   paa_envelope(lower, upper, edges), paa_envelope(mlower, mupper, edges))
 
     def group_keys(
         self, lo: NDArray[np.float64], hi: NDArray[np.float64],
@@ -156,9 +166,12 @@ class TierSource(Protocol):
         whose MINDIST is ``<= radius``, except those marked in ``seen``."""
         ...
 
-    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.floating], NDArray[np.float64]]:
-        """The curves ``(V, N)`` and indexed coordinates ``(V, d)`` of the tier's views; the
-        rows of ``groups`` are filled in (others may not be)."""
+    def rows(
+        self, groups: NDArray[np.int64]
+    ) -> tuple[NDArray[np.floating], NDArray[np.float64], NDArray[np.float64]]:
+        """The curves ``(V, N)``, indexed coordinates ``(V, d)`` and segment means ``(V, S)``
+        (:func:`~viewdb.search.bounds.paa_means` over :func:`paa_edges` of N) of the tier's
+        views; the rows of ``groups`` are filled in (others may not be)."""
         ...
 
     def view_id(self, row: int) -> int: ...
@@ -218,6 +231,7 @@ class TierArrays:
         self.row_owner = np.ascontiguousarray(self.owner[self._rows])
         self._curves = np.ascontiguousarray(self.curves[self._rows])
         self._coords = np.ascontiguousarray(coords[self._rows])
+        self._means = paa_means(self._curves, paa_edges(n)) if len(self._curves) else np.zeros((0, 1))
 
     @property
     def n_groups(self) -> int:
@@ -234,8 +248,10 @@ class TierArrays:
         hits = np.flatnonzero((mind <= radius) & ~seen).astype(np.int64)
         return hits, keys[hits]
 
-    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return self._curves, self._coords
+    def rows(
+        self, groups: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        return self._curves, self._coords, self._means
 
     def view_id(self, row: int) -> int:
         return int(self._rows[row])
@@ -331,12 +347,13 @@ def knn(
             end = min(len(order), max(ready, pos) + CHUNK)
             source.rows(order[ready:end])
             ready = end
-        curves, coords = source.rows(order[:0])
+        curves, coords, means = source.rows(order[:0])
         pos, status = refine_groups(
             qb.curve, r, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
+            qb.segments, qb.mirrored_segments,
             order, keys, pos, ready, math.inf if exhausted else radius,
             source.group_start, source.group_count, source.group_owner, source.row_owner,
-            curves, coords, bound, exact, exact_row, exact_mirrored, k, cap, counters, heap,
+            curves, coords, means, bound, exact, exact_row, exact_mirrored, k, cap, counters, heap,
         )
         if status == DONE:
             break

@@ -4,8 +4,9 @@
 so a search costs no Python per view. One min-priority queue (an array heap that
 persists between calls) holds
 
-* **Fourier points** of a view or of its mirror, keyed by ``max(Fourier_Dist, group
-  key)`` (both bound the exact distance of the view from below);
+* **Fourier points** of a view or of its mirror, keyed by ``max(Fourier_Dist, LB_PAA,
+  group key)`` (each bounds the exact distance of the view from below; LB_PAA, over the
+  view's segment means, is computed only when Fourier_Dist is under the limit);
 * **curves**, keyed by their LB_Keogh (computed when the point reaches the top, and
   abandoned as soon as it passes the current limit);
 
@@ -45,7 +46,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .bounds import _cascade_env_kernel, _dtw_kernel, _fourier_dist2, _lb_keogh2
+from .bounds import _cascade_env_kernel, _dtw_kernel, _fourier_dist2, _lb_keogh2, _lb_paa2
 
 __all__ = ["DONE", "EXHAUSTED", "NEED", "RADIUS", "WIDEN_ABS", "WIDEN_REL", "refine_groups", "scan_all"]
 
@@ -125,9 +126,9 @@ def _heap_pop(hkey, hcode, size):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _refine_kernel(  # pragma: no cover - compiled
-    q, r, lower, upper, mlower, mupper, blo, bhi, mblo, mbhi,
+    q, r, lower, upper, mlower, mupper, blo, bhi, mblo, mbhi, plo, phi, mplo, mphi, pwidth,
     order, keys, start_at, ready, stop_key,
-    group_start, group_count, group_owner, row_owner, curves, coords,
+    group_start, group_count, group_owner, row_owner, curves, coords, means,
     bound, exact, exact_row, exact_mirrored, k, cap, stats, hkey, hcode, hsize,
 ):
     n_samples = q.shape[0]
@@ -211,16 +212,20 @@ def _refine_kernel(  # pragma: no cover - compiled
             fd = _fourier_dist2(coords, row, mblo if mirrored else blo, mbhi if mirrored else bhi)
             if fd > limit2:
                 continue
+            pd = _lb_paa2(means, row, mplo if mirrored else plo, mphi if mirrored else phi, pwidth, limit2)
+            if pd > limit2:
+                continue
             # a point's key is at least its group's (both bound every view of the group)
-            size = _heap_push(hkey, hcode, size, max(math.sqrt(fd), gk), 4 * row + (1 if mirrored else 0))
+            size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), gk),
+                              4 * row + (1 if mirrored else 0))
     hsize[0] = size
     return i, status
 
 
 def refine_groups(
-    q, r, envelope, mirrored_envelope, box, mirrored_box,
+    q, r, envelope, mirrored_envelope, box, mirrored_box, segments, mirrored_segments,
     order, keys, start_at, ready, stop_key,
-    group_start, group_count, group_owner, row_owner, curves, coords,
+    group_start, group_count, group_owner, row_owner, curves, coords, means,
     bound, exact, exact_row, exact_mirrored, k, cap, stats, heap,
 ) -> tuple[int, int]:
     """Algorithm 2's refinement: pop views in the order of their keys, opening candidate
@@ -238,13 +243,17 @@ def refine_groups(
     known) + mirrored``.
     Updates ``bound``, ``exact``, ``exact_row``, ``exact_mirrored`` (per object, module
     doc) and ``stats`` (groups, views, LB_Keogh, DTW) in place. Group ``g`` holds rows
-    ``group_start[g] : group_start[g] + group_count[g]`` of ``curves`` (float32 or float64)
-    and ``coords``; ``row_owner`` is each row's object. Inputs are trusted.
+    ``group_start[g] : group_start[g] + group_count[g]`` of ``curves`` (float32 or float64),
+    ``coords`` and ``means`` (segment means, against ``segments`` / ``mirrored_segments``:
+    ``(lo, hi, widths)`` of :func:`~viewdb.search.bounds.paa_envelope`); ``row_owner`` is
+    each row's object. Inputs are trusted.
     """
     i, status = _refine_kernel(
         q, r, envelope[0], envelope[1], mirrored_envelope[0], mirrored_envelope[1],
-        box[0], box[1], mirrored_box[0], mirrored_box[1], order, keys, start_at, ready,
-        stop_key, group_start, group_count, group_owner, row_owner, curves, coords,
+        box[0], box[1], mirrored_box[0], mirrored_box[1],
+        segments[0], segments[1], mirrored_segments[0], mirrored_segments[1], segments[2],
+        order, keys, start_at, ready,
+        stop_key, group_start, group_count, group_owner, row_owner, curves, coords, means,
         bound, exact, exact_row, exact_mirrored, k, cap, stats, heap[0], heap[1], heap[2],
     )
     return int(i), int(status)

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from ..config import BuildConfig
 from ..errors import QueryError, StorageError
+from ..search.bounds import paa_edges, paa_means
 from ..search.grouping import (
     DIMENSION,
     group_points,
@@ -164,6 +165,8 @@ class StoredTier:
         # curves and coordinates of every view, filled in group by group as searches need them
         self._curves = np.empty((len(self._views), samples), dtype=np.float32)
         self._coords = np.empty((len(self._views), DIMENSION), dtype=np.float64)
+        self._edges = paa_edges(max(samples, 1))
+        self._means = np.empty((len(self._views), len(self._edges) - 1), dtype=np.float64)
         self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
         names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
         self._names = [names[int(i)] for i in object_ids]
@@ -184,7 +187,9 @@ class StoredTier:
         _, keys = query.group_keys(self._lo, self._hi, self._curve_lo, self._curve_hi, at)
         return at, keys
 
-    def rows(self, groups: NDArray[np.int64]) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    def rows(
+        self, groups: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
         missing = groups[~self._loaded[groups]]
         for start in range(0, len(missing), 900):  # SQLite caps the variables of one statement
             chunk = missing[start : start + 900]
@@ -198,8 +203,9 @@ class StoredTier:
                 curves = decode_array(blob, np.float32, (n, self._curves.shape[1]))
                 self._curves[a : a + n] = curves
                 self._coords[a : a + n] = indexed_coordinates(curves)
+                self._means[a : a + n] = paa_means(curves, self._edges)
                 self._loaded[g] = True
-        return self._curves, self._coords
+        return self._curves, self._coords, self._means
 
     def view_id(self, row: int) -> int:
         return int(self._views[row])
