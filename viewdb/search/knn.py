@@ -278,6 +278,7 @@ def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: in
 
 #: Groups made ready (read from the file if need be) per call of the compiled refinement.
 CHUNK = 32
+MAX_CHUNK = 1024
 
 
 def knn(
@@ -322,6 +323,7 @@ def knn(
     order = np.zeros(0, dtype=np.int64)
     keys = np.zeros(0, dtype=np.float64)
     pos = ready = 0
+    chunk = CHUNK
     radius = -math.inf
     exhausted = source.n_groups == 0
     status = EXHAUSTED
@@ -332,8 +334,10 @@ def knn(
             # browse further: every group within the (grown) radius joins the candidates
             smallest = min(float(keys[pos]) if pos < len(keys) else math.inf,
                            float(heap[0][0]) if heap[2][0] else math.inf)
+            # a known bound (a CS1 client's, earlier turns') is the radius at once: one
+            # browse lists every group that may matter, instead of doubling up to it
             radius = min(max(2.0 * radius, smallest if math.isfinite(smallest) else 0.0,
-                             initial_radius), cap)
+                             initial_radius, cap if math.isfinite(cap) else -math.inf), cap)
             stats.expansions += 1
             found, found_keys = source.groups_within(qb, radius, seen)
             seen[found] = True
@@ -344,10 +348,12 @@ def knn(
             order, keys, pos, ready = order[by_key], keys[by_key], 0, 0
             exhausted = bool(seen.all()) or radius >= cap
         if ready < len(order) and (status == NEED or ready <= pos):
-            end = min(len(order), max(ready, pos) + CHUNK)
-            source.rows(order[ready:end])
-            ready = end
-        curves, coords, means = source.rows(order[:0])
+            # chunks double while a search goes on (read rows stay loaded for the next)
+            end = min(len(order), max(ready, pos) + chunk)
+            curves, coords, means = source.rows(order[ready:end])
+            ready, chunk = end, min(2 * chunk, MAX_CHUNK)
+        else:
+            curves, coords, means = source.rows(order[:0])
         pos, status = refine_groups(
             qb.curve, r, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
             qb.segments, qb.mirrored_segments,
