@@ -6,7 +6,9 @@ the dynamic time warping distance between the query curve ``q`` and a stored cur
 
     MINDIST(box, MBR)  <=  Fourier_Dist(box, F c)  <=  LB_Keogh(L, U, c)  <=  DTW_r(q, c)
 
-for every MBR containing the candidate's coordinates ``F c``.  The bounds follow
+for every MBR containing the candidate's coordinates ``F c``; and next to Fourier_Dist,
+``LB_PAA <= LB_Keogh`` over the curve's segment means (section below), so the search keys
+a view by the larger of the two.  The bounds follow
 Keogh & Ratanamahatana, "Exact indexing of dynamic time warping", KAIS 7, 2005
 (LB_Keogh, the envelope, MINDIST) and Zhu & Shasha, "Warping indexes with envelope
 transforms for query by humming", SIGMOD 2003 (the *envelope transform*: the box of
