@@ -65,6 +65,22 @@ def test_reingest_is_a_noop_and_a_changed_file_replaces(tmp_path):
         assert db.objects()[0].content_hash != first.content_hash
 
 
+def test_renders_are_kept_read_only_and_forgotten_when_their_object_is_replaced(tmp_path):
+    src = tmp_path / "shape.off"
+    shutil.copy(sample("cone"), src)
+    path = tmp_path / "db.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        db.ingest([src])
+        first = db.render("shape", 30, 20)
+        assert db.render("shape", 390, 20) is first  # the same view, kept
+        with pytest.raises(ValueError):
+            first.mask[0, 0] = True  # shared, so read-only
+        shutil.copy(sample("pyramid"), src)  # another mesh under the same name
+        assert db.ingest([src]).counts()["replaced"] == 1
+        again = db.render("shape", 30, 20)
+        assert again is not first and (again.mask != first.mask).any()
+
+
 def test_a_bad_file_fails_alone_and_the_rest_go_in(tmp_path):
     bad = tmp_path / "broken.obj"
     bad.write_text("this is not an obj file\nf 1 2 3\n")
