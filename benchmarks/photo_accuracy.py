@@ -1,7 +1,7 @@
 """Recognition and pose accuracy on synthetic photographs, per plan (issue 5's benchmark).
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
-                                           [--pose-photos 20] [--true-mask] [--outline]
+                                           [--pose-photos 20] [--pnp] [--true-mask] [--outline]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
 perspective camera, with random lighting, a plain random background, pixel noise and
@@ -16,7 +16,10 @@ first N photos of **textured, asymmetric** objects (symmetry type with no genera
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
 between the true and the estimated camera directions) and the median full rotation error
-(the upright camera makes the true in-plane angle 0), with the pose's method and time.
+(the upright camera makes the true in-plane angle 0), with the pose's method and time;
+``--pnp`` poses them again with the camera's intrinsics (the SIFT pose by PnP, or the
+perspective silhouette fit for texture-less views) and reports the median rotation error
+and the translation error as a share of the camera's distance.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import viewdb
 from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 from viewdb.camera import camera_pose
 from viewdb.gl import pyrender_module
-from viewdb.pose import rotation_angle, view_rotation
+from viewdb.pose import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.render import _offscreen, pyrender_mesh
 
 
@@ -51,6 +54,27 @@ def true_mask(mesh, spec: PhotoSpec) -> np.ndarray:
     scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
     flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
     return np.asarray(_offscreen(spec.image_size).render(scene, flags=flags)) > 0
+
+
+def pnp_pose(db, photo: np.ndarray, spec: PhotoSpec) -> tuple[float, float, str, str, float]:
+    """The top result's pose with the photo's intrinsics (OpenCV frame, mesh units):
+    ``(rotation error deg, translation error % of the camera distance, method, why not,
+    seconds)``, NaN errors when the top result is wrong or has no pose."""
+    size = spec.image_size
+    f = size / 2.0 / math.tan(math.radians(spec.fov) / 2.0)
+    c = (size - 1) / 2.0  # OpenCV pixel centres on integers
+    start = time.perf_counter()
+    result = db.query(photo, k=1, plan="server", intrinsics=(f, f, c, c))
+    seconds = time.perf_counter() - start
+    top = result.results[0] if result.results else None
+    if top is None or top.object != spec.object or top.pose is None:
+        return math.nan, math.nan, "", "pnp: top result wrong or no pose", seconds
+    p, info = top.pose, db.object(spec.object)
+    truth = GL_TO_CV @ view_rotation(spec.azimuth, spec.elevation, 0.0)
+    # back to normalised units (mesh = centre + scale * normalised): t_n = (t + R c) / scale
+    t_n = (np.asarray(p.translation) + np.asarray(p.rotation) @ np.asarray(info.centre)) / info.scale
+    t_err = float(np.linalg.norm(t_n - np.array([0.0, 0.0, spec.distance])) / spec.distance * 100.0)
+    return rotation_angle(p.rotation, truth), t_err, p.method, "", seconds
 
 
 def textured(mesh) -> bool:
@@ -73,6 +97,9 @@ def main() -> None:
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--plans", default="server,cs1,cs2")
     parser.add_argument("--true-mask", action="store_true", help="also query with the exact silhouette")
+    parser.add_argument("--pnp", action="store_true",
+                        help="also pose the pose photos with the camera's intrinsics (PnP, or the "
+                             "perspective silhouette fit): full rotation and translation errors")
     parser.add_argument("--outline", action="store_true",
                         help="also query without the colour re-ranking (outline alone, the paper's way)")
     args = parser.parse_args()
@@ -85,6 +112,7 @@ def main() -> None:
     ranks = {p: [] for p in runs}
     times = {p: [] for p in runs}
     pose_rows = []
+    pnp_rows: list[tuple[float, float, str, str, float]] = []
     eligible: dict[str, bool] = {}
     for i in range(args.photos):
         name = names[rng.integers(len(names))]
@@ -128,6 +156,11 @@ def main() -> None:
                 pose_rows.append((name, math.nan, math.nan, "not recognised" if top is None
                                   or top.object != name else "no pose", seconds))
                 line.append("pose: top result wrong or no pose")
+            if args.pnp:
+                pnp_rows.append(pnp_pose(db, photo, spec))
+                line.append(pnp_rows[-1][3] if math.isnan(pnp_rows[-1][0]) else
+                            f"pnp {pnp_rows[-1][2]} rotation {pnp_rows[-1][0]:.1f} deg, "
+                            f"translation {pnp_rows[-1][1]:.1f} %, {pnp_rows[-1][4]:.1f} s")
         print("  ".join(line), flush=True)
     print(f"\n{args.photos} photos, {len(names)} objects, seed {args.seed}, k = {args.k}")
     for run in runs:
@@ -142,6 +175,13 @@ def main() -> None:
               f"median rotation error {np.median([r[2] for r in ok]) if ok else math.nan:.1f} deg; "
               f"methods {sorted({r[3] for r in pose_rows})}; "
               f"median query with pose {np.median([r[4] for r in pose_rows]) * 1e3:.0f} ms")
+    if pnp_rows:
+        ok = [row for row in pnp_rows if not math.isnan(row[0])]
+        print(f"pose with intrinsics: {len(ok)}/{len(pnp_rows)} top-1 right with a pose; "
+              f"median rotation error {np.median([r[0] for r in ok]) if ok else math.nan:.1f} deg, "
+              f"median translation error {np.median([r[1] for r in ok]) if ok else math.nan:.1f} % "
+              f"of the camera distance; methods {sorted({r[2] for r in ok})}; "
+              f"median query {np.median([r[4] for r in pnp_rows]):.1f} s")
 
 
 if __name__ == "__main__":
