@@ -11,6 +11,7 @@ the shape) raises :class:`~viewdb.errors.StorageError` instead of returning garb
 
 from __future__ import annotations
 
+import math
 import struct
 
 import numpy as np
@@ -87,7 +88,7 @@ def decode_array(
         raise StorageError("array blob truncated in its shape")
     dims = struct.unpack_from(f"<{ndim}I", buf, _HEADER.size)
     dt = DTYPE_CODES[code]
-    expected = int(np.prod(dims, dtype=np.int64)) * dt.itemsize
+    expected = math.prod(dims) * dt.itemsize  # exact; np.prod costs ~6 µs a call
     if len(buf) - offset != expected:
         raise StorageError(
             f"array blob holds {len(buf) - offset} data bytes, shape {dims} needs {expected}"
