@@ -6,7 +6,8 @@ everything below them (:mod:`viewdb.search.bounds` proves the chain):
 * a **group** (an MBR around a few views of one object, :mod:`viewdb.search.grouping`),
   keyed by the larger of ``MINDIST`` of the query box (or the mirrored box) to the MBR
   and the curve-box bound of the group's per-sample range;
-* a **Fourier point** of a view (or of its mirror), keyed by ``Fourier_Dist``;
+* a **Fourier point** of a view (or of its mirror), keyed by the larger of
+  ``Fourier_Dist`` and ``LB_PAA`` (its segment means against the envelope's);
 * a **curve**, keyed by ``LB_Keogh``, refined to its DTW distance when it pops.
 
 The queue and the refinement run compiled (:mod:`viewdb.search.refine`, which also says
@@ -19,11 +20,12 @@ Groups come from a :class:`TierSource`: an R-tree in the database
 (:class:`viewdb.storage.tiers.StoredTier`) or arrays in memory (:class:`TierArrays`).
 They are fed by **range browsing**: the candidates are every group whose MINDIST is at
 most a radius ``rho``; entries are taken only while the smallest key is ``<= rho``, and
-when it exceeds ``rho`` the radius grows and the source is asked for the groups within
-the new radius. Every group with key ``<= rho`` is a candidate whenever something is
-taken, so entries come in exactly the order of a queue that held all groups from the
-start. :func:`brute_force_knn` computes the same answer by scanning everything and is
-the oracle the tests use.
+when it exceeds ``rho`` the radius grows (doubling; a search given an upper bound of the
+k-th distance starts at that bound, beyond which nothing can enter the result) and the
+source is asked for the groups within the new radius. Every group with key ``<= rho`` is
+a candidate whenever something is taken, so entries come in exactly the order of a queue
+that held all groups from the start. :func:`brute_force_knn` computes the same answer by
+scanning everything and is the oracle the tests use.
 """
 
 from __future__ import annotations
