@@ -11,7 +11,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,6 +72,21 @@ VIEW_CACHE_SIZE = 256
 RENDER_CACHE_SIZE = 64
 #: How many objects' stored curves a database keeps in memory for CS2 walks.
 CURVE_CACHE_OBJECTS = 64
+
+_K = TypeVar("_K")
+_V = TypeVar("_V")
+
+
+def _cached(cache: OrderedDict[_K, _V], key: _K, make: Callable[[], _V], limit: int) -> _V:
+    """``cache[key]``, made by ``make()`` when missing (an exception caches nothing); the
+    least recently used entries go past ``limit``."""
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = cache[key] = make()
+    while len(cache) > limit:
+        cache.popitem(last=False)
+    return value
 
 
 @dataclass(frozen=True)
@@ -345,14 +360,7 @@ class ViewDB:
 
     def _stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
         """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
-        curves = self._curves.get(name)
-        if curves is None:
-            curves = self._curves[name] = self._store.object_curves(name)
-            while len(self._curves) > CURVE_CACHE_OBJECTS:
-                self._curves.popitem(last=False)
-        else:
-            self._curves.move_to_end(name)
-        return curves
+        return _cached(self._curves, name, lambda: self._store.object_curves(name), CURVE_CACHE_OBJECTS)
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
@@ -648,11 +656,10 @@ class ViewDB:
                           f["descriptors"], f["points3d"])
 
     def _regenerate(self, name: str, azimuth: float, elevation: float) -> StoredView:
-        key = (name, azimuth, elevation)
-        cached = self._regenerated.get(key)
-        if cached is not None:
-            self._regenerated.move_to_end(key)
-            return cached
+        return _cached(self._regenerated, (name, azimuth, elevation),
+                       lambda: self._describe(name, azimuth, elevation), VIEW_CACHE_SIZE)
+
+    def _describe(self, name: str, azimuth: float, elevation: float) -> StoredView:
         stored_as, mirrored = None, False
         try:
             stored_as, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
@@ -665,27 +672,16 @@ class ViewDB:
                 f"object {name!r} has no silhouette at azimuth {azimuth:g}, "
                 f"elevation {elevation:g}", self.path,
             ) from exc
-        view = StoredView(
+        return StoredView(
             name, azimuth, elevation, desc.curve, desc.fourier, desc.sift.keypoints,
             desc.sift.descriptors, desc.sift.points3d, regenerated=True,
             stored_as=stored_as, mirrored=mirrored,
         )
-        self._regenerated[key] = view
-        while len(self._regenerated) > VIEW_CACHE_SIZE:
-            self._regenerated.popitem(last=False)
-        return view
 
     def mesh(self, name: str) -> NormalisedMesh:
         """The stored normalised mesh of ``name`` (decoded once, then cached)."""
-        mesh = self._meshes.get(name)
-        if mesh is None:
-            mesh = mesh_from_glb(self._store.mesh_glb(name), name)
-            self._meshes[name] = mesh
-            while len(self._meshes) > MESH_CACHE_SIZE:
-                self._meshes.popitem(last=False)
-        else:
-            self._meshes.move_to_end(name)
-        return mesh
+        return _cached(self._meshes, name, lambda: mesh_from_glb(self._store.mesh_glb(name), name),
+                       MESH_CACHE_SIZE)
 
     def view_colours(
         self, views: Sequence[tuple[str, float, float]]
@@ -694,38 +690,30 @@ class ViewDB:
         ``(object, azimuth, elevation)``, rendered from the stored meshes (cached); None for
         an object whose mesh has no colour of its own (:func:`viewdb.colour.carries_colour`)."""
         renderer = get_renderer(replace(self.config.render, image_size=COLOUR_RENDER_SIZE))
-        out: list[NDArray[np.float32] | None] = []
-        for name, azimuth, elevation in views:
-            key = (name, float(azimuth), float(elevation))
-            if key not in self._colours:
-                mesh = self.mesh(name)
-                signature = None
-                if carries_colour(mesh):
-                    view = renderer.render(mesh, azimuth, elevation)
-                    signature = colour_signature(view.color, view.mask)
-                self._colours[key] = signature
-                while len(self._colours) > COLOUR_CACHE_VIEWS:
-                    self._colours.popitem(last=False)
-            else:
-                self._colours.move_to_end(key)
-            out.append(self._colours[key])
-        return out
+
+        def signature(name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
+            mesh = self.mesh(name)
+            if not carries_colour(mesh):
+                return None
+            view = renderer.render(mesh, azimuth, elevation)
+            return colour_signature(view.color, view.mask)
+
+        return [_cached(self._colours, (name, float(azimuth), float(elevation)),
+                        lambda n=name, a=azimuth, e=elevation: signature(n, a, e), COLOUR_CACHE_VIEWS)
+                for name, azimuth, elevation in views]
 
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone (the last
         :data:`RENDER_CACHE_SIZE` are kept; their arrays are read-only)."""
         key = (name, normalise_angle(azimuth), normalise_angle(elevation))
-        view = self._renders.get(key)
-        if view is not None:
-            self._renders.move_to_end(key)
+
+        def make() -> RenderedView:
+            view = get_renderer(self.config.render).render(self.mesh(name), key[1], key[2])
+            for array in (view.color, view.mask, view.depth, view.pose):
+                array.setflags(write=False)
             return view
-        view = get_renderer(self.config.render).render(self.mesh(name), key[1], key[2])
-        for array in (view.color, view.mask, view.depth, view.pose):
-            array.setflags(write=False)
-        self._renders[key] = view
-        while len(self._renders) > RENDER_CACHE_SIZE:
-            self._renders.popitem(last=False)
-        return view
+
+        return _cached(self._renders, key, make, RENDER_CACHE_SIZE)
 
     def check(self, progress: Callable[[int, int], None] | None = None) -> CheckReport:
         """Verify the file (see :mod:`viewdb.storage.integrity`); findings are in the report."""

@@ -545,7 +545,9 @@ def run_query(
     matches: list[QueryMatch] = []
     by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
     verify = rerank and pose and camera is not None
-    posed = 0 if not pose else len(merged) if pose_top is None or verify else min(pose_top, len(merged))
+    posed = len(merged) if pose else 0  # how many of the results get a pose
+    if pose_top is not None and not verify:  # re-ranking needs every result's pose
+        posed = min(posed, pose_top)
     if posed and server is not None:  # the server has the meshes: it poses
         poses, exchange = server.poses(query, [c for c, _ in merged[:posed]], camera,
                                        [by_angle.get(angle) for _, angle in merged[:posed]])
