@@ -158,9 +158,9 @@ def main() -> None:
                 line.append("pose: top result wrong or no pose")
             if args.pnp:
                 pnp_rows.append(pnp_pose(db, photo, spec))
-                line.append(pnp_rows[-1][3] if math.isnan(pnp_rows[-1][0]) else
-                            f"pnp {pnp_rows[-1][2]} rotation {pnp_rows[-1][0]:.1f} deg, "
-                            f"translation {pnp_rows[-1][1]:.1f} %, {pnp_rows[-1][4]:.1f} s")
+                r_err, t_err, method, why_not, pnp_seconds = pnp_rows[-1]
+                line.append(why_not or f"pnp {method} rotation {r_err:.1f} deg, "
+                                       f"translation {t_err:.1f} %, {pnp_seconds:.1f} s")
         print("  ".join(line), flush=True)
     print(f"\n{args.photos} photos, {len(names)} objects, seed {args.seed}, k = {args.k}")
     for run in runs:
@@ -171,17 +171,23 @@ def main() -> None:
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "
-              f"median viewing-direction error {np.median([r[1] for r in ok]) if ok else math.nan:.1f} deg, "
-              f"median rotation error {np.median([r[2] for r in ok]) if ok else math.nan:.1f} deg; "
+              f"median viewing-direction error {median(r[1] for r in ok):.1f} deg, "
+              f"median rotation error {median(r[2] for r in ok):.1f} deg; "
               f"methods {sorted({r[3] for r in pose_rows})}; "
-              f"median query with pose {np.median([r[4] for r in pose_rows]) * 1e3:.0f} ms")
+              f"median query with pose {median(r[4] for r in pose_rows) * 1e3:.0f} ms")
     if pnp_rows:
         ok = [row for row in pnp_rows if not math.isnan(row[0])]
         print(f"pose with intrinsics: {len(ok)}/{len(pnp_rows)} top-1 right with a pose; "
-              f"median rotation error {np.median([r[0] for r in ok]) if ok else math.nan:.1f} deg, "
-              f"median translation error {np.median([r[1] for r in ok]) if ok else math.nan:.1f} % "
+              f"median rotation error {median(r[0] for r in ok):.1f} deg, "
+              f"median translation error {median(r[1] for r in ok):.1f} % "
               f"of the camera distance; methods {sorted({r[2] for r in ok})}; "
-              f"median query {np.median([r[4] for r in pnp_rows]):.1f} s")
+              f"median query {median(r[4] for r in pnp_rows):.1f} s")
+
+
+def median(values) -> float:
+    """The median, NaN for none."""
+    v = list(values)
+    return float(np.median(v)) if v else math.nan
 
 
 if __name__ == "__main__":
