@@ -127,7 +127,10 @@ def ingest(
     else:
         out.print(
             f"{counts['added']} added, {counts['replaced']} replaced, "
-            f"{counts['unchanged']} unchanged, {counts['failed']} failed; "
+            f"{counts['unchanged']} unchanged, "
+            + (f"{counts['upgraded']} upgraded (perspective views added), "
+               if counts["upgraded"] else "")
+            + f"{counts['failed']} failed; "
             f"{report.views_rendered} views in {report.seconds:.1f} s "
             f"({report.views_per_second:.1f} views/s)"
         )
@@ -151,16 +154,26 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
+    distances = data.config.perspective.distances
+    stored = data.rows.get("perspective_views", 0)
+    lacking = sum(1 for o in data.objects if o.perspective_views == 0)
+    out.print(f"  perspective views: {stored}"
+              + (f" ({data.config.perspective_gap:g}° grid from "
+                 f"{', '.join(f'{d:g}' for d in distances)} bounding radii)" if distances else " (none)")
+              + (f"; {lacking} objects have none yet: ingest their files again to add them"
+                 if distances and lacking else ""))
     for tier, t in data.tiers.items():
         out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
                   f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")
-    table = Table("object", "faces", "type", "periods", "views", "grid", "no silhouette", "ingest s")
+    table = Table("object", "faces", "type", "periods", "views", "grid", "no silhouette",
+                  "perspective", "ingest s")
     for o in data.objects:
         sym = o.symmetry
         kind = f"{sym.h_type}/{sym.v_type}" if sym else "-"
         periods = f"{sym.h_period:g}/{sym.v_period:g}" if sym else "-"
         table.add_row(o.name, str(o.n_faces), kind, periods, str(o.views_stored),
-                      str(o.views_grid), str(o.empty_views), f"{o.ingest_seconds:.1f}")
+                      str(o.views_grid), str(o.empty_views), str(o.perspective_views),
+                      f"{o.ingest_seconds:.1f}")
     if data.objects:
         out.print(table)
 
@@ -333,7 +346,8 @@ def query(
         table.add_row(
             str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
             f"{r.score:.3f}",
-            f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}",
+            f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}"
+            + ("" if r.camera_distance is None else f" at {r.camera_distance:g} r"),
             f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
             p.method if p else "-", str(p.inliers) if p else "-",
         )

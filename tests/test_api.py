@@ -9,7 +9,8 @@ import pytest
 import viewdb
 from tests.conftest import sample
 from viewdb.camera import grid_views
-from viewdb.describe import describe_view
+from viewdb.config import BuildConfig
+from viewdb.describe import describe_view, perspective_grid
 from viewdb.features import distance_curve
 from viewdb.storage import store as store_module
 
@@ -57,7 +58,7 @@ def test_reingest_is_a_noop_and_a_changed_file_replaces(tmp_path):
         assert db.ingest([src]).counts()["added"] == 1
         first = db.objects()[0]
         again = db.ingest([src])
-        assert again.counts() == {"added": 0, "replaced": 0, "unchanged": 1, "failed": 0}
+        assert again.counts() == {"added": 0, "replaced": 0, "unchanged": 1, "upgraded": 0, "failed": 0}
         assert db.objects()[0].created_at == first.created_at
         src.write_text(src.read_text().replace("OFF", "OFF\n# changed", 1))
         assert db.ingest([src]).counts()["replaced"] == 1
@@ -87,7 +88,7 @@ def test_a_bad_file_fails_alone_and_the_rest_go_in(tmp_path):
     path = tmp_path / "db.db"
     with viewdb.open(path, gap=90, image_size=64) as db:
         report = db.ingest([sample("cone"), bad, tmp_path / "missing.stl", sample("pyramid")])
-        assert report.counts() == {"added": 2, "replaced": 0, "unchanged": 0, "failed": 2}
+        assert report.counts() == {"added": 2, "replaced": 0, "unchanged": 0, "upgraded": 0, "failed": 2}
         errors = [o.error for o in report.failed]
         assert any(str(bad) in e for e in errors) and any("missing.stl" in e for e in errors)
         assert [o.name for o in db.objects()] == ["cone", "pyramid"]
@@ -128,7 +129,8 @@ def test_parallel_ingest_stores_the_same_as_serial(tmp_path):
     with viewdb.open(b, gap=90, image_size=64) as db:
         report = db.ingest(files, jobs=2, progress=ticks.append)
         assert report.counts()["added"] == 3
-    assert ticks[-1].views_done == ticks[-1].views_total == 48
+    per_object = 16 + len(perspective_grid(BuildConfig(gap=90)))  # the 90° grid, then pinholes
+    assert ticks[-1].views_done == ticks[-1].views_total == 3 * per_object
     with viewdb.open(a) as da, viewdb.open(b) as dbb:
         for name in ("cone", "pyramid", "chair"):
             for h, v in da.views(name):

@@ -51,6 +51,12 @@ def test_healthy_db_passes(copy_db, capsys):
         ("UPDATE index_groups SET tier = 'sparse' WHERE id = (SELECT MIN(id) FROM index_groups"
          " WHERE tier = 'full')", "not in the R-tree"),
         ("DELETE FROM rtree_meta WHERE tier = 'sparse'", "sparse tier: R-tree cannot be opened"),
+        ("UPDATE perspective_views SET samples = (SELECT samples FROM curves LIMIT 1)"
+         " WHERE id = (SELECT MIN(id) FROM perspective_views)", "differs from the stored curve"),
+        ("DELETE FROM perspective_views WHERE id = (SELECT MIN(id) FROM perspective_views)",
+         "is not a view of its object"),
+        ("UPDATE perspective_views SET samples = x'00' WHERE id = (SELECT MAX(id) FROM perspective_views)",
+         "perspective view"),
         ("DELETE FROM rtree_pages WHERE tier = 'full'", "full tier: R-tree cannot be opened"),
     ],
 )

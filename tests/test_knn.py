@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from viewdb.features import distance_curve, mirror_curve
+from viewdb.render import get_renderer
 from viewdb.search.bounds import dtw
 from viewdb.search.knn import TierArrays, brute_force_knn, knn
 
@@ -95,11 +96,15 @@ def test_stored_tier_search_equals_brute_force_on_rendered_queries(tiered_db, ti
                 assert [h.object for h in hits] == [e.object for e in expected]
                 np.testing.assert_allclose([h.distance for h in hits],
                                            [e.distance for e in expected], rtol=0, atol=1e-9)
-                for h in hits:  # the reported view is at that distance
-                    i = next(j for j, row in enumerate(rows) if row[1:] == (h.azimuth, h.elevation)
-                             and tier.names[tier.owner[j]] == h.object)
-                    c = mirror_curve(tier.curves[i]) if h.mirrored else tier.curves[i]
-                    assert dtw(q, c, band) == pytest.approx(h.distance, abs=1e-9)
+                for h in hits:  # the reported view is at that distance (a perspective view
+                    # has a negative id, and one per camera distance)
+                    rows_of = [j for j, row in enumerate(rows) if row[1:] == (h.azimuth, h.elevation)
+                               and tier.names[tier.owner[j]] == h.object
+                               and (row[0] < 0) == (h.camera_distance is not None)]
+                    assert rows_of
+                    at = [dtw(q, mirror_curve(tier.curves[j]) if h.mirrored else tier.curves[j], band)
+                          for j in rows_of]
+                    assert min(at, key=lambda d: abs(d - h.distance)) == pytest.approx(h.distance, abs=1e-9)
                 dtws.append(stats.dtw)
     assert np.mean(dtws) < 0.5 * 2 * len(tier.curves)  # most curves never reach DTW
 
@@ -128,7 +133,13 @@ def test_db_search_finds_the_object_of_a_rendered_query(small_db):
             hits, stats = db.search(q, k=2)
             assert len(hits) == 2 and hits[0].distance <= hits[1].distance
             # the best hit's view, regenerated, is at the reported distance from the query
-            best = db.view(hits[0].object, hits[0].azimuth, hits[0].elevation).curve
+            top = hits[0]
+            if top.camera_distance is None:
+                best = db.view(top.object, top.azimuth, top.elevation).curve
+            else:
+                mask = get_renderer(db.config.render).perspective_mask(
+                    db.mesh(top.object), top.azimuth, top.elevation, top.camera_distance)
+                best = distance_curve(mask, db.config.features.curve_samples)
             target = mirror_curve(best) if hits[0].mirrored else best
             assert dtw(q, target, 6) == pytest.approx(hits[0].distance)
         with pytest.raises(viewdb.QueryError):

@@ -10,15 +10,19 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
+from viewdb.describe import perspective_grid
 from viewdb.features import distance_curve, mirror_curve
 from viewdb.search.knn import brute_force_knn
 
 
-def tier_views_of(db, tier):
+def tier_views_of(db, tier, perspective=False):
+    """Per object, the (h, v) of the tier's orthographic views (or of its perspective
+    views: negative ids)."""
     arrays, rows = db.search_tier(tier)
     out = {}
-    for j, (_, h, v) in enumerate(rows):
-        out.setdefault(arrays.names[arrays.owner[j]], set()).add((h, v))
+    for j, (vid, h, v) in enumerate(rows):
+        if (vid < 0) == perspective:
+            out.setdefault(arrays.names[arrays.owner[j]], set()).add((h, v))
     return out
 
 
@@ -27,8 +31,12 @@ def test_full_tier_is_every_stored_view_and_sparse_the_client_grid(tiered_db):
         assert db.config.gap == 30 and db.config.client_gap == 90
         full, sparse = tier_views_of(db, "full"), tier_views_of(db, "sparse")
         assert sum(map(len, sparse.values())) < sum(map(len, full.values()))
+        pinhole = tier_views_of(db, "full", perspective=True)
+        assert not tier_views_of(db, "sparse", perspective=True)
+        grid = {(h, v) for h, v, _ in perspective_grid(db.config)}
         for info in db.objects():
             assert full[info.name] == set(db.views(info.name))
+            assert pinhole[info.name] <= grid and len(pinhole[info.name]) > 0
             plan = db.view_plan(info.name)
             client = [(float(h), float(v)) for h in range(0, 360, 90) for v in range(0, 360, 90)]
             stand_ins = set()

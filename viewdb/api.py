@@ -21,7 +21,7 @@ from .colour import carries_colour, colour_signature
 from .config import BuildConfig, RenderConfig
 from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
-from .ingest import IngestProgress, IngestReport, run_ingest
+from .ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
 from .mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
 from .pose import PoseEstimate
 from .query import QueryResult, pose_object, run_query
@@ -128,6 +128,8 @@ class ObjectInfo:
     skimmed: bool = False
     #: The symmetry type; None for objects ingested before schema revision 0002.
     symmetry: SymmetryType | None = None
+    #: Perspective silhouettes stored (0 for objects ingested before revision 0004).
+    perspective_views: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         sym = self.symmetry
@@ -141,6 +143,7 @@ class ObjectInfo:
             "base_view": [sym.base_azimuth, sym.base_elevation] if sym else None,
             "skimmed": self.skimmed, "views_stored": self.views_stored,
             "views_grid": self.views_grid, "empty_views": self.empty_views,
+            "perspective_views": self.perspective_views,
             "ingest_seconds": round(self.ingest_seconds, 3), "created_at": self.created_at,
         }
 
@@ -188,6 +191,9 @@ class SearchHit:
     elevation: float
     #: The query matches the stored view's mirror (its reversed curve).
     mirrored: bool
+    #: The view is a perspective silhouette from this many bounding radii (None: an
+    #: orthographic view).
+    camera_distance: float | None = None
 
 
 @dataclass(frozen=True)
@@ -211,6 +217,8 @@ class DatabaseInfo:
             "fourier_coefficients": self.config.features.fourier_coefficients,
             "sift_max_keypoints": self.config.sift.max_keypoints,
             "skim_sigma": self.config.skim.sigma,
+            "perspective": {"distances": list(self.config.perspective.distances),
+                            "gap": self.config.perspective_gap},
             "rows": self.rows, "objects": [o.to_dict() for o in self.objects],
         }
 
@@ -266,8 +274,11 @@ class ViewDB:
 
         Each object is classified (symmetry type H1–H4 × V1–V4); with ``skim`` only the
         views its skim plan keeps are rendered and stored (the paper's camera view
-        skimming), otherwise the whole grid. Unchanged files (same name and content hash)
-        are skipped; changed ones replace their object. Each object is written in one
+        skimming), otherwise the whole grid; and the perspective silhouettes of the
+        build configuration (:class:`~viewdb.config.PerspectiveConfig`). Unchanged files
+        (same name and content hash) are skipped, except that an object stored without
+        perspective views (by an older viewdb) gets them ("upgraded"); changed ones
+        replace their object. Each object is written in one
         transaction. Files that fail are listed in the report's ``failed`` and the rest
         still go in: among them meshes with more than ``max_faces`` triangles (``None``:
         no cap) and meshes naming texture files that do not exist (unless
@@ -285,12 +296,18 @@ class ViewDB:
             self._store.write_object(desc, self.config)
             self._forget(desc.name)
 
+        def write_perspective(addition: PerspectiveAddition) -> None:
+            self._store.add_perspective(addition.name, addition.views, self.config)
+            self._forget(addition.name)
+
         try:
             options = LoadOptions(max_faces, allow_missing_textures)
         except ValueError as exc:
             raise ViewDBError(str(exc)) from exc
         return run_ingest(
             list(paths), self.config, self._store.object_hashes(), write,
+            lacking_perspective=self._store.objects_lacking_perspective(),
+            write_perspective=write_perspective,
             jobs=jobs, skim=skim, progress=progress, options=options,
         )
 
@@ -327,7 +344,7 @@ class ViewDB:
         with self._tier_reader().snapshot() as reader:
             versions = reader.object_versions()
             found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
-            angles = reader.view_angles([n.view for n in found])
+            angles = reader.view_projections([n.view for n in found])
         return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
 
     def walk(self, request: WalkRequest) -> ServerReply:
@@ -396,7 +413,8 @@ class ViewDB:
                                reply.stats, 0, 0)
         if plan == "server":
             hits, stats = self.search(q, k, band=band, tier="full")
-            found = [Candidate(h.object, h.distance, h.azimuth, h.elevation, h.mirrored) for h in hits]
+            found = [Candidate(h.object, h.distance, h.azimuth, h.elevation, h.mirrored,
+                               camera_distance=h.camera_distance) for h in hits]
             return Recognition(plan, found, [], 0.0, (time.perf_counter() - start) * 1e3,
                                stats.to_dict(), 0, 0)
         side = client or self
@@ -512,6 +530,7 @@ class ViewDB:
             ingest_seconds=row.ingest_seconds, created_at=row.created_at,
             skimmed=row.skimmed,
             symmetry=None if row.symmetry is None else SymmetryType.from_dict(row.symmetry),
+            perspective_views=row.perspective_views,
         )
 
     def objects(self) -> list[ObjectInfo]:
@@ -539,7 +558,8 @@ class ViewDB:
         ``tier`` is ``"full"`` (every stored view) or ``"sparse"`` (the client grid).
         """
         found, stats = self._knn(self._query_curve(curve, k, tier), k, band, tier)
-        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored) for c in found]
+        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance)
+                for c in found]
         return hits, stats
 
     def _knn(
@@ -551,7 +571,7 @@ class ViewDB:
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
             found, stats = knn(q, source, k, band)
-            angles = reader.view_angles([n.view for n in found])
+            angles = reader.view_projections([n.view for n in found])
             versions = reader.object_versions()
         return neighbours_to_candidates(found, angles, versions), stats
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .camera import grid_views
 from .config import BuildConfig
 from .errors import FeatureError
 from .features import distance_curve, fourier_point
@@ -24,10 +25,13 @@ from .symmetry import SymmetryType, classify, plan_without_skimming, skim_plan
 
 __all__ = [
     "ObjectDescription",
+    "PerspectiveView",
     "ViewDescription",
     "classify_object",
     "describe_object",
+    "describe_perspective",
     "describe_view",
+    "perspective_grid",
 ]
 
 
@@ -42,6 +46,18 @@ class ViewDescription:
     #: First m orthonormal DFT coefficients of ``curve`` (as stored, float32), complex128.
     fourier: NDArray[np.complex128] = field(repr=False)
     sift: SiftFeatures = field(repr=False)
+
+
+@dataclass(frozen=True, eq=False)
+class PerspectiveView:
+    """A perspective silhouette of a view direction: only its distance curve is stored."""
+
+    azimuth: float
+    elevation: float
+    #: Camera distance from the model's centre, in bounding radii.
+    distance: float
+    #: Centroid distance curve, float32 (N,), mean 1.
+    curve: NDArray[np.float32] = field(repr=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,6 +80,9 @@ class ObjectDescription:
     symmetry: SymmetryType | None = None
     #: Whether only the views the skim plan keeps were described.
     skimmed: bool = False
+    #: Perspective silhouettes (:func:`describe_perspective`); empty when the build
+    #: configuration has none.
+    perspective: list[PerspectiveView] = field(default_factory=list, repr=False)
 
 
 def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
@@ -104,6 +123,47 @@ def classify_object(
     return classify(curve_at, config.gap, config.skim.sigma)
 
 
+def perspective_grid(config: BuildConfig) -> list[tuple[float, float, float]]:
+    """``(azimuth, elevation, distance)`` of every perspective view the configuration asks
+    for: its grid (never finer than the server grid) at each distance."""
+    grid = grid_views(config.perspective_gap)
+    return [(h, v, d) for d in config.perspective.distances for h, v in grid]
+
+
+def describe_perspective(
+    mesh: NormalisedMesh,
+    config: BuildConfig,
+    renderer: Renderer | None = None,
+    on_view: Callable[[int], None] | None = None,
+) -> list[PerspectiveView]:
+    """The perspective silhouettes of :func:`perspective_grid`, skimmed of repeats.
+
+    At each distance a view whose curve lies within the skimming tolerance (RMS ``sigma``)
+    of a view already kept is left out: it would be found at the same distance, give or
+    take ``sigma`` (an axisymmetric object's views around its axis, a box's faces). Views
+    with no silhouette are left out too. ``on_view(1)`` after each render.
+    """
+    renderer = renderer or get_renderer(config.render)
+    samples = config.features.curve_samples
+    sigma = config.skim.sigma
+    kept: list[PerspectiveView] = []
+    kept_curves: dict[float, list[NDArray[np.float64]]] = {}
+    for azimuth, elevation, distance in perspective_grid(config):
+        mask = renderer.perspective_mask(mesh, azimuth, elevation, distance)
+        if on_view is not None:
+            on_view(1)
+        try:
+            curve = distance_curve(mask, samples)
+        except FeatureError:
+            continue
+        same = kept_curves.setdefault(distance, [])
+        if same and float(np.min(np.sqrt(np.mean((np.stack(same) - curve) ** 2, axis=1)))) < sigma:
+            continue
+        same.append(curve)
+        kept.append(PerspectiveView(azimuth, elevation, distance, curve.astype(np.float32)))
+    return kept
+
+
 def describe_object(
     mesh: NormalisedMesh,
     config: BuildConfig,
@@ -134,6 +194,7 @@ def describe_object(
             empty.append((azimuth, elevation))
         if on_view is not None:
             on_view(1)
+    perspective = describe_perspective(mesh, config, renderer, on_view)
     return ObjectDescription(
         name=mesh.name,
         source=mesh.source,
@@ -148,4 +209,5 @@ def describe_object(
         seconds=time.perf_counter() - start,
         symmetry=symmetry,
         skimmed=skim,
+        perspective=perspective,
     )

@@ -20,11 +20,17 @@ from typing import Any
 
 from .camera import grid_views
 from .config import BuildConfig
-from .describe import ObjectDescription, describe_object
+from .describe import (
+    ObjectDescription,
+    PerspectiveView,
+    describe_object,
+    describe_perspective,
+    perspective_grid,
+)
 from .errors import MeshError, ViewDBError
 from .mesh import LoadOptions, file_hash, load_mesh
 
-__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "run_ingest"]
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "PerspectiveAddition", "run_ingest"]
 
 
 @dataclass(frozen=True)
@@ -45,7 +51,8 @@ class FileOutcome:
 
     path: str
     name: str
-    #: "added", "replaced", "unchanged" or "failed".
+    #: "added", "replaced", "unchanged", "upgraded" (an unchanged file whose object gained
+    #: the perspective views it lacked) or "failed".
     status: str
     views: int = 0
     seconds: float = 0.0
@@ -68,14 +75,14 @@ class IngestReport:
 
     @property
     def views_rendered(self) -> int:
-        return sum(o.views for o in self.outcomes if o.status in ("added", "replaced"))
+        return sum(o.views for o in self.outcomes if o.status in ("added", "replaced", "upgraded"))
 
     @property
     def views_per_second(self) -> float:
         return self.views_rendered / self.seconds if self.seconds > 0 else 0.0
 
     def counts(self) -> dict[str, int]:
-        out = {k: 0 for k in ("added", "replaced", "unchanged", "failed")}
+        out = {k: 0 for k in ("added", "replaced", "unchanged", "upgraded", "failed")}
         for o in self.outcomes:
             out[o.status] += 1
         return out
@@ -95,11 +102,31 @@ def _tick(n: int) -> None:
         _TICKS.put(n)
 
 
+@dataclass(frozen=True)
+class PerspectiveAddition:
+    """The perspective views of an object already stored without them."""
+
+    name: str
+    views: list[PerspectiveView]
+    seconds: float
+
+
+def _describe(
+    job: _Job, config: BuildConfig, skim: bool, options: LoadOptions,
+    on_view: Callable[[int], None],
+) -> ObjectDescription | PerspectiveAddition:
+    start = time.perf_counter()
+    mesh = load_mesh(job.path, job.name, job.digest, options)
+    if job.perspective_only:
+        views = describe_perspective(mesh, config, on_view=on_view)
+        return PerspectiveAddition(job.name, views, time.perf_counter() - start)
+    return describe_object(mesh, config, skim=skim, on_view=on_view)
+
+
 def _describe_file(
-    path: str, name: str, digest: str, config: BuildConfig, skim: bool, options: LoadOptions
-) -> ObjectDescription:
-    mesh = load_mesh(path, name, digest, options)
-    return describe_object(mesh, config, skim=skim, on_view=_tick)
+    job: _Job, config: BuildConfig, skim: bool, options: LoadOptions
+) -> ObjectDescription | PerspectiveAddition:
+    return _describe(job, config, skim, options, _tick)
 
 
 @dataclass
@@ -109,6 +136,12 @@ class _Job:
     #: The file's content hash, computed once when deciding whether to ingest it.
     digest: str
     replaces: bool
+    #: The file is unchanged and its object lacks only the perspective views.
+    perspective_only: bool = False
+
+    def views(self, grid: int, perspective: int) -> int:
+        """Views to render for this job (the progress total)."""
+        return perspective if self.perspective_only else grid + perspective
 
 
 def run_ingest(
@@ -117,12 +150,18 @@ def run_ingest(
     existing_hashes: dict[str, str],
     write: Callable[[ObjectDescription], None],
     *,
+    lacking_perspective: set[str] | frozenset[str] = frozenset(),
+    write_perspective: Callable[[PerspectiveAddition], None] | None = None,
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
     options: LoadOptions = LoadOptions(),  # noqa: B008 - frozen, shared on purpose
 ) -> IngestReport:
     """Describe every new or changed file and hand each result to ``write``.
+
+    An unchanged file whose object is in ``lacking_perspective`` (stored by an older
+    viewdb) gets only its perspective views rendered, handed to ``write_perspective``,
+    when the configuration asks for perspective views.
 
     A file that fails (unreadable, no area, …) is reported as ``failed`` and the others
     still go in. ``KeyboardInterrupt`` stops the workers and propagates; objects already
@@ -131,6 +170,8 @@ def run_ingest(
     start = time.perf_counter()
     report = IngestReport()
     grid = len(grid_views(config.gap))
+    perspective = len(perspective_grid(config))
+    upgrade = write_perspective is not None and config.perspective.enabled
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -151,11 +192,14 @@ def run_ingest(
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
             continue
         if existing_hashes.get(name) == digest:
-            report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
+            if upgrade and name in lacking_perspective:
+                todo.append(_Job(str(path), name, digest, True, perspective_only=True))
+            else:
+                report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
         todo.append(_Job(str(path), name, digest, name in existing_hashes))
 
-    total_views = len(todo) * grid
+    total_views = sum(job.views(grid, perspective) for job in todo)
     done_views = 0
     files_total = len(report.outcomes) + len(todo)
 
@@ -165,7 +209,7 @@ def run_ingest(
                 done_views, total_views, len(report.outcomes), files_total, outcome
             ))
 
-    def finish(job: _Job, result: ObjectDescription | BaseException) -> None:
+    def finish(job: _Job, result: ObjectDescription | PerspectiveAddition | BaseException) -> None:
         if isinstance(result, ViewDBError):
             outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
         elif isinstance(result, BaseException):
@@ -175,20 +219,24 @@ def run_ingest(
             )
         else:
             try:
-                write(result)
+                if isinstance(result, PerspectiveAddition):
+                    assert write_perspective is not None
+                    write_perspective(result)
+                else:
+                    write(result)
             except ViewDBError as exc:
                 outcome = FileOutcome(job.path, job.name, "failed", error=str(exc))
             else:
-                outcome = FileOutcome(
-                    job.path, job.name, "replaced" if job.replaces else "added",
-                    views=len(result.views), seconds=result.seconds,
-                )
+                status = ("upgraded" if isinstance(result, PerspectiveAddition)
+                          else "replaced" if job.replaces else "added")
+                outcome = FileOutcome(job.path, job.name, status,
+                                      views=len(result.views), seconds=result.seconds)
         report.outcomes.append(outcome)
         notify(outcome)
 
     if jobs <= 1 or len(todo) <= 1:
         for job in todo:
-            expected_done = done_views + grid
+            expected_done = done_views + job.views(grid, perspective)
 
             def tick(n: int) -> None:
                 nonlocal done_views
@@ -196,9 +244,8 @@ def run_ingest(
                 notify()
 
             try:
-                mesh = load_mesh(job.path, job.name, job.digest, options)
-                result: ObjectDescription | BaseException = describe_object(
-                    mesh, config, skim=skim, on_view=tick
+                result: ObjectDescription | PerspectiveAddition | BaseException = _describe(
+                    job, config, skim, options, tick
                 )
             except ViewDBError as exc:
                 result = exc
@@ -211,11 +258,10 @@ def run_ingest(
             max_workers=min(jobs, len(todo)), mp_context=ctx,
             initializer=_init_worker, initargs=(ticks,),
         )
-        futures: dict[Future[ObjectDescription], _Job] = {}
+        futures: dict[Future[ObjectDescription | PerspectiveAddition], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job.path, job.name, job.digest, config, skim,
-                                    options)] = job
+                futures[pool.submit(_describe_file, job, config, skim, options)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

@@ -84,6 +84,9 @@ class QueryMatch:
     #: What the results are ranked by when re-ranked by colour
     #: (:func:`viewdb.colour.rerank`); None: by ``distance`` alone.
     colour_score: float | None = None
+    #: The matched view is a perspective silhouette from this many bounding radii
+    #: (:class:`~viewdb.config.PerspectiveConfig`); None: an orthographic view.
+    camera_distance: float | None = None
 
     @property
     def score(self) -> float:
@@ -95,7 +98,8 @@ class QueryMatch:
         out: dict[str, Any] = {
             "rank": self.rank, "object": self.object, "distance": self.distance,
             "view": {"azimuth": self.azimuth, "elevation": self.elevation,
-                     "mirrored": self.mirrored, "inplane": self.inplane},
+                     "mirrored": self.mirrored, "inplane": self.inplane,
+                     "camera_distance": self.camera_distance},
             "colour_distance": self.colour, "score": self.score,
             "pose": None,
         }
@@ -556,7 +560,8 @@ def run_query(
         pose_server_ms = exchange.server_ms
         network_ms += exchange.wall_ms - exchange.server_ms
         matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
-                              angle, *poses[rank - 1], *colours.get(c.object, (None, None)))
+                              angle, *poses[rank - 1], *colours.get(c.object, (None, None)),
+                              camera_distance=c.camera_distance)
                    for rank, (c, angle) in enumerate(merged, 1)]
     else:
         config = pose_config or PoseConfig()
@@ -570,7 +575,8 @@ def run_query(
                     problem = exc.message
             matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
                                       c.mirrored, angle, estimate, problem,
-                                      *colours.get(c.object, (None, None))))
+                                      *colours.get(c.object, (None, None)),
+                                      camera_distance=c.camera_distance))
         if verify:
             assert camera is not None
             matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)

@@ -121,6 +121,7 @@ class Renderer:
         self._mesh: NormalisedMesh | None = None
         self._scene = None
         self._camera_node = None
+        self._pinhole_node = None
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -137,8 +138,41 @@ class Renderer:
             xmag=cfg.xmag, ymag=cfg.xmag, znear=cfg.znear, zfar=cfg.zfar
         )
         self._camera_node = scene.add(camera, pose=np.eye(4))
+        self._pinhole_node = scene.add(
+            pyrender.PerspectiveCamera(yfov=1.0, aspectRatio=1.0, znear=0.05, zfar=100.0),
+            pose=np.eye(4),
+        )
+        scene.main_camera_node = self._camera_node
         self._scene = scene
         self._mesh = mesh
+
+    def perspective_mask(
+        self, mesh: NormalisedMesh, azimuth: float, elevation: float, distance: float
+    ) -> NDArray[np.bool_]:
+        """The silhouette of ``mesh`` seen from ``(azimuth, elevation)`` through a pinhole
+        camera ``distance`` bounding radii from the centre, on the view's axis, upright as
+        the orthographic view is; the field of view just holds the bounding sphere (5 %
+        margin). Depth only."""
+        pyrender = pyrender_module()
+        if not distance > 1.0:
+            raise ValueError(f"distance must be greater than 1 (bounding radii), got {distance}")
+        self._use_mesh(mesh)
+        assert self._scene is not None and self._pinhole_node is not None
+        camera = self._pinhole_node.camera
+        camera.yfov = 2.0 * float(np.arcsin(1.0 / distance)) * 1.05
+        camera.znear, camera.zfar = max(0.05, distance - 1.5), distance + 1.5
+        self._scene.set_pose(self._pinhole_node, camera_pose(azimuth, elevation, distance))
+        self._scene.main_camera_node = self._pinhole_node
+        gl = _offscreen(self.config.image_size)
+        try:
+            depth = gl.render(self._scene, flags=pyrender.RenderFlags.DEPTH_ONLY
+                              | pyrender.RenderFlags.SKIP_CULL_FACES)
+        except Exception as exc:
+            _reraise_interrupt(exc)
+            raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
+        finally:
+            self._scene.main_camera_node = self._camera_node
+        return np.asarray(depth) > 0
 
     def render(
         self, mesh: NormalisedMesh, azimuth: float, elevation: float, *, shaded: bool = True

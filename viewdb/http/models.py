@@ -42,6 +42,11 @@ class CandidateModel(_Strict):
         description="content hash of the object's mesh in the file the distance comes from: "
                     "a server ignores the bounds of objects it holds in another version",
     )
+    camera_distance: float | None = Field(
+        default=None, gt=1,
+        description="the view is a perspective silhouette from this many bounding radii "
+                    "(absent: an orthographic view)",
+    )
 
 
 class RefineRequestModel(_Strict):

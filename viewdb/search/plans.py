@@ -92,12 +92,17 @@ class Candidate:
     elevation: float
     mirrored: bool
     version: str | None = None
+    #: The view is a perspective silhouette seen from this many bounding radii (None:
+    #: an orthographic view).
+    camera_distance: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out = {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
                "elevation": self.elevation, "mirrored": self.mirrored}
         if self.version is not None:
             out["version"] = self.version
+        if self.camera_distance is not None:
+            out["camera_distance"] = self.camera_distance
         return out
 
     @classmethod
@@ -119,8 +124,16 @@ class Candidate:
                 isinstance(version, str) and 0 < len(version) <= 128 and version.isalnum()
             ):
                 raise QueryError("candidate version must be a short alphanumeric string")
+            camera = data.get("camera_distance")
+            if camera is not None and (
+                isinstance(camera, bool) or not isinstance(camera, (int, float))
+                or not _finite(camera, "candidate camera_distance") > 1
+            ):
+                raise QueryError(f"candidate camera_distance must be a number greater than 1, "
+                                 f"got {camera!r}")
             return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
-                       _finite(data["elevation"], "candidate elevation"), mirrored, version)
+                       _finite(data["elevation"], "candidate elevation"), mirrored, version,
+                       None if camera is None else float(camera))
         except KeyError as exc:
             raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
 
@@ -297,11 +310,16 @@ def walk(
 
 
 def neighbours_to_candidates(
-    found: Sequence[Neighbour], angles: dict[int, tuple[float, float]],
+    found: Sequence[Neighbour],
+    views: Mapping[int, tuple[float, float] | tuple[float, float, float | None]],
     versions: Mapping[str, str] | None = None,
 ) -> list[Candidate]:
-    """k-NN results as candidates, given ``view id -> (azimuth, elevation)`` (and the
-    objects' content hashes, ``versions``)."""
-    return [Candidate(n.object, n.distance, *angles[n.view], n.mirrored,
-                      None if versions is None else versions.get(n.object))
-            for n in found]
+    """k-NN results as candidates, given ``view id -> (azimuth, elevation[, camera
+    distance])`` (and the objects' content hashes, ``versions``)."""
+    out = []
+    for n in found:
+        azimuth, elevation, *camera = views[n.view]
+        out.append(Candidate(n.object, n.distance, azimuth, elevation, n.mirrored,
+                             None if versions is None else versions.get(n.object),
+                             camera[0] if camera else None))
+    return out

@@ -6,8 +6,8 @@ point and SIFT row; every blob decodes with the dtype and shape the schema promi
 Fourier point is the orthonormal DFT of its stored curve; each object's mesh is a GLB and
 its view count matches its grid; and both tiers' R-trees: every R-tree entry is a group
 row and vice versa with the same box, each group's curves are its views' stored curves and
-lie in its box, the full tier holds every view once and the sparse tier exactly the client
-grid's stand-ins.
+lie in its box, the full tier holds every view (and every perspective view) once and the
+sparse tier exactly the client grid's stand-ins.
 """
 
 from __future__ import annotations
@@ -184,6 +184,15 @@ def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # typ
         "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
     ):
         views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
+    # perspective views: full tier only, named by their negated id (schema.perspective_group_id)
+    perspective: dict[int, set[int]] = {}
+    for pid, oid, blob in raw.execute("SELECT id, object_id, samples FROM perspective_views"):
+        gid = s.perspective_group_id(int(pid))
+        perspective.setdefault(int(oid), set()).add(gid)
+        try:
+            curves[gid] = decode_array(blob, np.float32, (n,))
+        except StorageError as exc:
+            report.add(f"perspective view {pid}: {exc.message}")
     objects = raw.execute("SELECT id, name, skimmed, symmetry FROM objects").fetchall()
     for tier in TIERS:
         try:
@@ -224,6 +233,8 @@ def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # typ
                 if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
                     report.add(f"{where}: views lie outside its box")
                 owned = {vid for vid, _, _ in views.get(int(oid), [])}
+                if tier == "full":
+                    owned |= perspective.get(int(oid), set())
                 mine = in_tier.setdefault(int(oid), set())
                 for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
                     if vid not in owned:
@@ -249,6 +260,8 @@ def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # typ
                     members = tier_members([(a, e) for _, a, e in stored], config.gap,
                                            config.client_gap, sym, bool(skimmed))[tier]
                 expected = {stored[i][0] for i in members}
+                if tier == "full":
+                    expected |= perspective.get(int(oid), set())
                 if in_tier.get(int(oid), set()) != expected:
                     report.add(
                         f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "

@@ -13,10 +13,14 @@ views           one row per stored view: object, azimuth, elevation, grid gap
 curves          the view's centroid distance curve (float32 blob)
 fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob)
 sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
+perspective_views  perspective silhouettes (revision 0004): object, azimuth, elevation,
+                camera distance in bounding radii, the distance curve (float32 blob)
 index_groups    R-tree entries: a few views of one object in one tier (``full`` or
                 ``sparse``), with their MBR in the indexed Fourier coordinates, the
                 per-sample range of their curves and a copy of the curves (one read
-                per group at search time)
+                per group at search time). A view id ``i > 0`` is ``views.id``; ``-i``
+                is ``perspective_views.id`` (full tier only; see
+                :func:`perspective_group_id`)
 rtree_pages     the libspatialindex pages of each tier's R-tree (one BLOB per page)
 rtree_meta      each tier's R-tree: dimension and header page
 """
@@ -44,6 +48,8 @@ __all__ = [
     "index_groups",
     "metadata",
     "objects",
+    "perspective_group_id",
+    "perspective_views",
     "rtree_meta",
     "rtree_pages",
     "settings",
@@ -52,7 +58,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0003"
+SCHEMA_REVISION = "0004"
 
 metadata = MetaData()
 
@@ -122,6 +128,29 @@ sift_features = Table(
     Column("descriptors", LargeBinary, nullable=False),
     Column("points3d", LargeBinary, nullable=False),
 )
+
+# revision 0004: perspective silhouettes
+perspective_views = Table(
+    "perspective_views",
+    metadata,
+    Column("id", Integer, primary_key=True),
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
+    Column("azimuth", Float, nullable=False),
+    Column("elevation", Float, nullable=False),
+    #: camera distance from the model's centre, bounding radii
+    Column("distance", Float, nullable=False),
+    Column("samples", LargeBinary, nullable=False),
+    UniqueConstraint("object_id", "azimuth", "elevation", "distance",
+                     name="uq_perspective_views_object_view"),
+)
+Index("ix_perspective_views_object", perspective_views.c.object_id)
+
+
+def perspective_group_id(perspective_view_id: int) -> int:
+    """How an index group names a perspective view: its id negated (orthographic views
+    keep their positive ``views.id``), so one int64 array holds both kinds."""
+    return -int(perspective_view_id)
+
 
 # revision 0003: the Fourier-point R-trees of the sparse and full tiers
 index_groups = Table(

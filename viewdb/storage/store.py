@@ -64,6 +64,8 @@ class ObjectRow:
     #: The symmetry type as stored (JSON of :class:`viewdb.symmetry.SymmetryType`), or None
     #: for objects ingested before revision 0002.
     symmetry: dict[str, Any] | None = None
+    #: Perspective views stored (revision 0004).
+    perspective_views: int = 0
 
 
 @dataclass(frozen=True)
@@ -336,10 +338,14 @@ class Store:
         count = (
             sa.select(sa.func.count(v.c.id)).where(v.c.object_id == o.c.id).scalar_subquery()
         )
+        p = s.perspective_views
+        perspective = (
+            sa.select(sa.func.count(p.c.id)).where(p.c.object_id == o.c.id).scalar_subquery()
+        )
         query = sa.select(
             o.c.id, o.c.name, o.c.source, o.c.content_hash, o.c.n_faces, o.c.n_vertices,
             o.c.scale, o.c.centre, count, o.c.empty_views, o.c.ingest_seconds, o.c.created_at,
-            o.c.skimmed, o.c.symmetry,
+            o.c.skimmed, o.c.symmetry, perspective,
         ).order_by(o.c.name)
         if name is not None:
             query = query.where(o.c.name == name)
@@ -353,6 +359,7 @@ class Store:
                 views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
                 created_at=r[11], skimmed=bool(r[12]),
                 symmetry=None if r[13] is None else json.loads(r[13]),
+                perspective_views=int(r[14]),
             )
             for r in rows
         ]
@@ -433,8 +440,76 @@ class Store:
             positions = [(float(v.azimuth), float(v.elevation)) for v in desc.views]
             members = tier_members(positions, config.gap, config.client_gap,
                                    getattr(desc, "symmetry", None), bool(getattr(desc, "skimmed", False)))
-            write_groups(conn.connection.driver_connection, object_id, [i for i, _ in keyed],
-                         np.stack([v.curve for v in desc.views]), members, config.index.group_views)
+            ids = [i for i, _ in keyed]
+            curves = [v.curve for v in desc.views]
+            perspective_ids = self._insert_perspective(conn, object_id, getattr(desc, "perspective", []))
+            members["full"] = list(range(len(ids) + len(perspective_ids)))
+            write_groups(conn.connection.driver_connection, object_id, ids + perspective_ids,
+                         np.stack(curves + [v.curve for v in getattr(desc, "perspective", [])]),
+                         members, config.index.group_views)
+
+    def add_perspective(self, name: str, views: Any, config: BuildConfig) -> None:
+        """Give a stored object its perspective views (an older file's object) in one
+        transaction; views it already has are replaced. Its full-tier groups are written
+        again over all its views, as an ingest groups them."""
+        with self.transaction() as conn:
+            object_id = self.object_id(conn, name)
+            raw = conn.connection.driver_connection
+            full = [gid for (gid,) in raw.execute(
+                "SELECT id FROM index_groups WHERE object_id = ? AND tier = 'full'", (object_id,))]
+            delete_groups(raw, [object_id], only=full)
+            conn.execute(sa.delete(s.perspective_views)
+                         .where(s.perspective_views.c.object_id == object_id))
+            ortho = raw.execute(
+                "SELECT v.id, c.samples FROM views v JOIN curves c ON c.view_id = v.id"
+                " WHERE v.object_id = ? ORDER BY v.id", (object_id,),
+            ).fetchall()
+            ids = [int(i) for i, _ in ortho] + self._insert_perspective(conn, object_id, views)
+            curves = [decode_array(b, np.float32, (None,)) for _, b in ortho] + [v.curve for v in views]
+            if ids:
+                write_groups(raw, object_id, ids, np.stack(curves),
+                             {"full": list(range(len(ids)))}, config.index.group_views)
+
+    @staticmethod
+    def _insert_perspective(conn: Connection, object_id: int, views: Any) -> list[int]:
+        """Insert an object's perspective views; returns the ids its index groups name them
+        by (:func:`~viewdb.storage.schema.perspective_group_id`), in ``views`` order. They
+        go in the full tier only (client files copy the sparse one)."""
+        if not views:
+            return []
+        p = s.perspective_views
+        conn.execute(sa.insert(p), [
+            {"object_id": object_id, "azimuth": float(v.azimuth), "elevation": float(v.elevation),
+             "distance": float(v.distance), "samples": encode_array(v.curve)}
+            for v in views
+        ])
+        ids = {
+            (float(a), float(e), float(d)): int(i)
+            for i, a, e, d in conn.execute(
+                sa.select(p.c.id, p.c.azimuth, p.c.elevation, p.c.distance)
+                .where(p.c.object_id == object_id)
+            )
+        }
+        return [s.perspective_group_id(ids[(float(v.azimuth), float(v.elevation), float(v.distance))])
+                for v in views]
+
+    def objects_lacking_perspective(self) -> set[str]:
+        """Names of the objects with no perspective views (stored before revision 0004,
+        or by a configuration without them)."""
+        o, p = s.objects, s.perspective_views
+        has = sa.select(p.c.id).where(p.c.object_id == o.c.id).exists()
+        with self.read() as conn:
+            return {r[0] for r in conn.execute(sa.select(o.c.name).where(~has))}
+
+    def perspective_counts(self) -> dict[str, int]:
+        """``object name -> number of perspective views`` (objects with none left out)."""
+        o, p = s.objects, s.perspective_views
+        with self.read() as conn:
+            rows = conn.execute(
+                sa.select(o.c.name, sa.func.count(p.c.id))
+                .select_from(o.join(p, p.c.object_id == o.c.id)).group_by(o.c.name)
+            ).all()
+        return {name: int(n) for name, n in rows}
 
     # ----------------------------------------------------------------- views
     def views(self, name: str) -> list[ViewRow]:
@@ -506,7 +581,8 @@ class Store:
     def table_counts(self) -> dict[str, int]:
         out = {}
         with self.read() as conn:
-            for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features):
+            for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features,
+                          s.perspective_views):
                 out[table.name] = int(
                     conn.execute(sa.select(sa.func.count()).select_from(table)).scalar_one()
                 )

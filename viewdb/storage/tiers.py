@@ -103,13 +103,17 @@ def write_groups(
     return counts
 
 
-def delete_groups(conn: Any, object_ids: Iterable[int]) -> None:
-    """Take the objects' groups out of both tiers (caller's transaction)."""
+def delete_groups(conn: Any, object_ids: Iterable[int], only: Sequence[int] | None = None) -> None:
+    """Take the objects' groups (or just the groups ``only``) out of both tiers (caller's
+    transaction)."""
     raw = _raw(conn)
+    keep_only = None if only is None else {int(g) for g in only}
     for object_id in object_ids:
         rows = raw.execute(
             "SELECT id, tier, lo, hi FROM index_groups WHERE object_id = ?", (int(object_id),)
         ).fetchall()
+        if keep_only is not None:
+            rows = [r for r in rows if int(r[0]) in keep_only]
         for tier in TIERS:
             mine = [r for r in rows if r[1] == tier]
             if not mine:
@@ -125,7 +129,7 @@ def delete_groups(conn: Any, object_ids: Iterable[int]) -> None:
             except BaseException:
                 index.discard()
                 raise
-        raw.execute("DELETE FROM index_groups WHERE object_id = ?", (int(object_id),))
+        raw.executemany("DELETE FROM index_groups WHERE id = ?", [(int(r[0]),) for r in rows])
 
 
 class StoredTier:
@@ -307,16 +311,32 @@ class TierReader:
         return tier
 
     def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
-        """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`)."""
+        """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`); a perspective
+        view's (negative) id gives its direction, the same as the orthographic view's."""
+        return {i: (a, e) for i, (a, e, _) in self.view_projections(view_ids).items()}
+
+    def view_projections(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float, float | None]]:
+        """``view id -> (azimuth, elevation, distance)``, distance None for an orthographic
+        view and the camera distance in bounding radii for a perspective one."""
         ids = [int(i) for i in view_ids]
-        out: dict[int, tuple[float, float]] = {}
-        for start in range(0, len(ids), 900):  # SQLite caps the variables of one statement
-            chunk = ids[start : start + 900]
+        out: dict[int, tuple[float, float, float | None]] = {}
+        ortho = [i for i in ids if i > 0]
+        pinhole = [-i for i in ids if i < 0]
+        for start in range(0, len(ortho), 900):  # SQLite caps the variables of one statement
+            chunk = ortho[start : start + 900]
             marks = ",".join("?" * len(chunk))
             rows = self.conn.execute(
                 f"SELECT id, azimuth, elevation FROM views WHERE id IN ({marks})", chunk
             ).fetchall()
-            out.update((int(i), (float(a), float(e))) for i, a, e in rows)
+            out.update((int(i), (float(a), float(e), None)) for i, a, e in rows)
+        for start in range(0, len(pinhole), 900):
+            chunk = pinhole[start : start + 900]
+            marks = ",".join("?" * len(chunk))
+            rows = self.conn.execute(
+                f"SELECT id, azimuth, elevation, distance FROM perspective_views WHERE id IN ({marks})",
+                chunk,
+            ).fetchall()
+            out.update((-int(i), (float(a), float(e), float(d))) for i, a, e, d in rows)
         return out
 
     def object_versions(self) -> dict[str, str]:
