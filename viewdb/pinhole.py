@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from .errors import RenderError
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
-from .render import _offscreen, _reraise_interrupt
+from .render import _reraise_interrupt, render_depth
 
 __all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
 
@@ -121,14 +121,7 @@ class PinholeRenderer:
         pose[:3, :3] = CV_TO_GL @ np.asarray(rotation, dtype=np.float64)
         pose[:3, 3] = CV_TO_GL @ t
         self._scene.set_pose(self._mesh_node, pose)
-        gl = _offscreen(size)
-        try:
-            depth = gl.render(self._scene, flags=pyrender.RenderFlags.DEPTH_ONLY
-                              | pyrender.RenderFlags.SKIP_CULL_FACES)
-        except Exception as exc:
-            _reraise_interrupt(exc)
-            raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
-        depth = np.asarray(depth, dtype=np.float32)
+        depth = render_depth(self._scene, size, mesh.name)
         return depth > 0, depth
 
 

@@ -27,7 +27,7 @@ from .errors import RenderError
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 
-__all__ = ["RenderedView", "Renderer", "get_renderer", "headlight_shading"]
+__all__ = ["RenderedView", "Renderer", "get_renderer", "headlight_shading", "render_depth"]
 
 #: A depth step larger than this many pixel widths between neighbours is an occlusion edge.
 DEPTH_JUMP_PIXELS = 6.0
@@ -153,7 +153,6 @@ class Renderer:
         camera ``distance`` bounding radii from the centre, on the view's axis, upright as
         the orthographic view is; the field of view just holds the bounding sphere (5 %
         margin). Depth only."""
-        pyrender = pyrender_module()
         if not distance > 1.0:
             raise ValueError(f"distance must be greater than 1 (bounding radii), got {distance}")
         self._use_mesh(mesh)
@@ -163,16 +162,10 @@ class Renderer:
         camera.znear, camera.zfar = max(0.05, distance - 1.5), distance + 1.5
         self._scene.set_pose(self._pinhole_node, camera_pose(azimuth, elevation, distance))
         self._scene.main_camera_node = self._pinhole_node
-        gl = _offscreen(self.config.image_size)
         try:
-            depth = gl.render(self._scene, flags=pyrender.RenderFlags.DEPTH_ONLY
-                              | pyrender.RenderFlags.SKIP_CULL_FACES)
-        except Exception as exc:
-            _reraise_interrupt(exc)
-            raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
+            return render_depth(self._scene, self.config.image_size, mesh.name) > 0
         finally:
             self._scene.main_camera_node = self._camera_node
-        return np.asarray(depth) > 0
 
     def render(
         self, mesh: NormalisedMesh, azimuth: float, elevation: float, *, shaded: bool = True
@@ -214,6 +207,19 @@ class Renderer:
             color = np.clip(lit + 0.5, 0, 255).astype(np.uint8)
         return RenderedView(azimuth, elevation, color, mask, depth, pose)
 
+
+def render_depth(scene, size: int, name: str) -> NDArray[np.float32]:  # type: ignore[no-untyped-def]
+    """Depth only (both faces) of ``scene`` through its main camera, ``size`` pixels square;
+    GL failures become a :class:`RenderError` naming the object ``name``."""
+    pyrender = pyrender_module()
+    gl = _offscreen(size)
+    try:
+        depth = gl.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY
+                          | pyrender.RenderFlags.SKIP_CULL_FACES)
+    except Exception as exc:
+        _reraise_interrupt(exc)
+        raise RenderError(f"rendering {name!r} failed: {exc}") from exc
+    return np.asarray(depth, dtype=np.float32)
 
 
 def pyrender_mesh(mesh: NormalisedMesh):  # type: ignore[no-untyped-def]
