@@ -501,16 +501,6 @@ class Store:
         with self.read() as conn:
             return {r[0] for r in conn.execute(sa.select(o.c.name).where(~has))}
 
-    def perspective_counts(self) -> dict[str, int]:
-        """``object name -> number of perspective views`` (objects with none left out)."""
-        o, p = s.objects, s.perspective_views
-        with self.read() as conn:
-            rows = conn.execute(
-                sa.select(o.c.name, sa.func.count(p.c.id))
-                .select_from(o.join(p, p.c.object_id == o.c.id)).group_by(o.c.name)
-            ).all()
-        return {name: int(n) for name, n in rows}
-
     # ----------------------------------------------------------------- views
     def views(self, name: str) -> list[ViewRow]:
         v = s.views
