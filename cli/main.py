@@ -72,6 +72,16 @@ def _echo_json(data: Any) -> None:
 DbOption = Annotated[Path, typer.Option("--db", help="Database file.", dir_okay=False)]
 
 
+def _parse_distances(text: str) -> tuple[float, ...]:
+    if text.strip().lower() == "none":
+        return ()
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise typer.BadParameter(f"expected numbers separated by commas or 'none', got {text!r}",
+                                 param_hint="--perspective") from None
+
+
 @app.command()
 def ingest(
     paths: Annotated[
@@ -83,6 +93,11 @@ def ingest(
     client_gap: Annotated[
         float | None,
         typer.Option(help="Sparse (client) tier grid gap, a multiple of --gap (new db; default 30)."),
+    ] = None,
+    perspective: Annotated[
+        str | None,
+        typer.Option(help="Perspective views' camera distances in bounding radii, e.g. 3,4,6, "
+                          "or 'none' (new db; default 3,4,6)."),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 1,
     no_skim: Annotated[
@@ -104,7 +119,9 @@ def ingest(
     --no-skim.
     """
     files = viewdb.describe_paths(paths)
-    with viewdb.open(db, gap=gap, image_size=image_size, client_gap=client_gap) as vdb, \
+    distances = None if perspective is None else _parse_distances(perspective)
+    with viewdb.open(db, gap=gap, image_size=image_size, client_gap=client_gap,
+                     perspective=distances) as vdb, \
             _progress() as bar:
         task = bar.add_task("ingest", total=None)
 

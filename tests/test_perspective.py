@@ -273,3 +273,29 @@ def test_candidates_carry_the_camera_distance_and_reject_bad_ones():
     for bad in (1.0, 0.5, "3", float("nan"), True):
         with pytest.raises(QueryError, match="camera_distance"):
             Candidate.from_dict({**c.to_dict(), "camera_distance": bad})
+
+
+# ---------------------------------------------------------------- choosing them
+def test_the_cli_sets_the_perspective_distances_of_a_new_file_and_refuses_another(tmp_path, capsys):
+    path = tmp_path / "few.db"
+    assert main(["ingest", str(sample("cone")), "--db", str(path), "--gap", "60",
+                 "--image-size", "64", "--perspective", "2.5,5"]) == 0
+    with viewdb.open(path, create=False) as db:
+        assert db.config.perspective.distances == (2.5, 5.0)
+        with sqlite3.connect(path) as conn:
+            stored = {d for (d,) in conn.execute("SELECT DISTINCT distance FROM perspective_views")}
+        assert stored == {2.5, 5.0}
+    capsys.readouterr()
+    assert main(["ingest", str(sample("pyramid")), "--db", str(path), "--perspective", "none"]) == 1
+    assert "was built with --perspective 2.5,5, not none" in capsys.readouterr().err
+    with viewdb.open(path, create=False) as db:  # refused before anything was written
+        assert [o.name for o in db.objects()] == ["cone"]
+    none = tmp_path / "none.db"
+    assert main(["ingest", str(sample("cone")), "--db", str(none), "--gap", "60",
+                 "--image-size", "64", "--perspective", "none"]) == 0
+    with viewdb.open(none, create=False) as db:
+        assert not db.config.perspective.enabled and db.object("cone").perspective_views == 0
+    for bad, code in (("3,x", 2), ("0.5", 1), ("3,3", 1)):
+        assert main(["ingest", str(sample("cone")), "--db", str(tmp_path / "bad.db"),
+                     "--perspective", bad]) == code
+        assert not (tmp_path / "bad.db").exists()

@@ -777,6 +777,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     gap: float | None = None,
     image_size: int | None = None,
     client_gap: float | None = None,
+    perspective: Sequence[float] | None = None,
     config: BuildConfig | None = None,
     read_only: bool = False,
 ) -> ViewDB:
@@ -784,9 +785,11 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
 
     A new file takes its build configuration from ``config`` (default
     :class:`~viewdb.config.BuildConfig`), with ``gap``, ``image_size`` and ``client_gap``
-    (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°)
-    overriding it. An existing file keeps the configuration it was built with; asking for
-    a different one raises :class:`~viewdb.errors.ViewDBError`.
+    (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°) and
+    ``perspective`` (the perspective views' camera distances in bounding radii; empty for
+    none; :class:`~viewdb.config.PerspectiveConfig`) overriding it. An existing file keeps
+    the configuration it was built with; asking for a different one raises
+    :class:`~viewdb.errors.ViewDBError`.
 
     ``read_only=True`` opens an existing file without ever writing to it (no journal-mode
     switch, no migration: a file from an older viewdb must be opened once normally to be
@@ -800,6 +803,9 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
             wanted = replace(wanted, render=replace(wanted.render, image_size=image_size))
         if client_gap is not None:
             wanted = replace(wanted, index=replace(wanted.index, client_gap=float(client_gap)))
+        if perspective is not None:
+            wanted = replace(wanted, perspective=replace(wanted.perspective,
+                                                         distances=tuple(perspective)))
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc
@@ -827,10 +833,19 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
                 raise ViewDBError(
                     f"was built with --client-gap {stored.client_gap:g}, not {client_gap:g}", path
                 )
+            if perspective is not None and wanted.perspective.distances != stored.perspective.distances:
+                raise ViewDBError(
+                    f"was built with --perspective {_distances(stored.perspective.distances)}, "
+                    f"not {_distances(wanted.perspective.distances)}", path,
+                )
         return ViewDB(store, stored)
     except BaseException:
         store.close()
         raise
+
+
+def _distances(distances: Sequence[float]) -> str:
+    return ",".join(f"{d:g}" for d in distances) or "none"
 
 
 def render_model(
