@@ -129,7 +129,12 @@ class PerspectiveConfig:
 
 def default_client_gap(gap: float) -> float:
     """The smallest multiple of ``gap`` that is at least 30 degrees and divides 360."""
-    multiple = max(1, math.ceil(30.0 / gap - 1e-9))
+    return coarser_gap(gap, 30.0)
+
+
+def coarser_gap(gap: float, at_least: float) -> float:
+    """The smallest multiple of ``gap`` that is at least ``at_least`` and divides 360."""
+    multiple = max(1, math.ceil(at_least / gap - 1e-9))
     while not _divides_360(multiple * gap):
         multiple += 1
     return float(multiple * gap)
@@ -175,10 +180,7 @@ class BuildConfig:
         """The perspective views' grid gap: the smallest multiple of the server gap that
         is at least ``perspective.gap`` and divides 360, so every perspective view's
         direction is a server-grid view (the pose stage starts from it)."""
-        multiple = max(1, math.ceil(self.perspective.gap / self.gap - 1e-9))
-        while not _divides_360(multiple * self.gap):
-            multiple += 1
-        return float(multiple * self.gap)
+        return coarser_gap(self.gap, self.perspective.gap)
 
     def resolved(self) -> BuildConfig:
         """This configuration with every default that depends on others filled in (what a

@@ -146,9 +146,12 @@ def describe_perspective(
     renderer = renderer or get_renderer(config.render)
     samples = config.features.curve_samples
     sigma = config.skim.sigma
+    grid = perspective_grid(config)
     kept: list[PerspectiveView] = []
-    kept_curves: dict[float, list[NDArray[np.float64]]] = {}
-    for azimuth, elevation, distance in perspective_grid(config):
+    # the curves kept so far at each distance, filled row by row
+    kept_curves = {d: np.empty((len(grid), samples)) for d in config.perspective.distances}
+    n_kept = dict.fromkeys(config.perspective.distances, 0)
+    for azimuth, elevation, distance in grid:
         mask = renderer.perspective_mask(mesh, azimuth, elevation, distance)
         if on_view is not None:
             on_view(1)
@@ -156,10 +159,11 @@ def describe_perspective(
             curve = distance_curve(mask, samples)
         except FeatureError:
             continue
-        same = kept_curves.setdefault(distance, [])
-        if same and float(np.min(np.sqrt(np.mean((np.stack(same) - curve) ** 2, axis=1)))) < sigma:
+        same = kept_curves[distance][: n_kept[distance]]
+        if len(same) and float(np.min(np.sqrt(np.mean((same - curve) ** 2, axis=1)))) < sigma:
             continue
-        same.append(curve)
+        kept_curves[distance][n_kept[distance]] = curve
+        n_kept[distance] += 1
         kept.append(PerspectiveView(azimuth, elevation, distance, curve.astype(np.float32)))
     return kept
 

@@ -440,12 +440,11 @@ class Store:
             positions = [(float(v.azimuth), float(v.elevation)) for v in desc.views]
             members = tier_members(positions, config.gap, config.client_gap,
                                    getattr(desc, "symmetry", None), bool(getattr(desc, "skimmed", False)))
-            ids = [i for i, _ in keyed]
-            curves = [v.curve for v in desc.views]
-            perspective_ids = self._insert_perspective(conn, object_id, getattr(desc, "perspective", []))
-            members["full"] = list(range(len(ids) + len(perspective_ids)))
-            write_groups(conn.connection.driver_connection, object_id, ids + perspective_ids,
-                         np.stack(curves + [v.curve for v in getattr(desc, "perspective", [])]),
+            perspective = getattr(desc, "perspective", [])
+            ids = [i for i, _ in keyed] + self._insert_perspective(conn, object_id, perspective)
+            members["full"] = list(range(len(ids)))
+            write_groups(conn.connection.driver_connection, object_id, ids,
+                         np.stack([v.curve for v in (*desc.views, *perspective)]),
                          members, config.index.group_views)
 
     def add_perspective(self, name: str, views: Any, config: BuildConfig) -> None:
@@ -455,9 +454,7 @@ class Store:
         with self.transaction() as conn:
             object_id = self.object_id(conn, name)
             raw = conn.connection.driver_connection
-            full = [gid for (gid,) in raw.execute(
-                "SELECT id FROM index_groups WHERE object_id = ? AND tier = 'full'", (object_id,))]
-            delete_groups(raw, [object_id], only=full)
+            delete_groups(raw, [object_id], tiers=("full",))
             conn.execute(sa.delete(s.perspective_views)
                          .where(s.perspective_views.c.object_id == object_id))
             ortho = raw.execute(

@@ -52,6 +52,14 @@ __all__ = [
 #: The two tiers: every stored view (server grid) and the client grid's stand-ins.
 TIERS = ("full", "sparse")
 
+def rows_with_ids(conn: sqlite3.Connection, sql: str, ids: Sequence[int]) -> Iterator[tuple[Any, ...]]:
+    """The rows of ``sql`` (``... WHERE id IN ({})``) for ``ids``, queried in chunks:
+    SQLite caps the variables of one statement."""
+    for start in range(0, len(ids), 900):
+        chunk = list(ids[start : start + 900])
+        yield from conn.execute(sql.format(",".join("?" * len(chunk))), chunk)
+
+
 def create_tiers(conn: Any) -> None:
     """Create the empty R-trees of both tiers (the tables must exist)."""
     for tier in TIERS:
@@ -103,18 +111,14 @@ def write_groups(
     return counts
 
 
-def delete_groups(conn: Any, object_ids: Iterable[int], only: Sequence[int] | None = None) -> None:
-    """Take the objects' groups (or just the groups ``only``) out of both tiers (caller's
-    transaction)."""
+def delete_groups(conn: Any, object_ids: Iterable[int], tiers: Sequence[str] = TIERS) -> None:
+    """Take the objects' groups out of ``tiers`` (default both; caller's transaction)."""
     raw = _raw(conn)
-    keep_only = None if only is None else {int(g) for g in only}
     for object_id in object_ids:
-        rows = raw.execute(
+        rows = [r for r in raw.execute(
             "SELECT id, tier, lo, hi FROM index_groups WHERE object_id = ?", (int(object_id),)
-        ).fetchall()
-        if keep_only is not None:
-            rows = [r for r in rows if int(r[0]) in keep_only]
-        for tier in TIERS:
+        ) if r[1] in tiers]
+        for tier in tiers:
             mine = [r for r in rows if r[1] == tier]
             if not mine:
                 continue
@@ -195,20 +199,17 @@ class StoredTier:
         self, groups: NDArray[np.int64]
     ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
         missing = groups[~self._loaded[groups]]
-        for start in range(0, len(missing), 900):  # SQLite caps the variables of one statement
-            chunk = missing[start : start + 900]
-            by_id = {int(self._ids[g]): int(g) for g in chunk}
-            marks = ",".join("?" * len(chunk))
-            for gid, blob in self.conn.execute(
-                f"SELECT id, curves FROM index_groups WHERE id IN ({marks})", list(by_id)
-            ):
-                g = by_id[int(gid)]
-                a, n = int(self.group_start[g]), int(self.group_count[g])
-                curves = decode_array(blob, np.float32, (n, self._curves.shape[1]))
-                self._curves[a : a + n] = curves
-                self._coords[a : a + n] = indexed_coordinates(curves)
-                self._means[a : a + n] = paa_means(curves, self._edges)
-                self._loaded[g] = True
+        by_id = {int(self._ids[g]): int(g) for g in missing}
+        for gid, blob in rows_with_ids(
+            self.conn, "SELECT id, curves FROM index_groups WHERE id IN ({})", list(by_id)
+        ):
+            g = by_id[int(gid)]
+            a, n = int(self.group_start[g]), int(self.group_count[g])
+            curves = decode_array(blob, np.float32, (n, self._curves.shape[1]))
+            self._curves[a : a + n] = curves
+            self._coords[a : a + n] = indexed_coordinates(curves)
+            self._means[a : a + n] = paa_means(curves, self._edges)
+            self._loaded[g] = True
         return self._curves, self._coords, self._means
 
     def view_id(self, row: int) -> int:
@@ -320,23 +321,16 @@ class TierReader:
         view and the camera distance in bounding radii for a perspective one."""
         ids = [int(i) for i in view_ids]
         out: dict[int, tuple[float, float, float | None]] = {}
-        ortho = [i for i in ids if i > 0]
-        pinhole = [-i for i in ids if i < 0]
-        for start in range(0, len(ortho), 900):  # SQLite caps the variables of one statement
-            chunk = ortho[start : start + 900]
-            marks = ",".join("?" * len(chunk))
-            rows = self.conn.execute(
-                f"SELECT id, azimuth, elevation FROM views WHERE id IN ({marks})", chunk
-            ).fetchall()
-            out.update((int(i), (float(a), float(e), None)) for i, a, e in rows)
-        for start in range(0, len(pinhole), 900):
-            chunk = pinhole[start : start + 900]
-            marks = ",".join("?" * len(chunk))
-            rows = self.conn.execute(
-                f"SELECT id, azimuth, elevation, distance FROM perspective_views WHERE id IN ({marks})",
-                chunk,
-            ).fetchall()
-            out.update((-int(i), (float(a), float(e), float(d))) for i, a, e, d in rows)
+        for i, a, e in rows_with_ids(
+            self.conn, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})",
+            [i for i in ids if i > 0],
+        ):
+            out[int(i)] = (float(a), float(e), None)
+        for i, a, e, d in rows_with_ids(
+            self.conn, "SELECT id, azimuth, elevation, distance FROM perspective_views WHERE id IN ({})",
+            [-i for i in ids if i < 0],
+        ):
+            out[-int(i)] = (float(a), float(e), float(d))
         return out
 
     def object_versions(self) -> dict[str, str]:
