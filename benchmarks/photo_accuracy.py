@@ -2,6 +2,7 @@
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]
+                                           [--unverified] [--rotations 12]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
 perspective camera, with random lighting, a plain random background, pixel noise and
@@ -11,7 +12,8 @@ would be, and queried with every plan (12 in-plane turns); reported per plan: th
 (rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
 each photo with its exact silhouette (rendered depth > 0) as the mask, to separate
 segmentation errors from recognition errors; ``--outline`` also queries without the colour
-re-ranking (:mod:`viewdb.colour`), ranking by outline alone as the paper does. With ``--pose-photos N`` the
+and shape re-rankings (:mod:`viewdb.colour`, :mod:`viewdb.verify`), ranking by outline alone
+as the paper does, and ``--unverified`` without the shape re-ranking only. With ``--pose-photos N`` the
 first N photos of **textured, asymmetric** objects (symmetry type with no generator; a
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
@@ -96,19 +98,26 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--plans", default="server,cs1,cs2")
+    parser.add_argument("--rotations", type=int, default=12,
+                        help="in-plane turns of the silhouette tried (1: upright only; the photos "
+                             "are upright, as a camera that knows gravity would take them)")
     parser.add_argument("--true-mask", action="store_true", help="also query with the exact silhouette")
     parser.add_argument("--pnp", action="store_true",
                         help="also pose the pose photos with the camera's intrinsics (PnP, or the "
                              "perspective silhouette fit): full rotation and translation errors")
     parser.add_argument("--outline", action="store_true",
-                        help="also query without the colour re-ranking (outline alone, the paper's way)")
+                        help="also query without the colour and shape re-rankings (outline alone, the "
+                             "paper's way)")
+    parser.add_argument("--unverified", action="store_true",
+                        help="also query without the shape re-ranking (outline and colour)")
     args = parser.parse_args()
     plans = args.plans.split(",")
     db = viewdb.open(args.db, read_only=True)
     names = [o.name for o in db.objects()]
     rng = np.random.default_rng(args.seed)
     runs = (plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
-            + ([f"{p}+outline" for p in plans] if args.outline else []))
+            + ([f"{p}+outline" for p in plans] if args.outline else [])
+            + ([f"{p}+unverified" for p in plans] if args.unverified else []))
     ranks = {p: [] for p in runs}
     times = {p: [] for p in runs}
     pose_rows = []
@@ -126,9 +135,10 @@ def main() -> None:
             plan = run.split("+")[0]
             start = time.perf_counter()
             try:
-                result = db.query(photo, k=args.k, plan=plan, pose=False,
+                result = db.query(photo, k=args.k, plan=plan, pose=False, rotations=args.rotations,
                                   mask=exact if run.endswith("+mask") else None,
-                                  colour=not run.endswith("+outline"))
+                                  colour=not run.endswith("+outline"),
+                                  verify=not run.endswith(("+outline", "+unverified")))
                 found = [m.object for m in result.results]
                 rank = found.index(name) + 1 if name in found else 0
             except viewdb.ViewDBError as exc:
@@ -167,7 +177,7 @@ def main() -> None:
         r = np.array(ranks[run])
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
         print(f"{run:14s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
-              f"(segmentation + 12 turns{'' if run.endswith('+outline') else ' + colour'}, no pose)")
+              f"(segmentation + {args.rotations} turns{STAGES[run.split('+')[-1]]}, no pose)")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "
@@ -182,6 +192,11 @@ def main() -> None:
               f"median translation error {median(r[1] for r in ok):.1f} % "
               f"of the camera distance; methods {sorted({r[2] for r in ok})}; "
               f"median query {median(r[4] for r in pnp_rows):.1f} s")
+
+
+#: What a run's query does after the search, by the run's suffix.
+STAGES = {"outline": "", "unverified": " + colour", "mask": " + colour + shape fit"}
+STAGES.update({p: " + colour + shape fit" for p in ("server", "cs1", "cs2")})
 
 
 def median(values) -> float:

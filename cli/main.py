@@ -300,7 +300,10 @@ def query(
         "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
                          "silhouette fit.")] = False,
     no_colour: Annotated[bool, typer.Option(
-        "--no-colour", help="Rank by outline alone (the paper's way), not re-ranked by colour.")] = False,
+        "--no-colour", help="Do not re-rank by colour.")] = False,
+    no_verify: Annotated[bool, typer.Option(
+        "--no-verify", help="Do not re-rank by how well each result's view fits the photo's shape "
+                            "(with --no-colour: rank by outline alone, the paper's way).")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     server: Annotated[
         str | None, typer.Option(help="URL of a viewdb server (viewdb serve); the client half runs "
@@ -334,7 +337,7 @@ def query(
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
                                 label_map=label_map, label=label, colour=not no_colour,
-                                pose_top=pose_top)
+                                verify=not no_verify, pose_top=pose_top)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -344,7 +347,7 @@ def query(
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
                                    label_map=label_map, label=label, rerank=rerank,
-                                   colour=not no_colour, pose_top=pose_top)
+                                   colour=not no_colour, verify=not no_verify, pose_top=pose_top)
             finally:
                 if side is not None:
                     side.close()
@@ -355,14 +358,15 @@ def query(
     network = f", network {t['network']:.0f}" if "network" in t else ""
     out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
               f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
-              f"server {t['server']:.0f}, colour {t['colour']:.0f}, pose {t['pose']:.0f}{network})")
-    table = Table("rank", "object", "distance", "colour", "score", "view h/v", "pose h/v/in-plane",
+              f"server {t['server']:.0f}, colour {t['colour']:.0f}, verify {t['verify']:.0f}, "
+              f"pose {t['pose']:.0f}{network})")
+    table = Table("rank", "object", "distance", "colour", "fit", "score", "view h/v", "pose h/v/in-plane",
                   "method", "inliers")
     for r in result.results:
         p = r.pose
         table.add_row(
             str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
-            f"{r.score:.3f}",
+            "-" if r.shape_fit is None else f"{r.shape_fit:.3f}", f"{r.score:.3f}",
             f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}"
             + ("" if r.camera_distance is None else f" at {r.camera_distance:g} r"),
             f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
@@ -408,10 +412,10 @@ def serve(
                                  envvar="VIEWDB_TOKEN")
     ] = None,
     max_body: Annotated[
-        int, typer.Option(help="Largest /refine or /walk body in bytes.", min=1024)
+        int, typer.Option(help="Largest /refine, /walk or /colours body in bytes.", min=1024)
     ] = 256 * 1024,
     max_image_body: Annotated[
-        int, typer.Option(help="Largest /pose body (the query image) in bytes.", min=1024)
+        int, typer.Option(help="Largest /pose or /fits body (the query image) in bytes.", min=1024)
     ] = 32 * 1024 * 1024,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")

@@ -24,7 +24,7 @@ import viewdb
 from tests.conftest import mixed_query_curves
 from tests.serving import ServerProcess, request
 from viewdb.http import models
-from viewdb.http.wire import PoseRequest, decode_query, encode_query
+from viewdb.http.wire import FitReply, PoseRequest, decode_query, encode_query
 from viewdb.pose import QueryView
 from viewdb.search.plans import MAX_K
 from viewdb_cli.main import main
@@ -96,9 +96,10 @@ def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote
                 assert there.results[0].pose is not None
                 assert (there.results[1].pose is None) == (top == 1)
             t, x = there.timing_ms, there.transfer
-            # 6 turns, the colour signatures (a photo with colour), the pose
+            # 6 turns, the colour signatures (a photo with colour), the shape fits, the pose
             assert any(m.colour is not None for m in there.results) == coloured
-            assert x["round_trips"] == 6 + coloured + pose and x["bytes_sent"] > 0 and x["bytes_received"] > 0
+            assert all(m.shape_fit is not None for m in there.results)
+            assert x["round_trips"] == 6 + coloured + 1 + pose and x["bytes_sent"] > 0 and x["bytes_received"] > 0
             assert t["server"] > 0 and t["network"] >= 0 and t["total"] >= t["segment"]
             if plan == "server":
                 assert t["client"] < 1.0  # nothing runs on the client's tier
@@ -131,7 +132,7 @@ def test_health_info_and_openapi(server, remote):
     assert info["limits"]["curve_samples"] == 128 and info["limits"]["max_k"] == MAX_K
     status, schema = request(server.url, "GET", "/openapi.json")
     assert status == 200
-    assert {"/refine", "/walk", "/pose", "/info", "/health"} <= set(schema["paths"])
+    assert {"/refine", "/walk", "/pose", "/colours", "/fits", "/info", "/health"} <= set(schema["paths"])
     body = schema["paths"]["/refine"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert body["$ref"].split("/")[-1] in schema["components"]["schemas"]
     assert "CandidateModel" in schema["components"]["schemas"]
@@ -178,6 +179,10 @@ def _pose_body(image):
     return {"image": image, "matches": _valid()["client"], "intrinsics": None}
 
 
+def _fit_body(image):
+    return {"image": image, "views": [{"object": "mug", "azimuth": 30.0, "elevation": 60.0}]}
+
+
 @pytest.mark.parametrize("path, body, status, problem", [
     ("/refine", b"{not json", 400, "not valid JSON"),
     ("/refine", b"", 400, "empty body"),
@@ -214,6 +219,14 @@ def _pose_body(image):
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "matches": []}, 422, "must not be empty"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [1, 2, 3]}, 422, "intrinsics"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "positive"),
+    ("/fits", {"views": []}, 422, "lacks 'image'"),
+    ("/fits", _fit_body("!!!not base64!!!"), 422, "not valid base64"),
+    ("/fits", _fit_body(_png(np.zeros((32, 32, 3), np.uint8))), 422, "must be RGBA"),
+    ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))), "views": []}, 422, "1 to 100"),
+    ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))),
+               "views": [{"object": "mug", "azimuth": "NaN", "elevation": 0}]}, 422, "finite"),
+    ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))),
+               "views": [{"object": "nope", "azimuth": 0, "elevation": 0}]}, 404, "no object named 'nope'"),
 ])
 def test_bad_input_gets_a_4xx_with_a_one_line_json_error(server, path, body, status, problem):
     got, reply = request(server.url, "POST", path, body, token=TOKEN)
@@ -246,7 +259,8 @@ def test_huge_payloads_get_413(server, chunked):
 
 @pytest.mark.parametrize("headers", [{}, {"Authorization": "Bearer wrong"}, {"Authorization": TOKEN},
                                      {"Authorization": f"Basic {TOKEN}"}, {"Authorization": f"Bearer {TOKEN}x"}])
-@pytest.mark.parametrize("method, path", [("POST", "/refine"), ("POST", "/walk"), ("POST", "/pose"), ("GET", "/info")])
+@pytest.mark.parametrize("method, path", [("POST", "/refine"), ("POST", "/walk"), ("POST", "/pose"),
+                                          ("POST", "/fits"), ("GET", "/info")])
 def test_a_missing_or_wrong_token_gets_401(server, headers, method, path):
     got, reply = request(server.url, method, path, _valid() if method == "POST" else None, headers=headers)
     assert got == 401 and "token" in reply["error"]
@@ -287,9 +301,10 @@ def test_cli_query_against_the_server_equals_the_local_query(tiered_db, files, s
     assert main(["query", *common, "--db", str(tiered_db), "--client", str(client)]) == 0
     local = json.loads(capsys.readouterr().out)
     assert there["results"] == local["results"] and there["results"][0]["object"] == "car"
-    # 4 turns and the colour signatures (the car is coloured)
+    # 4 turns, the colour signatures (the car is coloured) and the shape fits
     assert there["results"][0]["colour_distance"] is not None
-    assert there["transfer"]["round_trips"] == 4 + 1 and "network" in there["timing_ms"]
+    assert there["results"][0]["shape_fit"] is not None
+    assert there["transfer"]["round_trips"] == 4 + 1 + 1 and "network" in there["timing_ms"]
 
 
 def test_cli_errors_for_remote_queries(files, server, tmp_path, capsys):
@@ -316,23 +331,26 @@ JSON = st.recursive(
     max_leaves=30,
 )
 KEYS = {"/refine": ("curve", "band", "k", "client"), "/walk": ("curve", "band", "k", "client", "client_gap"),
-        "/pose": ("image", "matches", "intrinsics")}
+        "/pose": ("image", "matches", "intrinsics"), "/fits": ("image", "views")}
 
 
 @st.composite
 def mutated(draw):
     """A valid request of some endpoint with one part replaced, dropped or corrupted."""
     path = draw(st.sampled_from(sorted(KEYS)))
-    body = (_pose_body(_png(np.full((20, 20, 4), 255, np.uint8))) if path == "/pose"
+    image = _png(np.full((20, 20, 4), 255, np.uint8))
+    body = (_pose_body(image) if path == "/pose" else _fit_body(image) if path == "/fits"
             else _valid("walk" if path == "/walk" else "refine"))
     key = draw(st.sampled_from(KEYS[path]))
     how = draw(st.sampled_from(["replace", "drop", "candidate", "curve"]))
     if how == "drop":
         del body[key]
+    elif how == "candidate" and path == "/fits":
+        body["views"][0][draw(st.sampled_from(["object", "azimuth", "elevation"]))] = draw(JSON)
     elif how == "candidate":
         cands = body["matches" if path == "/pose" else "client"]
         cands[0][draw(st.sampled_from(["object", "distance", "azimuth", "elevation", "mirrored"]))] = draw(JSON)
-    elif how == "curve" and path != "/pose":
+    elif how == "curve" and path not in ("/pose", "/fits"):
         body["curve"] = draw(st.lists(st.floats(allow_nan=False) | st.integers(), max_size=200))
     else:
         body[key] = draw(JSON)
@@ -341,11 +359,14 @@ def mutated(draw):
 
 def _fuzz_one(url, path, body):
     got, reply = request(url, "POST", path, body, token=TOKEN)
-    assert got in (200, 400, 413, 422), (got, reply)
+    # (an unknown object's view cannot be fitted: 404; a pose of one is an error per match)
+    assert got in (200, 400, 413, 422) + ((404,) if path == "/fits" else ()), (got, reply)
     assert isinstance(reply, dict)
     if got == 200:
         if path == "/pose":
             assert len(reply["poses"]) == len(body["matches"])
+        elif path == "/fits":
+            assert len(FitReply.from_dict(reply).fits) == len(body["views"])
         else:
             viewdb.ServerReply.from_dict(reply)
     else:

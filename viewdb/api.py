@@ -20,10 +20,10 @@ from .camera import grid_views, normalise_angle
 from .colour import carries_colour, colour_signature
 from .config import BuildConfig, RenderConfig
 from .describe import ObjectDescription, describe_view
-from .errors import FeatureError, NotFound, QueryError, StorageError, ViewDBError
+from .errors import FeatureError, NotFound, PoseError, QueryError, RenderError, StorageError, ViewDBError
 from .ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
 from .mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
-from .pose import PoseEstimate
+from .pose import CandidateView, PoseEstimate, QueryView, shape_fit
 from .query import QueryResult, pose_object, run_query
 from .remote import ServerTier
 from .render import RenderedView, get_renderer
@@ -465,6 +465,7 @@ class ViewDB:
         label: int | None = None,
         rerank: bool = False,
         colour: bool = True,
+        verify: bool = True,
         pose_top: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
@@ -480,7 +481,10 @@ class ViewDB:
         label image instead of ``mask``. ``rerank`` (with intrinsics) re-ranks the k results
         by the IoU of their perspective silhouette fit. ``colour``: a photo with colour
         re-ranks the plan's best objects by how well their colours match too
-        (:mod:`viewdb.colour`); ``colour=False`` ranks by outline alone, as the paper does.
+        (:mod:`viewdb.colour`); ``verify``: they are re-ranked by how well each one's
+        matched view, rendered, fits the photo's outline and internal edges
+        (:mod:`viewdb.verify`); ``colour=False, verify=False`` ranks by outline alone, as
+        the paper does.
         ``pose_top``: pose only the best this many results (default all k; about 0.4 s
         each).
 
@@ -493,7 +497,7 @@ class ViewDB:
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and (self.role == "full" or server is not None),
                          intrinsics=intrinsics, server=server, label_map=label_map, label=label,
-                         rerank=rerank, colour=colour, pose_top=pose_top)
+                         rerank=rerank, colour=colour, verify=verify, pose_top=pose_top)
 
     def estimate_pose(
         self,
@@ -721,6 +725,28 @@ class ViewDB:
         return [_cached(self._colours, (name, float(azimuth), float(elevation)),
                         lambda n=name, a=azimuth, e=elevation: signature(n, a, e), COLOUR_CACHE_VIEWS)
                 for name, azimuth, elevation in views]
+
+    def view_fits(
+        self, query: QueryView, views: Sequence[tuple[str, float, float]]
+    ) -> list[float | None]:
+        """How well each view ``(object, azimuth, elevation)``, rendered from the stored
+        mesh (cached, :meth:`render`), explains the segmented query's shape
+        (:func:`viewdb.pose.shape_fit`, in [0, 1]); None where the view has no silhouette."""
+        empty = np.zeros((0, 3), np.float32)
+        fits: list[float | None] = []
+        for name, azimuth, elevation in views:
+            try:
+                rendered = self.render(name, azimuth, elevation)
+                view = CandidateView(
+                    azimuth=azimuth, elevation=elevation, mirrored=False,
+                    keypoints=np.zeros((0, 5), np.float32), descriptors=np.zeros((0, 128), np.uint8),
+                    points3d=empty, mask=rendered.mask, image_size=self.config.render.image_size,
+                    xmag=self.config.render.xmag, color=rendered.color,
+                )
+                fits.append(shape_fit(query, view))
+            except (PoseError, RenderError):
+                fits.append(None)
+        return fits
 
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone (the last

@@ -79,6 +79,7 @@ __all__ = [
     "QueryView",
     "estimate_pose",
     "inplane_angle",
+    "shape_fit",
     "rotation_angle",
     "rotation_to_view",
     "rotation_z",
@@ -1095,6 +1096,25 @@ def estimate_pose(
         return PoseEstimate(h, v, a, hyp.scale, hyp.rotation, hyp.translation, "sift", support,
                             hyp.candidate, frame, ratio)
     return _shape_pose(query, color, mask, candidates, config, k_matrix, inplane_near)
+
+
+def shape_fit(query: QueryView, view: CandidateView, config: PoseConfig | None = None) -> float:
+    """How well one view explains the query's shape: the score (``1 - cost``, in [0, 1])
+    of :func:`estimate_pose`'s shape method on this view alone, i.e. its best alignment
+    of the outline and, when the view carries its shaded render, of the internal edges.
+    The view's SIFT features are not used. The query's outline and edges are derived once
+    per :class:`QueryView`, so fitting many views to one query costs one alignment each.
+
+    Raises
+    ------
+    PoseError
+        The query or the view has no usable silhouette.
+    """
+    config = config or PoseConfig()
+    mask = np.asarray(query.mask, dtype=bool)
+    if not mask.any():
+        raise PoseError("the query mask is empty: no shape to fit")
+    return _shape_pose(query, np.asarray(query.color), mask, [view], config, None).score
 
 
 def _shape_pose(

@@ -9,9 +9,11 @@ all of them, remembering the turn that matched. Each turn is one search by the c
 plan (:meth:`viewdb.ViewDB.recognise`); CS1 stays exact per turn, so CS1 still equals the
 ``server`` plan.
 
-A photo with colour then has the plan's best :data:`COLOUR_POOL` objects re-ranked by
-outline distance times colour mismatch against each one's matched view
-(:mod:`viewdb.colour`), and the best k kept.
+The plan finds its best :data:`POOL` objects (at least k) when they are re-ranked: a
+photo with colour by outline distance times colour mismatch against each one's matched
+view (:mod:`viewdb.colour`), then every photo by how well each one's matched view,
+rendered, fits the photo's outline and internal edges (:mod:`viewdb.verify`); the best
+k are kept. Both need the meshes (a full file or a server).
 
 For each of the top results the candidate same-shape poses of the matched view (the
 paper's eqs. 1–2) are fetched or regenerated from the mesh, and :mod:`viewdb.pose` picks
@@ -50,6 +52,7 @@ from .query_image import LoadedImage, Segmentation, label_mask, load_image, segm
 from .render import get_renderer
 from .search.plans import Candidate
 from .silhouette_pose import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
+from .verify import physical_view, rerank_by_fit
 
 if TYPE_CHECKING:
     from .api import ServerTier, ViewDB
@@ -87,11 +90,19 @@ class QueryMatch:
     #: The matched view is a perspective silhouette from this many bounding radii
     #: (:class:`~viewdb.config.PerspectiveConfig`); None: an orthographic view.
     camera_distance: float | None = None
+    #: How well the matched view, rendered, fits the photo's shape (:mod:`viewdb.verify`,
+    #: in [0, 1]); None when the results were not verified or the view has no silhouette.
+    shape_fit: float | None = None
+    #: What the results are ranked by when verified (:func:`viewdb.verify.rerank_by_fit`).
+    verified_score: float | None = None
 
     @property
     def score(self) -> float:
         """What the results are ranked by: ``distance``, lengthened by the colour
-        mismatch when they were re-ranked by colour."""
+        mismatch when they were re-ranked by colour, and by the shape misfit when they
+        were verified."""
+        if self.verified_score is not None:
+            return self.verified_score
         return self.distance if self.colour_score is None else self.colour_score
 
     def to_dict(self) -> dict[str, Any]:
@@ -100,7 +111,7 @@ class QueryMatch:
             "view": {"azimuth": self.azimuth, "elevation": self.elevation,
                      "mirrored": self.mirrored, "inplane": self.inplane,
                      "camera_distance": self.camera_distance},
-            "colour_distance": self.colour, "score": self.score,
+            "colour_distance": self.colour, "shape_fit": self.shape_fit, "score": self.score,
             "pose": None,
         }
         p = self.pose
@@ -248,8 +259,9 @@ def _merge(per_turn: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tu
     return sorted(best.values(), key=lambda x: (x[0].distance, x[0].object))[:k]
 
 
-#: Objects the plan finds (at least k) before the colour re-ranking keeps the best k.
-COLOUR_POOL = 5
+#: Objects the plan finds (at least k) before the colour and shape re-rankings keep the
+#: best k.
+POOL = 5
 
 
 def _by_colour(
@@ -260,6 +272,16 @@ def _by_colour(
     colour distance (None: its mesh has no colour) and score."""
     order, colours, scores = rerank([c.distance for c, _ in merged], query, signatures)
     by_object = {c.object: (d, sc) for (c, _), d, sc in zip(merged, colours, scores, strict=True)}
+    return [merged[i] for i in order], by_object
+
+
+def _by_fit(
+    merged: list[tuple[Candidate, float]], scores: Sequence[float], fits: Sequence[float | None],
+) -> tuple[list[tuple[Candidate, float]], dict[str, tuple[float | None, float]]]:
+    """``merged`` re-ranked by shape fit (:func:`viewdb.verify.rerank_by_fit`) from their
+    ``scores``, and each object's fit and verified score."""
+    order, verified = rerank_by_fit(scores, fits)
+    by_object = {c.object: (f, v) for (c, _), f, v in zip(merged, fits, verified, strict=True)}
     return [merged[i] for i in order], by_object
 
 
@@ -466,6 +488,7 @@ def run_query(
     label: int | None = None,
     rerank: bool = False,
     colour: bool = True,
+    verify: bool = True,
     pose_top: int | None = None,
 ) -> QueryResult:
     """Recognise the object a query image shows and estimate its pose (see module doc).
@@ -481,9 +504,11 @@ def run_query(
     first result again with the full search, and the results sorted by IoU (``distance``
     stays the curve distance).
 
-    ``colour``: when the photo has colour, the plan's best :data:`COLOUR_POOL` (at least
-    k) objects are re-ranked by outline distance times colour mismatch (:mod:`viewdb.colour`;
-    needs the meshes: a full file or a server) and the best k kept.
+    ``colour``: when the photo has colour, the plan's best :data:`POOL` (at least k)
+    objects are re-ranked by outline distance times colour mismatch (:mod:`viewdb.colour`).
+    ``verify``: they are re-ranked by how well each one's matched view fits the photo's
+    shape (:mod:`viewdb.verify`). Both need the meshes (a full file or a server); the best
+    k are kept.
 
     ``pose_top``: pose only the best this many results (None: all k; ``rerank`` poses all
     k); the others get no pose. Posing costs about 0.4 s per result on two cores.
@@ -511,8 +536,10 @@ def run_query(
     if completed is not None:
         curves += rotated_curves(completed, db.config.features.curve_samples, rotations)
     segmented = time.perf_counter()
-    recolour = colour and (server is not None or db.role == "full") and has_colour(loaded.rgb)
-    pool = max(k, COLOUR_POOL) if recolour else k
+    meshes = server is not None or db.role == "full"
+    recolour = colour and meshes and has_colour(loaded.rgb)
+    verifying = verify and meshes
+    pool = max(k, POOL) if recolour or verifying else k
     per_turn = []
     client_ms = server_ms = 0.0
     sent = received = trips = 0
@@ -544,6 +571,18 @@ def run_query(
             sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
             network_ms += exchange.wall_ms - exchange.server_ms
         merged, colours = _by_colour(merged, colour_signature(query.color, query.mask), signatures)
+    coloured = time.perf_counter()
+    fitted: dict[str, tuple[float | None, float]] = {}
+    if verifying and len(merged) > 1:
+        views = [(c.object, *physical_view(c)) for c, _ in merged]
+        if server is None:
+            fits = db.view_fits(query, views)
+        else:
+            fits, exchange = server.fits(query, views)
+            sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
+            network_ms += exchange.wall_ms - exchange.server_ms
+        scores = [colours[c.object][1] if c.object in colours else c.distance for c, _ in merged]
+        merged, fitted = _by_fit(merged, scores, fits)
     merged = merged[:k]
     recognised = time.perf_counter()
     matches: list[QueryMatch] = []
@@ -561,7 +600,7 @@ def run_query(
         network_ms += exchange.wall_ms - exchange.server_ms
         matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
                               angle, *poses[rank - 1], *colours.get(c.object, (None, None)),
-                              camera_distance=c.camera_distance)
+                              c.camera_distance, *fitted.get(c.object, (None, None)))
                    for rank, (c, angle) in enumerate(merged, 1)]
     else:
         config = pose_config or PoseConfig()
@@ -575,8 +614,8 @@ def run_query(
                     problem = exc.message
             matches.append(QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation,
                                       c.mirrored, angle, estimate, problem,
-                                      *colours.get(c.object, (None, None)),
-                                      camera_distance=c.camera_distance))
+                                      *colours.get(c.object, (None, None)), c.camera_distance,
+                                      *fitted.get(c.object, (None, None))))
         if verify:
             assert camera is not None
             matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)
@@ -587,7 +626,8 @@ def run_query(
         image=name, plan=plan, k=k, results=matches,
         timing_ms={
             "segment": (segmented - start) * 1e3, "client": client_ms, "server": server_ms,
-            "colour": (recognised - searched) * 1e3, "pose": (end - recognised) * 1e3,
+            "colour": (coloured - searched) * 1e3, "verify": (recognised - coloured) * 1e3,
+            "pose": (end - recognised) * 1e3,
             "total": (end - start) * 1e3, **remote,
         },
         segmentation=seg.method,

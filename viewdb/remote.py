@@ -51,6 +51,14 @@ class ServerTier(Protocol):
         object's mesh has no colour)."""
         ...
 
+    def fits(
+        self, query: QueryView, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[float | None], Exchange]:
+        """How well each stored view ``(object, azimuth, elevation)``, rendered from the
+        server's meshes, fits the segmented query's shape (:mod:`viewdb.verify`; None: the
+        view has no silhouette)."""
+        ...
+
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,

@@ -8,6 +8,8 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /walk``    CS2's server half (Algorithm 4)
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
+``POST /fits``    how well stored views fit the segmented query's shape (the client
+                  re-ranks by them, :mod:`viewdb.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
@@ -52,7 +54,15 @@ from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..query import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models
-from .wire import ColourReply, ColourRequest, PoseReply, PoseRequest, decode_query
+from .wire import (
+    ColourReply,
+    ColourRequest,
+    FitReply,
+    FitRequest,
+    PoseReply,
+    PoseRequest,
+    decode_query,
+)
 
 __all__ = ["DEFAULT_MAX_BODY", "DEFAULT_MAX_IMAGE_BODY", "app_from_env", "create_app"]
 
@@ -316,13 +326,23 @@ def create_app(
         signatures, ms = await run(lambda db: db.view_colours(req.views))
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
+    @app.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
+              responses={200: {"model": models.FitReplyModel}, **_ERRORS},
+              summary="Shape fits of stored views to the segmented query image, to re-rank results")
+    async def fits(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: FitRequest.from_dict(data))
+        query = _parse(lambda: decode_query(req.image))
+        found, ms = await run(lambda db: db.view_fits(query, req.views))
+        return FitReply(found, {"server_ms": ms}).to_dict()
+
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
             schema = get_openapi(title=app.title, version=app.version, description=app.description,
                                  routes=app.routes)
             components = schema.setdefault("components", {}).setdefault("schemas", {})
             for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel):
+                          models.ColourRequestModel, models.FitRequestModel):
                 doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
                 components.update(doc.pop("$defs", {}))
                 components[model.__name__] = doc
@@ -330,7 +350,8 @@ def create_app(
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
-    app.add_middleware(BodyLimit, limits={"/pose": max_image_body}, default=max_body)
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body},
+                       default=max_body)
     return app
 
 

@@ -25,7 +25,7 @@ from ..errors import QueryError, ServerError
 from ..pose import PoseEstimate, QueryView
 from ..remote import Exchange
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
-from .wire import ColourReply, ColourRequest, PoseReply, PoseRequest
+from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 
 __all__ = ["RemoteServer"]
 
@@ -160,6 +160,17 @@ class RemoteServer:
         if len(signatures) != len(views):
             raise ServerError(f"server sent {len(signatures)} colour signatures, not {len(views)}", self.url)
         return signatures, exchange
+
+    def fits(
+        self, query: QueryView, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[float | None], Exchange]:
+        if not views:
+            return [], Exchange(0, 0, 0.0, 0.0)
+        reply, exchange = self.request("POST", "/fits", FitRequest.from_query(query, views).to_dict())
+        fits = _parse_reply(FitReply.from_dict, reply, self.url).fits
+        if len(fits) != len(views):
+            raise ServerError(f"server sent {len(fits)} shape fits, not {len(views)}", self.url)
+        return fits, exchange
 
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],

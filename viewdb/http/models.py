@@ -127,6 +127,20 @@ class ColourReplyModel(_Strict):
     stats: dict[str, float]
 
 
+class FitRequestModel(_Strict):
+    """The segmented query image and the stored views to fit to its shape."""
+
+    image: str = Field(description="base64 of an 8-bit RGBA PNG whose alpha is the object mask")
+    views: list[ColourViewModel] = Field(min_length=1, max_length=MAX_K)
+
+
+class FitReplyModel(_Strict):
+    fits: list[float | None] = Field(
+        description="per view, how well its render fits the query's outline and internal edges "
+                    "(0 to 1); null when the view has no silhouette")
+    stats: dict[str, float]
+
+
 class ErrorModel(_Strict):
     """Every error reply."""
 

@@ -1,5 +1,5 @@
-"""The pose and colour messages between a client and ``viewdb serve``, and the query
-image codec.
+"""The pose, colour and shape-fit messages between a client and ``viewdb serve``, and
+the query image codec.
 
 A client holds no meshes and no SIFT features, so it sends the server the query image
 already segmented: one lossless PNG whose alpha channel is the object mask (the server
@@ -32,7 +32,8 @@ from ..query_image import MAX_PIXELS, MIN_SIDE
 from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
 
 __all__ = [
-    "ColourReply", "ColourRequest", "PoseReply", "PoseRequest", "decode_query", "encode_query",
+    "ColourReply", "ColourRequest", "FitReply", "FitRequest", "PoseReply", "PoseRequest",
+    "decode_query", "encode_query",
     "pose_from_dict", "pose_to_dict",
 ]
 
@@ -175,13 +176,7 @@ class PoseRequest:
         if not isinstance(data, dict):
             raise QueryError("request must be an object")
         try:
-            image = data["image"]
-            if not isinstance(image, str):
-                raise QueryError("image must be a base64 string")
-            try:
-                raw = base64.b64decode(image, validate=True)
-            except (binascii.Error, ValueError) as exc:
-                raise QueryError("image is not valid base64") from exc
+            raw = _image(data)
             matches = _candidates(data["matches"], MAX_K)
             if not matches:
                 raise QueryError("matches must not be empty")
@@ -223,6 +218,37 @@ class PoseReply:
         return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
 
 
+def _image(data: dict[str, Any]) -> bytes:
+    image = data["image"]
+    if not isinstance(image, str):
+        raise QueryError("image must be a base64 string")
+    try:
+        return base64.b64decode(image, validate=True)
+    except (binascii.Error, ValueError) as exc:
+        raise QueryError("image is not valid base64") from exc
+
+
+def _views(items: Any) -> list[tuple[str, float, float]]:
+    if not isinstance(items, list):
+        raise QueryError("views must be a list")
+    if not 1 <= len(items) <= MAX_K:
+        raise QueryError(f"views must hold 1 to {MAX_K} entries, not {len(items)}")
+    views = []
+    for item in items:
+        if not isinstance(item, dict) or not isinstance(item.get("object"), str):
+            raise QueryError("each view must be an object with an object name")
+        try:
+            views.append((item["object"], _finite(item["azimuth"], "azimuth"),
+                          _finite(item["elevation"], "elevation")))
+        except KeyError as exc:
+            raise QueryError(f"view lacks {exc.args[0]!r}") from exc
+    return views
+
+
+def _views_to_list(views: Sequence[tuple[str, float, float]]) -> list[dict[str, Any]]:
+    return [{"object": o, "azimuth": h, "elevation": v} for o, h, v in views]
+
+
 @dataclass(frozen=True)
 class ColourRequest:
     """Client → server: the views ``(object, azimuth, elevation)`` whose colour signatures
@@ -231,25 +257,13 @@ class ColourRequest:
     views: list[tuple[str, float, float]]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"views": [{"object": o, "azimuth": h, "elevation": v} for o, h, v in self.views]}
+        return {"views": _views_to_list(self.views)}
 
     @classmethod
     def from_dict(cls, data: Any) -> ColourRequest:
         if not isinstance(data, dict) or not isinstance(data.get("views"), list):
             raise QueryError("request must be an object with a views list")
-        items = data["views"]
-        if not 1 <= len(items) <= MAX_K:
-            raise QueryError(f"views must hold 1 to {MAX_K} entries, not {len(items)}")
-        views = []
-        for item in items:
-            if not isinstance(item, dict) or not isinstance(item.get("object"), str):
-                raise QueryError("each view must be an object with an object name")
-            try:
-                views.append((item["object"], _finite(item["azimuth"], "azimuth"),
-                              _finite(item["elevation"], "elevation")))
-            except KeyError as exc:
-                raise QueryError(f"view lacks {exc.args[0]!r}") from exc
-        return cls(views)
+        return cls(_views(data["views"]))
 
 
 @dataclass(frozen=True)
@@ -280,5 +294,58 @@ class ColourReply:
             if (values < 0).any():
                 raise QueryError("signature values must not be negative")
             out.append(values.reshape(BINS, BINS))
+        stats = data.get("stats", {})
+        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+
+
+@dataclass(frozen=True)
+class FitRequest:
+    """Client → server: the segmented query (RGBA PNG) and the stored views
+    ``(object, azimuth, elevation)`` to fit to its shape (:mod:`viewdb.verify`)."""
+
+    image: bytes = field(repr=False)
+    views: list[tuple[str, float, float]]
+
+    @classmethod
+    def from_query(cls, query: QueryView, views: Sequence[tuple[str, float, float]]) -> FitRequest:
+        return cls(encode_query(query), list(views))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"image": base64.b64encode(self.image).decode("ascii"),
+                "views": _views_to_list(self.views)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> FitRequest:
+        if not isinstance(data, dict):
+            raise QueryError("request must be an object")
+        try:
+            return cls(_image(data), _views(data["views"]))
+        except KeyError as exc:
+            raise QueryError(f"request lacks {exc.args[0]!r}") from exc
+
+
+@dataclass(frozen=True)
+class FitReply:
+    """Server → client: per view, its shape fit in [0, 1], or None (no silhouette)."""
+
+    fits: list[float | None]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"fits": [None if f is None else float(f) for f in self.fits], "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> FitReply:
+        if not isinstance(data, dict) or not isinstance(data.get("fits"), list):
+            raise QueryError("reply must be an object with a fits list")
+        out: list[float | None] = []
+        for item in data["fits"]:
+            if item is None:
+                out.append(None)
+                continue
+            value = _finite(item, "fit")
+            if not 0.0 <= value <= 1.0:
+                raise QueryError(f"each fit must be in [0, 1], not {value}")
+            out.append(value)
         stats = data.get("stats", {})
         return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
