@@ -235,7 +235,9 @@ def run_ycb(db: viewdb.ViewDB, plans: list[str], k: int, out: Path, objects: lis
             row["pose_seconds"] = time.perf_counter() - t0
             row["pose"] = {**pose_errors(sym, est.rotation, est.translation, r_gt, t_gt), "iou": est.iou}
             for plan in plans:
-                curve = db.query(color, k=max(k, 20), plan=plan, label_map=labels, label=label, pose=False)
+                # the ranks before any re-ranking by a rendered view's fit
+                curve = db.query(color, k=max(k, 20), plan=plan, label_map=labels, label=label, pose=False,
+                                 verify=False)
                 t0 = time.perf_counter()
                 verified = db.query(color, k=k, plan=plan, label_map=labels, label=label, intrinsics=intr,
                                     rerank=True)
