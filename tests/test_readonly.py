@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import viewdb
-from tests.conftest import ROOT, sample
+from tests.conftest import ROOT, mixed_query_curves, sample
+from viewdb.config import PerspectiveConfig
 from viewdb.errors import SchemaMismatch, StorageError
 from viewdb.storage.store import Store
 
@@ -104,6 +105,65 @@ def test_an_old_schema_is_not_upgraded_read_only(tmp_path):
         pass
     with viewdb.open(path, read_only=True) as db:
         assert [o.name for o in db.objects()] == ["cone", "pyramid"]
+
+
+def _downgrade(path, revision):
+    """Take a current file back to an older schema revision (Alembic's downgrade)."""
+    import sqlalchemy as sa
+    from alembic import command
+
+    from viewdb.storage.store import _alembic_config
+
+    engine = sa.create_engine(f"sqlite:///{path}")
+    with engine.begin() as conn:
+        command.downgrade(_alembic_config(conn), revision)
+    engine.dispose()
+
+
+def test_a_client_file_from_revision_0003_is_used_read_only_as_it_is(tiered_db, tmp_path):
+    """A client file shipped before the perspective views (revision 0004) cannot be
+    upgraded on a read-only device: it opens read-only with an empty stand-in for the
+    table it lacks, answers as the current file does, and is not written."""
+    client = tmp_path / "client.db"
+    with viewdb.open(tiered_db, read_only=True) as full:
+        full.export_client(client)
+        curves = mixed_query_curves(full, np.random.default_rng(11), 8)
+    with viewdb.open(client, read_only=True) as db:
+        expected = [db.client_candidates(q, 3)[0] for q in curves]
+    _downgrade(client, "0003")
+    with sqlite3.connect(client) as conn:
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert "perspective_views" not in tables
+    before = _snapshot(client)
+    with viewdb.open(client, read_only=True) as db, viewdb.open(tiered_db, read_only=True) as full:
+        assert db.info().schema_revision == "0003"
+        assert [db.client_candidates(q, 3)[0] for q in curves] == expected
+        for q in curves[:4]:  # CS1 from the old client file is still exactly the server's answer
+            assert (full.recognise(q, 3, plan="cs1", client=db).results
+                    == full.recognise(q, 3, plan="server").results)
+        assert all(o.perspective_views == 0 for o in db.objects())
+        _use(db)
+        assert db.check().ok
+    assert _snapshot(client) == before
+    with viewdb.open(client, create=False) as db:  # opened normally, it is upgraded
+        assert db.info().schema_revision != "0003"
+
+
+def test_a_full_file_from_revision_0003_searches_its_orthographic_views_read_only(tmp_path):
+    path = tmp_path / "full.db"
+    # as if built before the perspective views: none in the index, then no table for them
+    config = viewdb.BuildConfig(gap=60, render=viewdb.RenderConfig(image_size=64),
+                                perspective=PerspectiveConfig(distances=()))
+    with viewdb.open(path, config=config) as db:
+        db.ingest([sample("car"), sample("mug")])
+    _downgrade(path, "0003")
+    before = _snapshot(path)
+    with viewdb.open(path, read_only=True) as db:
+        assert [o.perspective_views for o in db.objects()] == [0, 0]
+        _, rows = db.search_tier("full")
+        assert rows and all(view_id > 0 for view_id, _, _ in rows)
+        _use(db)
+    assert _snapshot(path) == before
 
 
 def test_unfinished_newer_missing_and_foreign_files_are_refused(tmp_path):

@@ -1,6 +1,7 @@
 """``viewdb check``: verify that a database file is whole and self-consistent.
 
-Checks, in order: the schema revision is the one this viewdb writes; SQLite's own
+Checks, in order: the schema revision is the one this viewdb writes (or, opened
+read-only, one it reads as it is: :data:`~viewdb.storage.store.READ_ONLY_COMPATIBLE`); SQLite's own
 ``integrity_check`` and ``foreign_key_check``; every view has exactly one curve, Fourier
 point and SIFT row; every blob decodes with the dtype and shape the schema promises; each
 Fourier point is the orthonormal DFT of its stored curve; each object's mesh is a GLB and
@@ -27,7 +28,7 @@ from ..symmetry import SymmetryType, skim_plan
 from . import schema as s
 from .codecs import decode_array
 from .spatial import FourierIndex
-from .store import Store
+from .store import READ_ONLY_COMPATIBLE, Store
 from .tiers import TIERS
 
 __all__ = ["CheckReport", "check_store"]
@@ -62,7 +63,7 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
     """Run every check on an open store and return the report (never raises for findings)."""
     report = CheckReport(str(store.path))
     revision = store.revision()
-    if revision != s.SCHEMA_REVISION:
+    if revision != s.SCHEMA_REVISION and not (store.read_only and revision in READ_ONLY_COMPATIBLE):
         report.add(f"schema revision is {revision}, expected {s.SCHEMA_REVISION}")
     config = store.build_config()
     if config is None:

@@ -8,7 +8,9 @@ SQLAlchemy and sqlite3 errors are turned into :class:`~viewdb.errors.StorageErro
 
 ``Store(path, read_only=True)`` never writes to the file: it connects through SQLite's
 ``mode=ro`` URI with ``query_only`` on, sets no journal mode and runs no migration (a file
-that would need one is refused with a message saying to open it once normally). A file
+that would need one is refused with a message saying to open it once normally, unless the
+migrations since its revision only add tables it can do without:
+:data:`READ_ONLY_COMPATIBLE`, TEMP tables standing in for them). A file
 in a folder that cannot be written, with no WAL beside it, is opened ``immutable=1``
 (SQLite could not make its ``-shm`` there); such a file must not change while it is open.
 """
@@ -113,9 +115,27 @@ def _set_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
     cur.close()
 
 
-def _set_read_only_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
+#: Older schema revisions a read-only open accepts, with what the revisions since then
+#: added: empty tables, which TEMP tables of the same shape stand in for on each
+#: connection (SQLite keeps TEMP tables out of the file, so the file is never written).
+#: Revision 0004 only added the perspective views: a file from 0003 (a client file
+#: shipped to a device, say) has none and searches as before.
+READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
+    "0003": (
+        "CREATE TEMP TABLE IF NOT EXISTS perspective_views (id INTEGER PRIMARY KEY,"
+        " object_id INTEGER NOT NULL, azimuth FLOAT NOT NULL, elevation FLOAT NOT NULL,"
+        " distance FLOAT NOT NULL, samples BLOB NOT NULL)",
+    ),
+}
+
+
+def _read_only_setup(dbapi_conn: sqlite3.Connection, stand_ins: tuple[str, ...]) -> None:
+    """Busy timeout, the stand-in TEMP tables (before ``query_only`` forbids them), then
+    ``query_only``."""
     cur = dbapi_conn.cursor()
     cur.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+    for statement in stand_ins:
+        cur.execute(statement)
     cur.execute("PRAGMA query_only=1")
     cur.close()
 
@@ -162,11 +182,14 @@ class Store:
             self._check_header()
         elif not self.path.parent.exists():
             raise StorageError("its folder does not exist", self.path)
+        #: TEMP tables standing in for what an older file lacks (read-only opens only).
+        self._stand_ins: tuple[str, ...] = ()
         if read_only:
             self._uri = read_only_uri(self.path)
             self.engine: Engine = sa.create_engine("sqlite://", creator=lambda: sqlite3.connect(
                 self._uri, uri=True, check_same_thread=False))
-            event.listen(self.engine, "connect", _set_read_only_pragmas)
+            event.listen(self.engine, "connect",
+                         lambda conn, _record: _read_only_setup(conn, self._stand_ins))
         else:
             self.engine = sa.create_engine(f"sqlite:///{self.path}")
             event.listen(self.engine, "connect", _set_pragmas)
@@ -184,8 +207,9 @@ class Store:
         """A new raw sqlite3 connection to the file (read-only if the store is), usable
         from any thread; for readers that manage their own transactions."""
         if self.read_only:
-            return sqlite3.connect(self._uri, uri=True, check_same_thread=False,
-                                   isolation_level=None)
+            conn = sqlite3.connect(self._uri, uri=True, check_same_thread=False, isolation_level=None)
+            _read_only_setup(conn, self._stand_ins)
+            return conn
         return sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
 
     def _check_header(self) -> None:
@@ -256,6 +280,10 @@ class Store:
             if current is None:
                 raise StorageError("is an unfinished database (its creation was interrupted); "
                                    "delete it and ingest again", self.path)
+            if current in READ_ONLY_COMPATIBLE:
+                self._stand_ins = READ_ONLY_COMPATIBLE[current]
+                self.engine.dispose()  # the next connections get the stand-ins
+                return
             raise StorageError(
                 f"has schema revision {current}, older than this viewdb's {s.SCHEMA_REVISION}: "
                 "open it once without read-only (e.g. viewdb info --db FILE) to upgrade it",
