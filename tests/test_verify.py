@@ -162,3 +162,28 @@ def test_fit_messages_round_trip_and_reject_bad_input():
     for bad in ({}, {"fits": [1.5]}, {"fits": [-0.1]}, {"fits": ["x"]}, {"fits": [float("nan")]}):
         with pytest.raises(viewdb.QueryError):
             FitReply.from_dict(bad)
+
+
+def test_a_mirrored_match_is_compared_by_the_colours_of_the_side_the_photo_shows(tiered_db):
+    """Colour re-ranking uses the same physical view as the shape fit: for a mirrored
+    match, the view from the opposite side (whose colours can differ: the marked cube's
+    faces are painted differently)."""
+    from viewdb.colour import colour_distance, colour_signature
+    from viewdb.query_image import load_image, segment
+
+    telling = 0
+    with viewdb.open(tiered_db, read_only=True) as db:
+        for name, h, v in [("marked_cube", 200, 20), ("marked_cube", 110, 330), ("mug", 160, 15),
+                           ("car", 230, 10), ("marked_cube", 20, 40), ("mug", 300, 340)]:
+            img, _ = _on_grey(db, name, h, v, background=(235, 235, 235))
+            result = db.query(img, k=5, rotations=6, pose=False)
+            query = colour_signature(img, segment(load_image(img)).mask)  # as the engine does
+            for m in result.results:
+                if not m.mirrored or m.colour is None:
+                    continue
+                match = Candidate(m.object, m.distance, m.azimuth, m.elevation, True)
+                shown = db.view_colours([(m.object, *physical_view(match))])[0]
+                assert m.colour == pytest.approx(colour_distance(query, shown), abs=1e-6)
+                matched = db.view_colours([(m.object, m.azimuth, m.elevation)])[0]
+                telling += abs(colour_distance(query, matched) - m.colour) > 0.05
+    assert telling >= 1  # some mirrored match's own view has other colours than its opposite

@@ -61,9 +61,8 @@ __all__ = [
 
 #: How many decoded meshes a database keeps in memory for :meth:`ViewDB.render`.
 MESH_CACHE_SIZE = 8
-#: Views whose colour signatures stay cached, and the size they are rendered at.
+#: Views whose colour signatures stay cached.
 COLOUR_CACHE_VIEWS = 4096
-COLOUR_RENDER_SIZE = 96
 #: How many regenerated (pruned or off-grid) views a database keeps in memory.
 VIEW_CACHE_SIZE = 256
 #: How many renders (:meth:`ViewDB.render`, about 0.5 MB each) a database keeps: posing a
@@ -711,15 +710,14 @@ class ViewDB:
         self, views: Sequence[tuple[str, float, float]]
     ) -> list[NDArray[np.float32] | None]:
         """The colour signatures (:func:`viewdb.colour.colour_signature`) of views
-        ``(object, azimuth, elevation)``, rendered from the stored meshes (cached); None for
-        an object whose mesh has no colour of its own (:func:`viewdb.colour.carries_colour`)."""
-        renderer = get_renderer(replace(self.config.render, image_size=COLOUR_RENDER_SIZE))
-
+        ``(object, azimuth, elevation)``, rendered from the stored meshes (:meth:`render`,
+        whose cache the shape verification and the pose then use; signatures are cached
+        too); None for an object whose mesh has no colour of its own
+        (:func:`viewdb.colour.carries_colour`)."""
         def signature(name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
-            mesh = self.mesh(name)
-            if not carries_colour(mesh):
+            if not carries_colour(self.mesh(name)):
                 return None
-            view = renderer.render(mesh, azimuth, elevation)
+            view = self.render(name, azimuth, elevation)
             return colour_signature(view.color, view.mask)
 
         return [_cached(self._colours, (name, float(azimuth), float(elevation)),

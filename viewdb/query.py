@@ -563,7 +563,8 @@ def run_query(
     query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
     colours: dict[str, tuple[float | None, float]] = {}
     if recolour and merged:
-        views = [(c.object, c.azimuth, c.elevation) for c, _ in merged]
+        # the side the photo shows: for a mirrored match, the opposite one
+        views = [(c.object, *physical_view(c)) for c, _ in merged]
         if server is None:
             signatures = db.view_colours(views)
         else:
