@@ -182,3 +182,35 @@ def test_knn_with_a_clients_upper_bounds_equals_brute_force(seed, k, r, objects,
     upper = everything[k - 1].distance * (1 + slack) if len(everything) >= k else np.inf
     result, _ = knn(query, tier, k, r, upper=upper, known=known, initial_radius=initial_radius)
     same(result, everything[:k])
+
+
+@settings(max_examples=100)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.integers(0, 6), st.integers(2, 8),
+       st.sampled_from([1e-4, 0.01, 0.125]), st.floats(0.0, 1.0))
+def test_the_view_reported_at_a_tie_does_not_depend_on_the_search_order(seed, k, r, objects, initial_radius,
+                                                                       slack):
+    """Symmetric silhouettes give curves equal to their own mirrors, and symmetric objects
+    repeat views: several views (or orientations) at exactly the same distance. Whatever
+    bounds a search gets (a CS1 client's) and however it browses, it reports the same
+    view for each object: the lowest row, unmirrored first."""
+    rng = np.random.default_rng(seed)
+    owner = rng.integers(0, objects, 60)
+    owner[:objects] = np.arange(objects)
+    curves = smooth_curves(rng, 60)
+    symmetric = rng.random(60) < 0.4
+    curves[symmetric] = (curves[symmetric] + np.array([mirror_curve(c) for c in curves[symmetric]])) / 2
+    for i in rng.integers(0, 60, 15):  # copies of views within and across objects
+        curves[rng.integers(0, 60)] = curves[i]
+    tier = TierArrays([f"o{i}" for i in range(objects)], owner, curves, group_views=int(rng.integers(2, 9)))
+    query = curves[rng.integers(60)] + (rng.normal(0, 0.02, 64) if rng.random() < 0.5 else 0.0)
+    reference, _ = knn(query, tier, k, r)
+    everything = brute_force_knn(query, tier, objects, r)
+    known = {tier.names.index(nb.object): nb.distance * (1 + slack * rng.random())
+             for nb in everything if rng.random() < 0.6}
+    upper = everything[k - 1].distance * (1 + slack) if len(everything) >= k else np.inf
+    bounded, _ = knn(query, tier, k, r, upper=upper, known=known, initial_radius=initial_radius)
+    assert bounded == reference
+    for nb in reference:
+        c = tier.curves[nb.view]
+        if nb.mirrored:  # mirrored only when strictly better than the view as it is
+            assert dtw(query, mirror_curve(c), r) < dtw(query, c, r)

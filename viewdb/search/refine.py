@@ -22,7 +22,9 @@ Bookkeeping, per object ``o``:
 * ``bound[o]``: the smallest distance known so far to be *achieved* by one of ``o``'s
   views (a distance computed here, or an upper bound handed in by a CS1 client);
 * ``exact[o]``, ``exact_row[o]``, ``exact_mirrored[o]``: the smallest distance computed
-  here, and where.
+  here, and where (among views at exactly that distance, the lowest row, unmirrored
+  first: every view at an object's final distance is refined whatever the bounds, so
+  the view reported is the same for every search order, e.g. CS1's and the server's).
 
 ``U``, the ``k``-th smallest ``bound`` (capped by ``cap``), bounds the final ``k``-th
 distance from above, so an entry whose key exceeds ``U`` cannot enter the result, and
@@ -61,6 +63,16 @@ WIDEN_ABS = 1e-12
 @njit(cache=True, nogil=True)
 def _widen(x):  # pragma: no cover - compiled
     return x * (1.0 + WIDEN_REL) + WIDEN_ABS
+
+
+@njit(cache=True, nogil=True)
+def _first(row, mirrored, other_row, other_mirrored):  # pragma: no cover - compiled
+    # the canonical order among views at exactly the same distance (a symmetric
+    # silhouette's curve is its own mirror): lower row first, then unmirrored; so the
+    # reported view does not depend on the order the search happened to refine them in
+    if row != other_row:
+        return row < other_row
+    return other_mirrored and not mirrored
 
 
 @njit(cache=True, nogil=True)
@@ -181,7 +193,8 @@ def _refine_kernel(  # pragma: no cover - compiled
             dist = _cascade_env_kernel(q, scratch, r, limit, lower, upper, True)
             if dist > limit:
                 continue  # abandoned
-            if dist < exact[o]:
+            if dist < exact[o] or (dist == exact[o] and _first(row, mirrored, exact_row[o],
+                                                               exact_mirrored[o])):
                 exact[o] = dist
                 exact_row[o] = row
                 exact_mirrored[o] = mirrored
