@@ -13,7 +13,9 @@ with the background.
 The query engine re-ranks its results by their outline distance times
 ``1 + COLOUR_WEIGHT * colour distance`` (:func:`reranked_score`), where the colour
 distance is the Bhattacharyya distance between the photo's signature and that of the
-result's matched view, rendered from the mesh (0 = the same colours, 1 = none shared).
+result's matched view, rendered from the mesh (0 = the same colours, 1 = none shared); for
+a mirrored match, the view from the opposite side, the side the photo shows
+(:func:`viewdb.verify.physical_view`).
 A photo without colour (greyscale, or every pixel nearly neutral: :func:`has_colour`)
 is not re-ranked. A mesh whose file gives no colour (no texture, no vertex or face
 colours, only a neutral grey material: :func:`carries_colour`) has no signature: a grey
