@@ -561,10 +561,12 @@ def run_query(
     merged = _merge(per_turn, pool)
     searched = time.perf_counter()
     query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
+    # the side of each object the photo shows (for a mirrored match, the opposite one):
+    # the view both re-rankings compare it with
+    shown = {c.object: (c.object, *physical_view(c)) for c, _ in merged}
     colours: dict[str, tuple[float | None, float]] = {}
     if recolour and merged:
-        # the side the photo shows: for a mirrored match, the opposite one
-        views = [(c.object, *physical_view(c)) for c, _ in merged]
+        views = [shown[c.object] for c, _ in merged]
         if server is None:
             signatures = db.view_colours(views)
         else:
@@ -575,7 +577,7 @@ def run_query(
     coloured = time.perf_counter()
     fitted: dict[str, tuple[float | None, float]] = {}
     if verifying and len(merged) > 1:
-        views = [(c.object, *physical_view(c)) for c, _ in merged]
+        views = [shown[c.object] for c, _ in merged]
         if server is None:
             fits = db.view_fits(query, views)
         else:
