@@ -19,6 +19,17 @@ from pathlib import Path
 from typing import Any
 
 
+def deliverable_sigint() -> None:
+    """Run in the child before exec: SIGINT at its default disposition and unblocked,
+    whatever this test process inherited. A parent that ignores SIGINT (a shell's
+    background job, nohup) passes SIG_IGN on, and Python then installs no Ctrl-C handler;
+    a parent that blocks it (some CI runners) passes the blocked mask on, and the signal
+    stays pending. Either way a user's viewdb would rightly not be interrupted, so the
+    tests give their children what a terminal gives a foreground process."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 class ServerProcess:
     """``viewdb serve --db DB --port 0 ...`` started on enter (returns once /health
     answers), stopped with SIGINT on exit (as Ctrl-C would)."""
@@ -43,7 +54,8 @@ class ServerProcess:
         if self.token:
             cmd += ["--token", self.token]
         env = {k: v for k, v in os.environ.items() if k != "VIEWDB_TOKEN"}
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._log, text=True, env=env)
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._log, text=True, env=env,
+                                     preexec_fn=deliverable_sigint)
         line: list[str] = []
         reader = threading.Thread(target=lambda: line.append(self.proc.stdout.readline()), daemon=True)
         reader.start()

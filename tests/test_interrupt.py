@@ -11,20 +11,18 @@ import pytest
 
 import viewdb
 from tests.conftest import sample_files
+from tests.serving import deliverable_sigint
 
 
 def _interrupt_an_ingest(db, files, jobs):
     """Start an ingest, send SIGINT once an object is committed; ``(returncode, stderr)``,
     or None when the ingest was over before the interrupt could act on it (it ended
     first, or it exits 0 with every object in: the signal came as it was exiting)."""
-    # the child gets SIGINT's default disposition even when this test runs with SIGINT
-    # ignored (a background job of a shell, nohup): Python then installs no Ctrl-C handler
-    # at all, as a backgrounded viewdb rightly keeps ignoring the terminal's Ctrl-C
     proc = subprocess.Popen(
         [sys.executable, "-m", "viewdb_cli.main", "ingest", *files, "--db", str(db), "--gap", "20", "--no-skim",
          "--image-size", "96", "--jobs", str(jobs)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        preexec_fn=deliverable_sigint,
     )
     try:
         return _interrupt(proc, db, files)
