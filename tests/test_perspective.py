@@ -36,6 +36,15 @@ def test_perspective_distances_must_be_outside_the_bounding_sphere_and_distinct(
         PerspectiveConfig(distances=distances)
 
 
+@pytest.mark.parametrize("distances", ["none", "3,4,6", ("three",), 4.0])
+def test_perspective_distances_that_are_not_numbers_are_refused_in_one_line(tmp_path, distances):
+    db = tmp_path / "p.db"
+    with pytest.raises(viewdb.ViewDBError, match="sequence of numbers") as info:
+        viewdb.open(db, perspective=distances)
+    assert str(db) in str(info.value) and "\n" not in str(info.value)
+    assert not db.exists()
+
+
 def test_perspective_gap_must_divide_360():
     with pytest.raises(ValueError, match="perspective gap"):
         PerspectiveConfig(gap=25)

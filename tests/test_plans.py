@@ -208,3 +208,18 @@ def test_candidates_of_objects_the_server_lacks_are_not_bounds(tiered_db):
             strangers = [viewdb.Candidate(f"gone{i}", 1e-6 * i, 0.0, 0.0, False) for i in range(3)]
             reply = db.refine(viewdb.RefineRequest(q, 6, 3, strangers))
             _same(reply.results, brute_force_knn(q, arrays, 3, 6))
+
+
+def test_cs2_walk_leaves_out_candidates_of_objects_the_server_lacks(tiered_db, client_file):
+    rng = np.random.default_rng(6)
+    with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
+        for q in _queries(db, rng, 4):
+            mine, _ = client.client_candidates(q, 3)
+            gap = client.config.client_gap
+            want = db.walk(viewdb.WalkRequest(q, 6, 3, gap, mine))
+            assert want.results
+            strangers = [viewdb.Candidate(f"gone{i}", 1e-6 * i, c.azimuth, c.elevation, False)
+                         for i, c in enumerate(mine)]
+            mixed = db.walk(viewdb.WalkRequest(q, 6, 3, gap, strangers[:1] + mine + strangers[1:]))
+            assert mixed.results == want.results
+            assert db.walk(viewdb.WalkRequest(q, 6, 3, gap, strangers)).results == []

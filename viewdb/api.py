@@ -347,10 +347,15 @@ class ViewDB:
         return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
 
     def walk(self, request: WalkRequest) -> ServerReply:
-        """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views."""
+        """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views.
+        Candidates of objects this file lacks (a stale client file) are left out, as
+        :meth:`refine` leaves them out of its bounds: the walk starts from the others."""
         self._full_tier_only()
         q = self._query_curve(request.curve, request.k, "full")
-        found, stats = walk(replace(request, curve=q), self._grid_curve, self.config.gap)
+        with self._tier_reader().snapshot() as reader:
+            known = reader.object_versions()
+        client = [c for c in request.client if c.object in known]
+        found, stats = walk(replace(request, curve=q, client=client), self._grid_curve, self.config.gap)
         return ServerReply(found, stats)
 
     def _full_tier_only(self) -> None:
@@ -829,7 +834,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
             wanted = replace(wanted, index=replace(wanted.index, client_gap=float(client_gap)))
         if perspective is not None:
             wanted = replace(wanted, perspective=replace(wanted.perspective,
-                                                         distances=tuple(perspective)))
+                                                         distances=perspective))
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc

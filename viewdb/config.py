@@ -113,7 +113,15 @@ class PerspectiveConfig:
     gap: float = 20.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "distances", tuple(float(d) for d in self.distances))
+        try:
+            if isinstance(self.distances, str | bytes):  # "3,4,6" or "none" would iterate by character
+                raise TypeError
+            object.__setattr__(self, "distances", tuple(float(d) for d in self.distances))
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"perspective distances must be a sequence of numbers (bounding radii), e.g. "
+                f"(3, 4, 6), or () for none; got {self.distances!r}"
+            ) from None
         if any(not d > 1.0 for d in self.distances) or len(set(self.distances)) != len(self.distances):
             raise ValueError(
                 f"perspective distances must be distinct and greater than 1 (bounding radii), "
