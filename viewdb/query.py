@@ -56,6 +56,7 @@ from .verify import physical_view, rerank_by_fit
 
 if TYPE_CHECKING:
     from .api import ServerTier, ViewDB
+    from .remote import Exchange
 
 __all__ = [
     "QueryMatch", "QueryResult", "completed_mask", "pose_matches", "pose_object", "rotated_curves",
@@ -470,6 +471,26 @@ def pose_matches(
     return out
 
 
+@dataclass
+class _Traffic:
+    """What a query sent to its server and got back, in how many round trips, and the
+    time spent on the network (wall-clock time less the server's own)."""
+
+    sent: int = 0
+    received: int = 0
+    trips: int = 0
+    network_ms: float = 0.0
+
+    def add(self, sent: int, received: int, trips: int, network_ms: float) -> None:
+        self.sent += sent
+        self.received += received
+        self.trips += trips
+        self.network_ms += network_ms
+
+    def exchanged(self, exchange: Exchange) -> None:
+        self.add(exchange.sent, exchange.received, 1, exchange.wall_ms - exchange.server_ms)
+
+
 def run_query(
     db: ViewDB,
     image: str | Path | NDArray[Any] | LoadedImage,
@@ -542,8 +563,8 @@ def run_query(
     pool = max(k, POOL) if recolour or verifying else k
     per_turn = []
     client_ms = server_ms = 0.0
-    sent = received = trips = 0
-    network_ms = pose_server_ms = 0.0
+    traffic = _Traffic()
+    pose_server_ms = 0.0
     for angle, curve in curves:
         # the turns so far bound this one's search (the merged result is unchanged)
         prior = [c for c, _ in _merge(per_turn, pool)]
@@ -554,10 +575,8 @@ def run_query(
         per_turn.append((angle, found.results))
         client_ms += found.client_ms
         server_ms += found.server_ms
-        network_ms += found.network_ms
-        sent += found.bytes_sent
-        received += found.bytes_received
-        trips += plan != "server" or server is not None
+        traffic.add(found.bytes_sent, found.bytes_received, int(plan != "server" or server is not None),
+                    found.network_ms)
     merged = _merge(per_turn, pool)
     searched = time.perf_counter()
     query = QueryView(loaded.rgb, _pose_mask(seg, mask, label_map), ignore)
@@ -571,8 +590,7 @@ def run_query(
             signatures = db.view_colours(views)
         else:
             signatures, exchange = server.colours(views)
-            sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
-            network_ms += exchange.wall_ms - exchange.server_ms
+            traffic.exchanged(exchange)
         merged, colours = _by_colour(merged, colour_signature(query.color, query.mask), signatures)
     coloured = time.perf_counter()
     fitted: dict[str, tuple[float | None, float]] = {}
@@ -582,8 +600,7 @@ def run_query(
             fits = db.view_fits(query, views)
         else:
             fits, exchange = server.fits(query, views)
-            sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
-            network_ms += exchange.wall_ms - exchange.server_ms
+            traffic.exchanged(exchange)
         scores = [colours[c.object][1] if c.object in colours else c.distance for c, _ in merged]
         merged, fitted = _by_fit(merged, scores, fits)
     merged = merged[:k]
@@ -598,9 +615,8 @@ def run_query(
         poses, exchange = server.poses(query, [c for c, _ in merged[:posed]], camera,
                                        [by_angle.get(angle) for _, angle in merged[:posed]])
         poses = poses + [(None, None)] * (len(merged) - posed)
-        sent, received, trips = sent + exchange.sent, received + exchange.received, trips + 1
+        traffic.exchanged(exchange)
         pose_server_ms = exchange.server_ms
-        network_ms += exchange.wall_ms - exchange.server_ms
         matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored,
                               angle, *poses[rank - 1], *colours.get(c.object, (None, None)),
                               c.camera_distance, *fitted.get(c.object, (None, None)))
@@ -623,7 +639,7 @@ def run_query(
             assert camera is not None
             matches = _rerank(db, query, matches, {c.object: c for c, _ in merged}, config, camera)
     end = time.perf_counter()
-    remote = {} if server is None else {"network": network_ms, "pose_server": pose_server_ms}
+    remote = {} if server is None else {"network": traffic.network_ms, "pose_server": pose_server_ms}
     name = loaded.path or (str(image) if isinstance(image, (str, Path)) else "<array>")
     return QueryResult(
         image=name, plan=plan, k=k, results=matches,
@@ -634,5 +650,6 @@ def run_query(
             "total": (end - start) * 1e3, **remote,
         },
         segmentation=seg.method,
-        transfer={"bytes_sent": sent, "bytes_received": received, "round_trips": trips},
+        transfer={"bytes_sent": traffic.sent, "bytes_received": traffic.received,
+                  "round_trips": traffic.trips},
     )
