@@ -60,7 +60,11 @@ def _kill_runs(tmp_path, runs, seed):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
         if db.exists():
-            counts.append(_assert_whole(db))
+            try:
+                counts.append(_assert_whole(db))
+            except viewdb.StorageError as exc:  # killed before the file's creation committed
+                assert "unfinished database" in str(exc), exc
+                counts.append(0)
             assert counts[-1] >= previous  # progress is kept between kills
             previous = counts[-1]
             if counts[-1] == len(files):

@@ -128,6 +128,22 @@ def test_a_file_whose_creation_was_cut_short_is_not_taken_as_built_with_defaults
         assert db.config.gap == 45
 
 
+def test_a_file_killed_before_its_creation_committed_is_not_built_with_defaults(tmp_path):
+    # SQLite has written the file's header (the WAL switch), but the transaction creating
+    # the schema and settings never committed: a file without tables
+    path = tmp_path / "killed.db"
+    sqlite3.connect(path).execute("PRAGMA journal_mode=WAL").connection.close()
+    before = path.read_bytes()
+    assert before
+    with pytest.raises(StorageError, match="unfinished database"):
+        viewdb.open(path, create=False)
+    assert path.read_bytes() == before
+    with viewdb.open(path, gap=30) as db:  # the ingest run again creates it as asked
+        assert db.config.gap == 30
+    with viewdb.open(path, create=False) as db:
+        assert db.config.gap == 30
+
+
 def test_a_new_file_gets_schema_and_configuration_together(tmp_path):
     path = tmp_path / "new.db"
     with viewdb.open(path, gap=45, client_gap=90):

@@ -174,6 +174,7 @@ class Store:
         ``read_only`` opens an existing file without ever writing to it."""
         self.path = Path(path)
         self._initial = initial
+        self._create = create
         self.read_only = read_only
         exists = self.path.exists() and self.path.stat().st_size > 0
         if not exists and (read_only or not create):
@@ -276,10 +277,12 @@ class Store:
                 f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it",
                 self.path,
             )
+        if current is None and (self.read_only or not self._create):
+            # an SQLite file without tables: a creation killed before its first commit;
+            # only a caller that may create a file makes it a database (with its settings)
+            raise StorageError("is an unfinished database (its creation was interrupted); "
+                               "delete it and ingest again", self.path)
         if self.read_only:
-            if current is None:
-                raise StorageError("is an unfinished database (its creation was interrupted); "
-                                   "delete it and ingest again", self.path)
             if current in READ_ONLY_COMPATIBLE:
                 self._stand_ins = READ_ONLY_COMPATIBLE[current]
                 self.engine.dispose()  # the next connections get the stand-ins
