@@ -18,16 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-
-def deliverable_sigint() -> None:
-    """Run in the child before exec: SIGINT at its default disposition and unblocked,
-    whatever this test process inherited. A parent that ignores SIGINT (a shell's
-    background job, nohup) passes SIG_IGN on, and Python then installs no Ctrl-C handler;
-    a parent that blocks it (some CI runners) passes the blocked mask on, and the signal
-    stays pending. Either way a user's viewdb would rightly not be interrupted, so the
-    tests give their children what a terminal gives a foreground process."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+from tests.interrupting import deliverable_sigint
 
 
 class ServerProcess:

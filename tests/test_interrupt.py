@@ -11,7 +11,7 @@ import pytest
 
 import viewdb
 from tests.conftest import sample_files
-from tests.serving import deliverable_sigint
+from tests.interrupting import ctrl_c_in, deliverable_sigint, sigint_raises
 
 
 def _interrupt_an_ingest(db, files, jobs):
@@ -22,7 +22,7 @@ def _interrupt_an_ingest(db, files, jobs):
         [sys.executable, "-m", "viewdb_cli.main", "ingest", *files, "--db", str(db), "--gap", "20", "--no-skim",
          "--image-size", "96", "--jobs", str(jobs)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=deliverable_sigint,
+        preexec_fn=deliverable_sigint, env={**os.environ, "PYTHONFAULTHANDLER": "1"},
     )
     try:
         return _interrupt(proc, db, files)
@@ -55,13 +55,33 @@ def _interrupt(proc, db, files):
               f"poll errors {sorted(set(problems))[:3]})")
         return None
     os.kill(proc.pid, signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the ingest did not stop within 60 s of SIGINT\n{_post_mortem(proc)}")
     if proc.returncode == 0:
         with viewdb.open(db, create=False) as vdb:
             if len(vdb.objects()) == len(files):
                 print(f"the ingest finished as the interrupt came (objects seen {seen})")
                 return None
     return proc.returncode, err
+
+
+def _post_mortem(proc: subprocess.Popen[str]) -> str:
+    """How a stuck child handles SIGINT (its /proc masks: bit 1 is SIGINT) and where each
+    of its threads is (faulthandler's dump on SIGABRT)."""
+    try:
+        status = open(f"/proc/{proc.pid}/status").read().splitlines()
+        masks = [line for line in status if line.startswith(("SigPnd", "ShdPnd", "SigBlk", "SigIgn", "SigCgt"))]
+    except OSError as exc:
+        masks = [f"no /proc status: {exc}"]
+    proc.send_signal(signal.SIGABRT)
+    try:
+        out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return "\n".join([*masks, "stdout:", out[-2000:], "stderr:", err[-8000:]])
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
@@ -87,6 +107,28 @@ def test_sigint_mid_ingest_exits_130_and_leaves_whole_objects(tmp_path, jobs):
     assert rows["views"] == rows["curves"] == rows["fourier_points"] == rows["sift_features"]
     # re-running completes the catalogue
     with viewdb.open(db) as vdb:
+        report = vdb.ingest(files)
+        assert not report.failed
+        assert len(vdb.objects()) == len(files)
+
+
+@pytest.mark.parametrize("nth", [1, 5, 9])
+def test_ctrl_c_inside_the_r_tree_while_an_object_is_written_stops_the_ingest(tmp_path, nth):
+    """The interrupt comes inside an R-tree page callback (C++ between it and the ingest):
+    it must stop the ingest, not be lost or count the object as failed."""
+    files = [str(p) for p in sample_files()][:3]
+    db = tmp_path / "held.db"
+    with viewdb.open(db, gap=30, image_size=64) as vdb:
+        with sigint_raises(), ctrl_c_in("storeByteArray", nth) as calls:
+            with pytest.raises(KeyboardInterrupt):
+                vdb.ingest(files)
+        assert calls[0] >= nth  # raised once the native call that took it was over
+        objects = vdb.objects()
+        assert len(objects) < len(files)
+        rows = vdb.info().rows
+        for o in objects:
+            assert o.views_stored + o.empty_views == vdb.view_plan(o.name).views_stored
+        assert rows["views"] == rows["curves"] == rows["fourier_points"] == rows["sift_features"]
         report = vdb.ingest(files)
         assert not report.failed
         assert len(vdb.objects()) == len(files)

@@ -67,6 +67,7 @@ from numpy.typing import NDArray
 from rtree.exceptions import RTreeError
 
 from ..errors import NotFound, StorageError
+from ..interrupts import interrupts_held
 
 __all__ = ["FourierIndex", "SqlitePageStorage", "ensure_table"]
 
@@ -107,8 +108,11 @@ class SqlitePageStorage(rtree.index.CustomStorage):
     An exception while *storing or deleting* is only kept in :attr:`error` and reported as
     success: libspatialindex also writes from its destructor, where an error code becomes
     a C++ exception that aborts the process.  :class:`FourierIndex` checks :attr:`error`
-    after every call and raises :class:`~viewdb.errors.StorageError`; the transaction is
-    then incomplete and must be rolled back (and the index reloaded).
+    after every call and raises :class:`~viewdb.errors.StorageError` (or, unchanged, an
+    exception that is not an ``Exception``, such as ``KeyboardInterrupt``); the
+    transaction is then incomplete and must be rolled back (and the index reloaded).
+    :class:`FourierIndex` holds Ctrl-C during its calls (:mod:`viewdb.interrupts`), so a
+    ``KeyboardInterrupt`` is raised after them, not inside these callbacks.
 
     When :attr:`detached` is set, writes and deletes are silently dropped: used to dispose
     of an in-memory tree that must not write back.
@@ -259,11 +263,8 @@ class FourierIndex:
         if self.header_page is not None:
             props.index_id = self.header_page
         args: tuple[Any, ...] = (self.storage,) if stream is None else (self.storage, stream)
-        try:
+        with self._native("cannot open the R-tree"):
             self._index = rtree.index.Index(*args, properties=props, interleaved=True)
-        except RTreeError as exc:
-            raise self._error(exc, "cannot open the R-tree") from exc
-        self._check_storage("cannot open the R-tree")
         if self.header_page is None:
             # libspatialindex wrote its header page while constructing the tree; the live
             # properties of the index (not the Property passed in) say which page it is.
@@ -370,21 +371,18 @@ class FourierIndex:
         commit.  An index dropped without ``close``/``flush`` writes nothing more."""
         if self._index is None:
             return
-        try:
-            self._index.close()
-        finally:
-            self._index = None
-        self._check_storage("cannot write the R-tree")
+        index, self._index = self._index, None
+        with self._native("cannot write the R-tree"):
+            index.close()
 
     def discard(self) -> None:
         """Release the in-memory tree without writing anything to the database."""
         if self._index is None:
             return
         self.storage.detached = True
-        try:
-            self._index.close()
-        finally:
-            self._index = None
+        index, self._index = self._index, None
+        with interrupts_held():
+            index.close()
 
     def reload(self) -> None:
         """Drop the in-memory state (without writing) and reopen the tree from the table;
@@ -428,9 +426,23 @@ class FourierIndex:
         self.close()
 
     # ---------------------------------------------------------------- errors
-    def _error(self, exc: BaseException, what: str) -> StorageError:
+    @contextmanager
+    def _native(self, what: str) -> Iterator[None]:
+        """A call into libspatialindex: Ctrl-C is held until it returns (see
+        :mod:`viewdb.interrupts`); its errors and the page storage's are raised as
+        :class:`~viewdb.errors.StorageError` saying ``what`` failed."""
+        with interrupts_held():
+            try:
+                yield
+            except RTreeError as exc:
+                raise self._error(exc, what) from exc
+        self._check_storage(what)
+
+    def _error(self, exc: BaseException, what: str) -> BaseException:
         inner = self.storage.error
         self.storage.error = None
+        if inner is not None and not isinstance(inner, Exception):
+            return inner  # an interrupt or exit taken in a callback stays what it was
         detail = f"{inner}" if inner is not None else f"{exc}"
         return StorageError(f"{what} {self.tier!r}: {detail}")
 
@@ -441,40 +453,28 @@ class FourierIndex:
     # ---------------------------------------------------------------- contents
     def insert(self, id: int, point: object) -> None:
         p = _vec(point, self.dimension, "point")
-        try:
+        with self._native("cannot insert into the R-tree"):
             self.index.insert(int(id), (*p, *p))
-        except RTreeError as exc:
-            raise self._error(exc, "cannot insert into the R-tree") from exc
-        self._check_storage("cannot insert into the R-tree")
 
     def insert_box(self, id: int, lo: object, hi: object) -> None:
         """Insert entry ``id`` with the box ``[lo, hi]`` (an MBR of several points)."""
         box = self._box(lo, hi)
-        try:
+        with self._native("cannot insert into the R-tree"):
             self.index.insert(int(id), box)
-        except RTreeError as exc:
-            raise self._error(exc, "cannot insert into the R-tree") from exc
-        self._check_storage("cannot insert into the R-tree")
 
     def delete_box(self, id: int, lo: object, hi: object) -> None:
         """Remove entry ``id`` with the box ``[lo, hi]`` (exactly as inserted)."""
         box = self._box(lo, hi)
-        try:
+        with self._native("cannot delete from the R-tree"):
             self.index.delete(int(id), box)
-        except RTreeError as exc:
-            raise self._error(exc, "cannot delete from the R-tree") from exc
-        self._check_storage("cannot delete from the R-tree")
 
     def intersection_boxes(
         self, lo: object, hi: object
     ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
         """Ids and boxes (``lo``, ``hi`` rows) of the entries that meet ``[lo, hi]``."""
         box = self._box(lo, hi)
-        try:
+        with self._native("cannot read the R-tree"):
             items = list(self.index.intersection(box, objects=True))
-        except RTreeError as exc:
-            raise self._error(exc, "cannot read the R-tree") from exc
-        self._check_storage("cannot read the R-tree")
         d = self.dimension
         ids = np.fromiter((it.id for it in items), dtype=np.int64, count=len(items))
         bounds = np.array([it.bbox for it in items], dtype=np.float64).reshape(len(items), 2 * d)
@@ -504,11 +504,8 @@ class FourierIndex:
     def delete(self, id: int, point: object) -> None:
         """Remove entry ``id`` at ``point`` (rtree needs the coordinates to find it)."""
         p = _vec(point, self.dimension, "point")
-        try:
+        with self._native("cannot delete from the R-tree"):
             self.index.delete(int(id), (*p, *p))
-        except RTreeError as exc:
-            raise self._error(exc, "cannot delete from the R-tree") from exc
-        self._check_storage("cannot delete from the R-tree")
 
     def _box(self, lo: object, hi: object) -> tuple[float, ...]:
         a, b = _vec(lo, self.dimension, "lo"), _vec(hi, self.dimension, "hi")
@@ -519,11 +516,8 @@ class FourierIndex:
     def intersection(self, lo: object, hi: object) -> NDArray[np.int64]:
         """Ids of the points in the closed box ``[lo, hi]``, sorted."""
         box = self._box(lo, hi)
-        try:
+        with self._native("cannot read the R-tree"):
             out = np.fromiter(self.index.intersection(box), dtype=np.int64)
-        except RTreeError as exc:
-            raise self._error(exc, "cannot read the R-tree") from exc
-        self._check_storage("cannot read the R-tree")
         out.sort()
         return out
 
@@ -534,21 +528,16 @@ class FourierIndex:
         hi = np.ascontiguousarray(his, dtype=np.float64).reshape(-1, self.dimension)
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
             raise ValueError("boxes must be finite with lo <= hi")
-        try:
+        with self._native("cannot read the R-tree"):
             ids, _ = self.index.intersection_v(lo, hi)
-        except RTreeError as exc:
-            raise self._error(exc, "cannot read the R-tree") from exc
-        self._check_storage("cannot read the R-tree")
         return np.unique(ids.astype(np.int64))
 
     @property
     def count(self) -> int:
         """Number of entries."""
         inf = np.full(self.dimension, np.inf)
-        try:
+        with self._native("cannot read the R-tree"):
             return int(self.index.count((*(-inf), *inf)))
-        except RTreeError as exc:
-            raise self._error(exc, "cannot read the R-tree") from exc
 
     def __len__(self) -> int:
         return self.count
@@ -556,11 +545,8 @@ class FourierIndex:
     def leaves(self) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]]:
         """``(node page, child ids, lo, hi)`` for every leaf node (an empty tree has one
         empty leaf whose bounds are meaningless)."""
-        try:
+        with self._native("cannot read the R-tree"):
             raw = self.index.leaves()
-        except RTreeError as exc:
-            raise self._error(exc, "cannot read the R-tree") from exc
-        self._check_storage("cannot read the R-tree")
         d = self.dimension
         out = []
         for node, children, bounds in raw:
