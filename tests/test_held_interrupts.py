@@ -22,6 +22,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import sample
 from tests.interrupting import ctrl_c_in, sigint_raises
 from viewdb.interrupts import interrupts_held
 from viewdb.storage.spatial import FourierIndex
@@ -152,3 +153,30 @@ def test_ctrl_c_inside_a_page_callback_is_an_interrupt_and_the_tree_stays_whole(
         assert idx.intersection(*BOX).tolist() == brute(both, *BOX)
     idx.close()
     conn.close()
+
+
+# ------------------------------------------------------------------ inside trimesh
+def test_ctrl_c_while_trimesh_reads_a_texture_is_an_interrupt(sigint_raises, monkeypatch) -> None:
+    """trimesh reads an OBJ's texture inside ``except BaseException`` ("failed to load
+    image"; the mesh goes on untextured): a Ctrl-C there used to vanish, and the ingest
+    went on. It found this in CI: the second sample object's texture is the first image
+    the process opens, so PIL imports its plugins right after the first commit."""
+    from PIL import Image
+
+    from viewdb.mesh import load_mesh
+
+    opened = []
+    original = Image.open
+
+    def open_then_ctrl_c(*args: object, **kwargs: object) -> object:
+        opened.append(args)
+        signal.raise_signal(signal.SIGINT)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(Image, "open", open_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        load_mesh(sample("bottle"))
+    assert opened  # the interrupt came from inside trimesh's texture loading
+    monkeypatch.setattr(Image, "open", original)
+    textured = load_mesh(sample("bottle"))  # and nothing stuck: the texture loads
+    assert any(getattr(g.visual, "kind", None) == "texture" for g in textured.scene.geometry.values())

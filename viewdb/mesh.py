@@ -5,6 +5,11 @@ OBJ, PLY, STL, OFF and GLB/glTF are read through trimesh. A file becomes a
 geometry (textures and vertex colours kept for the shaded render), moved so the bounding
 box centre is at the origin and scaled so the farthest vertex is at distance 1. The
 original centre and scale are kept, so a pose can be reported in the mesh's own units.
+
+trimesh catches ``BaseException`` in places (a texture image that fails to load, for one:
+"failed to load image", and the mesh goes on untextured), which would swallow a Ctrl-C
+and let an ingest run on. So Ctrl-C is held while trimesh reads, normalises or writes a
+mesh and raised as soon as it is done (:mod:`viewdb.interrupts`).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from .errors import MeshError
+from .interrupts import interrupts_held
 
 __all__ = [
     "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "load_mesh", "mesh_from_glb",
@@ -67,7 +73,8 @@ class NormalisedMesh:
 
     def to_glb(self) -> bytes:
         """The normalised scene as binary glTF (textures and vertex colours included)."""
-        data = self.scene.export(file_type="glb")
+        with interrupts_held():  # see the module doc
+            data = self.scene.export(file_type="glb")
         return bytes(data)
 
 
@@ -142,19 +149,20 @@ def load_mesh(
                 + "; restore it, or ingest untextured with --allow-missing-textures",
                 path,
             )
-    try:
-        loaded = trimesh.load(str(path), process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
-    if options.max_faces is not None:
-        faces = _face_count(loaded)
-        if faces > options.max_faces:
-            raise MeshError(
-                f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
-                "decimate it first or raise the cap (--max-faces)", path,
-            )
-    digest = content_hash or file_hash(path)
-    return _normalise(loaded, name or path.stem, str(path), digest, path)
+    with interrupts_held():  # see the module doc
+        try:
+            loaded = trimesh.load(str(path), process=False)
+        except Exception as exc:  # trimesh raises many types for bad files
+            raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
+        if options.max_faces is not None:
+            faces = _face_count(loaded)
+            if faces > options.max_faces:
+                raise MeshError(
+                    f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
+                    "decimate it first or raise the cap (--max-faces)", path,
+                )
+        digest = content_hash or file_hash(path)
+        return _normalise(loaded, name or path.stem, str(path), digest, path)
 
 
 def _face_count(loaded: object) -> int:
@@ -203,11 +211,12 @@ def missing_textures(path: str | Path) -> list[str]:
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
     """Rebuild an already normalised mesh from the GLB blob a database stores."""
-    try:
-        loaded = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
-    except Exception as exc:
-        raise MeshError(f"stored mesh of object {name!r} cannot be decoded: {_short(exc)}") from exc
-    scene = _as_scene(loaded, name)
+    with interrupts_held():  # see the module doc
+        try:
+            loaded = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
+        except Exception as exc:
+            raise MeshError(f"stored mesh of object {name!r} cannot be decoded: {_short(exc)}") from exc
+        scene = _as_scene(loaded, name)
     return NormalisedMesh(name=name, scene=scene, centre=np.zeros(3), scale=1.0)
 
 

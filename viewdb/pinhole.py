@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from .errors import RenderError
 from .gl import pyrender_module
+from .interrupts import interrupts_held
 from .mesh import NormalisedMesh
 from .render import _reraise_interrupt, render_depth
 
@@ -89,8 +90,9 @@ class PinholeRenderer:
         pyrender = pyrender_module()
         try:
             scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
-            geometry = mesh.geometry
-            self._mesh_node = scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=False))
+            with interrupts_held():  # trimesh swallows BaseException in places
+                geometry = mesh.geometry
+                self._mesh_node = scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=False))
         except Exception as exc:
             _reraise_interrupt(exc)
             raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc

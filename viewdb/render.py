@@ -25,6 +25,7 @@ from .camera import camera_pose
 from .config import RenderConfig
 from .errors import RenderError
 from .gl import pyrender_module
+from .interrupts import interrupts_held
 from .mesh import NormalisedMesh
 
 __all__ = ["RenderedView", "Renderer", "get_renderer", "headlight_shading", "render_depth"]
@@ -231,12 +232,14 @@ def pyrender_mesh(mesh: NormalisedMesh):  # type: ignore[no-untyped-def]
 
     The scene's transforms are baked into its geometry (:mod:`viewdb.mesh`); normals do
     not matter in FLAT mode, and face colours need unshared (non-smooth) vertices.
+    Ctrl-C is held meanwhile: trimesh's visuals swallow ``BaseException`` in places.
     """
     pyrender = pyrender_module()
     primitives = []
-    for geometry in mesh.scene.geometry.values():
-        smooth = geometry.visual.kind != "face"
-        primitives += pyrender.Mesh.from_trimesh(geometry, smooth=smooth).primitives
+    with interrupts_held():
+        for geometry in mesh.scene.geometry.values():
+            smooth = geometry.visual.kind != "face"
+            primitives += pyrender.Mesh.from_trimesh(geometry, smooth=smooth).primitives
     return pyrender.Mesh(primitives=primitives)
 
 
