@@ -32,6 +32,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .interrupts import interrupts_held
+
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
     "reranked_score", "rerank",
@@ -99,19 +101,20 @@ def reranked_score(distance: float, colour: float, weight: float = COLOUR_WEIGHT
 def carries_colour(mesh: Any) -> bool:
     """Whether a normalised mesh (:class:`viewdb.mesh.NormalisedMesh`) has colour of its
     own: a texture image, vertex or face colours, or a material colour that is not grey."""
-    for geometry in mesh.scene.geometry.values():
-        visual = geometry.visual
-        if visual.kind in ("vertex", "face"):
-            return True
-        material = getattr(visual, "material", None)
-        if material is None:
-            continue
-        if any(getattr(material, key, None) is not None for key in ("baseColorTexture", "image")):
-            return True
-        factor = getattr(material, "baseColorFactor", None)
-        if factor is not None and np.ptp(np.asarray(factor, np.float64)[:3]) > 0:
-            return True
-    return False
+    with interrupts_held():  # trimesh's visuals swallow BaseException in places
+        return any(_carries_colour(geometry.visual) for geometry in mesh.scene.geometry.values())
+
+
+def _carries_colour(visual: Any) -> bool:
+    if visual.kind in ("vertex", "face"):
+        return True
+    material = getattr(visual, "material", None)
+    if material is None:
+        return False
+    if any(getattr(material, key, None) is not None for key in ("baseColorTexture", "image")):
+        return True
+    factor = getattr(material, "baseColorFactor", None)
+    return factor is not None and bool(np.ptp(np.asarray(factor, np.float64)[:3]) > 0)
 
 
 def rerank(
