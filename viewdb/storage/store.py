@@ -295,6 +295,12 @@ class Store:
         from alembic import command
 
         with self.transaction() as conn:
+            # Python's sqlite3 opens a transaction before INSERT and the like, not before
+            # CREATE or ALTER TABLE: without an explicit BEGIN each table of a migration
+            # commits on its own, and a kill leaves tables without a schema version
+            dbapi = conn.connection.driver_connection
+            if not dbapi.in_transaction:
+                dbapi.execute("BEGIN")
             command.upgrade(_alembic_config(conn), "head")
             if current is None and self._initial is not None:
                 config, role = self._initial
