@@ -242,10 +242,19 @@ class Store:
 
     @contextmanager
     def transaction(self) -> Iterator[Connection]:
-        """One write transaction: everything inside commits together or not at all."""
+        """One write transaction: everything inside commits together or not at all.
+
+        It begins explicitly, taking the write lock (waiting up to the busy timeout for
+        another writer): Python's sqlite3 opens a transaction only before INSERT and the
+        like, so without this a CREATE or ALTER TABLE (a migration) commits on its own,
+        a kill left tables without a schema version, and reads before the first write
+        ran outside the transaction."""
         if self.read_only:
             raise StorageError("is open read-only; open it normally to change it", self.path)
         with self._errors(), self.engine.begin() as conn:
+            dbapi = conn.connection.driver_connection
+            if not dbapi.in_transaction:
+                dbapi.execute("BEGIN IMMEDIATE")
             yield conn
 
     def revision(self) -> str | None:
@@ -294,13 +303,7 @@ class Store:
             )
         from alembic import command
 
-        with self.transaction() as conn:
-            # Python's sqlite3 opens a transaction before INSERT and the like, not before
-            # CREATE or ALTER TABLE: without an explicit BEGIN each table of a migration
-            # commits on its own, and a kill leaves tables without a schema version
-            dbapi = conn.connection.driver_connection
-            if not dbapi.in_transaction:
-                dbapi.execute("BEGIN")
+        with self.transaction() as conn:  # the DDL too: see transaction()
             command.upgrade(_alembic_config(conn), "head")
             if current is None and self._initial is not None:
                 config, role = self._initial
