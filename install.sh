@@ -22,9 +22,9 @@ command -v pyenv >/dev/null 2>&1 && pyenv rehash || true
 
 # Fail here, not at a user's desk, if headless rendering does not work.
 "$PYTHON" - <<'PY'
-import viewdb.gl
-viewdb.gl.pyrender_module()
-from viewdb.render import get_renderer
+import viewdb.catalogue.gl
+viewdb.catalogue.gl.pyrender_module()
+from viewdb.catalogue.render import get_renderer
 get_renderer()
 print("install.sh: viewdb installed; headless rendering works")
 PY

@@ -32,9 +32,9 @@ sys.path.insert(0, str(ROOT))
 
 import viewdb  # noqa: E402
 from tests.serving import ServerProcess  # noqa: E402
+from viewdb.catalogue.features import distance_curve  # noqa: E402
 from viewdb.errors import FeatureError  # noqa: E402
-from viewdb.features import distance_curve  # noqa: E402
-from viewdb.pose import QueryView  # noqa: E402
+from viewdb.pose.estimate import QueryView  # noqa: E402
 from viewdb.search.plans import RefineRequest, WalkRequest  # noqa: E402
 
 

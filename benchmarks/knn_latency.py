@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 import viewdb
-from viewdb.features import FeatureError, distance_curve, mirror_curve
+from viewdb.catalogue.features import FeatureError, distance_curve, mirror_curve
 from viewdb.search.bounds import dtw, envelope, lb_keogh_many
 from viewdb.search.knn import TierArrays
 from viewdb.search.refine import scan_all

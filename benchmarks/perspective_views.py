@@ -31,12 +31,12 @@ import numpy as np
 import viewdb
 from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
 from viewdb.camera import camera_pose, grid_views
+from viewdb.catalogue.features import distance_curve
+from viewdb.catalogue.gl import pyrender_module
+from viewdb.catalogue.render import _offscreen
 from viewdb.errors import FeatureError
-from viewdb.features import distance_curve
-from viewdb.gl import pyrender_module
-from viewdb.query import rotated_curves
-from viewdb.query_image import load_image, segment
-from viewdb.render import _offscreen
+from viewdb.recognition.image import load_image, segment
+from viewdb.recognition.pipeline import rotated_curves
 from viewdb.search.knn import TierArrays, knn
 
 SIZE = 256

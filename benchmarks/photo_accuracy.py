@@ -12,8 +12,9 @@ would be, and queried with every plan (12 in-plane turns); reported per plan: th
 (rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
 each photo with its exact silhouette (rendered depth > 0) as the mask, to separate
 segmentation errors from recognition errors; ``--outline`` also queries without the colour
-and shape re-rankings (:mod:`viewdb.colour`, :mod:`viewdb.verify`), ranking by outline alone
-as the paper does, and ``--unverified`` without the shape re-ranking only. With ``--pose-photos N`` the
+and shape re-rankings (:mod:`viewdb.recognition.colour`,
+:mod:`viewdb.recognition.verify`), ranking by outline alone as the paper does, and
+``--unverified`` without the shape re-ranking only. With ``--pose-photos N`` the
 first N photos of **textured, asymmetric** objects (symmetry type with no generator; a
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
@@ -36,9 +37,9 @@ import numpy as np
 import viewdb
 from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 from viewdb.camera import camera_pose
-from viewdb.gl import pyrender_module
-from viewdb.pose import GL_TO_CV, rotation_angle, view_rotation
-from viewdb.render import _offscreen, pyrender_mesh
+from viewdb.catalogue.gl import pyrender_module
+from viewdb.catalogue.render import _offscreen, pyrender_mesh
+from viewdb.pose.estimate import GL_TO_CV, rotation_angle, view_rotation
 
 
 def direction(azimuth: float, elevation: float) -> np.ndarray:

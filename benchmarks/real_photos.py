@@ -55,10 +55,10 @@ import trimesh
 from scipy.spatial import cKDTree
 
 import viewdb
-from viewdb.mesh import load_mesh
-from viewdb.pinhole import Window, get_pinhole_renderer
-from viewdb.pose import rotation_angle
-from viewdb.query_image import load_image, segment
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.pinhole import Window, get_pinhole_renderer
+from viewdb.pose.estimate import rotation_angle
+from viewdb.recognition.image import load_image, segment
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"

@@ -7,7 +7,7 @@ Every sample model (``sample_models/``) is rendered from ``--views`` random view
 ``tests/test_query_image.py`` (plain light, plain dark, gradient, mild clutter, and
 ``clutter_strong``, which is beyond "mild" and only measured): scaled, off-centre,
 anti-aliased, with sensor noise.  Each colour method of
-:func:`viewdb.query_image.segment` cuts the object out and is scored by IoU against the
+:func:`viewdb.recognition.image.segment` cuts the object out and is scored by IoU against the
 render's silhouette with its holes filled (a refusal scores 0), and by the RMS
 difference between the distance curves of its mask and of the truth (what a query is
 searched with; a refusal scores 1).  Prints IoU mean, minimum, 10th percentile and the
@@ -45,9 +45,9 @@ def main() -> None:
     import viewdb
     from tests.conftest import sample_files
     from tests.test_query_image import ALL_BACKGROUNDS, make_scene
+    from viewdb.catalogue.features import distance_curve
     from viewdb.errors import ImageError
-    from viewdb.features import distance_curve
-    from viewdb.query_image import DEFAULT_METHOD, load_image, segment
+    from viewdb.recognition.image import DEFAULT_METHOD, load_image, segment
 
     methods = args.methods.split(",")
     scores: dict[tuple[str, str], list[tuple[float, str]]] = {}

@@ -26,12 +26,12 @@ import numpy as np
 
 import viewdb
 from viewdb.camera import grid_views
+from viewdb.catalogue.describe import classify_object
+from viewdb.catalogue.features import distance_curve, mirror_curve
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.render import get_renderer
+from viewdb.catalogue.symmetry import skim_plan
 from viewdb.config import BuildConfig
-from viewdb.describe import classify_object
-from viewdb.features import distance_curve, mirror_curve
-from viewdb.mesh import load_mesh
-from viewdb.render import get_renderer
-from viewdb.symmetry import skim_plan
 
 
 def curves_of(db: viewdb.ViewDB) -> dict[str, np.ndarray]:

@@ -93,7 +93,7 @@ def mixed_query_curves(db, rng, count):
     """Query curves for plan tests, half of each kind: a stored curve with noise (mirrored
     half the time), and the silhouette of a random object at a random off-grid angle."""
 
-    from viewdb.features import distance_curve, mirror_curve
+    from viewdb.catalogue.features import distance_curve, mirror_curve
 
     arrays, _ = db.search_tier("full")
     out = []

@@ -1,11 +1,11 @@
-"""Slow, obvious oracles for :mod:`viewdb.features` (used only by the tests).
+"""Slow, obvious oracles for :mod:`viewdb.catalogue.features` (used only by the tests).
 
 Nothing here shares code with the fast implementation: the contour is found by a
 pure-Python marching squares pass over every 2x2 cell with the segments linked into
 loops by hand (no OpenCV), the centroid and the start point are computed in exact
 rational arithmetic (:class:`fractions.Fraction`), the curve is sampled by walking the
 polygon edge by edge, and the DFT is the textbook double sum.  Only the *conventions*
-(documented in :mod:`viewdb.features`) are shared.
+(documented in :mod:`viewdb.catalogue.features`) are shared.
 """
 
 from __future__ import annotations
@@ -193,7 +193,7 @@ def naive_dft(x: np.ndarray, m: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------
-# Oracle for viewdb.symmetry: brute-force view relations of a finite symmetry group.
+# Oracle for viewdb.catalogue.symmetry: brute-force view relations of a finite symmetry group.
 # Shares nothing with the module but the camera contract (viewdb.camera.camera_pose):
 # the group is closed by multiplying all pairs until nothing new appears, and every pair
 # of grid views is compared with every g·C·M directly as matrices (no decomposition into

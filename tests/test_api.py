@@ -9,9 +9,9 @@ import pytest
 import viewdb
 from tests.conftest import sample
 from viewdb.camera import grid_views
+from viewdb.catalogue.describe import describe_view, perspective_grid
+from viewdb.catalogue.features import distance_curve
 from viewdb.config import BuildConfig
-from viewdb.describe import describe_view, perspective_grid
-from viewdb.features import distance_curve
 from viewdb.storage import store as store_module
 
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests import reference as R
-from viewdb.features import fourier_point, mirror_curve
+from viewdb.catalogue.features import fourier_point, mirror_curve
 from viewdb.search import bounds as B
 
 SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])

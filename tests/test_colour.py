@@ -1,4 +1,4 @@
-"""Colour signatures and the colour re-ranking of query results (viewdb.colour)."""
+"""Colour signatures and the colour re-ranking of query results (viewdb.recognition.colour)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
-from viewdb.colour import carries_colour, colour_distance, colour_signature, has_colour, rerank
 from viewdb.config import BuildConfig, IndexConfig, RenderConfig
 from viewdb.http.wire import ColourReply, ColourRequest
+from viewdb.recognition.colour import carries_colour, colour_distance, colour_signature, has_colour, rerank
 
 
 def patch(rgb: tuple[int, int, int], size: int = 48) -> tuple[np.ndarray, np.ndarray]:

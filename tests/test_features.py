@@ -1,4 +1,4 @@
-"""Tests of viewdb.features: contour, centroid distance curve, Fourier point (paper II.A)."""
+"""Tests of viewdb.catalogue.features: contour, centroid distance curve, Fourier point (paper II.A)."""
 
 from __future__ import annotations
 
@@ -16,14 +16,14 @@ from tests.reference import (
     naive_dft,
     naive_distance_curve,
 )
-from viewdb.errors import FeatureError
-from viewdb.features import (
+from viewdb.catalogue.features import (
     MIN_AREA,
     distance_curve,
     fourier_point,
     largest_contour,
     mirror_curve,
 )
+from viewdb.errors import FeatureError
 
 EXACT = 1e-9  # "exact up to floating-point rounding"
 

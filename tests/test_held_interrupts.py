@@ -163,7 +163,7 @@ def test_ctrl_c_while_trimesh_reads_a_texture_is_an_interrupt(sigint_raises, mon
     the process opens, so PIL imports its plugins right after the first commit."""
     from PIL import Image
 
-    from viewdb.mesh import load_mesh
+    from viewdb.catalogue.mesh import load_mesh
 
     opened = []
     original = Image.open

@@ -25,7 +25,7 @@ from tests.conftest import mixed_query_curves
 from tests.serving import ServerProcess, request
 from viewdb.http import models
 from viewdb.http.wire import FitReply, PoseRequest, decode_query, encode_query
-from viewdb.pose import QueryView
+from viewdb.pose.estimate import QueryView
 from viewdb.search.plans import MAX_K
 from viewdb_cli.main import main
 

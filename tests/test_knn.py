@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from viewdb.features import distance_curve, mirror_curve
-from viewdb.render import get_renderer
+from viewdb.catalogue.features import distance_curve, mirror_curve
+from viewdb.catalogue.render import get_renderer
 from viewdb.search.bounds import dtw
 from viewdb.search.knn import TierArrays, brute_force_knn, knn
 

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from tests.conftest import sample, sample_files
+from viewdb.catalogue.mesh import LoadOptions, load_mesh, mesh_from_glb, missing_textures
 from viewdb.errors import MeshError
-from viewdb.mesh import LoadOptions, load_mesh, mesh_from_glb, missing_textures
 
 
 def test_every_format_is_present_among_the_samples():

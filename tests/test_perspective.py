@@ -13,12 +13,12 @@ import pytest
 import viewdb
 from tests.conftest import ROOT, sample
 from viewdb.camera import camera_pose, grid_views
+from viewdb.catalogue.describe import describe_perspective, perspective_grid
+from viewdb.catalogue.features import distance_curve
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.render import get_renderer
 from viewdb.config import BuildConfig, IndexConfig, PerspectiveConfig, RenderConfig
-from viewdb.describe import describe_perspective, perspective_grid
 from viewdb.errors import FeatureError, QueryError
-from viewdb.features import distance_curve
-from viewdb.mesh import load_mesh
-from viewdb.render import get_renderer
 from viewdb.search.plans import Candidate
 from viewdb_cli.main import main
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import mixed_query_curves
-from viewdb.features import mirror_curve
+from viewdb.catalogue.features import mirror_curve
 from viewdb.search.bounds import dtw
 from viewdb.search.knn import brute_force_knn
 

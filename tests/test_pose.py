@@ -1,4 +1,4 @@
-"""Pose estimation (viewdb.pose): the rotation convention, SIFT poses off the grid, PnP with
+"""Pose estimation (viewdb.pose.estimate): the rotation convention, SIFT poses off the grid, PnP with
 intrinsics, the silhouette fallback for texture-less objects, and the errors."""
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from hypothesis import strategies as st
 import viewdb
 from tests.conftest import sample
 from viewdb.camera import camera_direction, camera_pose, grid_views, normalise_angle
+from viewdb.catalogue.sift import extract_sift
 from viewdb.errors import PoseError
-from viewdb.pose import (
+from viewdb.pose.estimate import (
     GL_TO_CV,
     SHAPE_NEAR_WINDOW,
     CandidateView,
@@ -29,7 +30,6 @@ from viewdb.pose import (
     solve_pnp,
     view_rotation,
 )
-from viewdb.sift import extract_sift
 
 GAP = 30
 SIZE = 256
@@ -371,9 +371,9 @@ def chair_renders():
     ``.render(name, h, v)`` like a ViewDB's, for :func:`make_query`."""
     from types import SimpleNamespace
 
+    from viewdb.catalogue.mesh import load_mesh
+    from viewdb.catalogue.render import get_renderer
     from viewdb.config import RenderConfig
-    from viewdb.mesh import load_mesh
-    from viewdb.render import get_renderer
 
     mesh = load_mesh(sample("chair"))
     renderer = get_renderer(RenderConfig(image_size=SIZE))
@@ -468,6 +468,6 @@ def test_a_small_object_is_enlarged_before_sift(pose_db, monkeypatch):
     query, (rot, _, _), _ = make_query(pose_db, "mug", 60, 30, 25, 0.3, (0, 0))
     est = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30))
     assert est.method == "sift" and rotation_angle(est.rotation, rot) <= 3.0
-    monkeypatch.setattr("viewdb.pose.MAX_SIFT_UPSCALE", 1.0)
+    monkeypatch.setattr("viewdb.pose.estimate.MAX_SIFT_UPSCALE", 1.0)
     plain = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30))
     assert plain.inliers < est.inliers

@@ -3,7 +3,7 @@
 Segmentation is measured on renders of the sample models composited, anti-aliased, scaled
 and off-centre, over synthetic backgrounds (:func:`make_scene`, also used by
 ``benchmarks/segmentation.py``); the truth is the render's silhouette with its holes
-filled, as :func:`viewdb.query_image.segment` promises.
+filled, as :func:`viewdb.recognition.image.segment` promises.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from scipy.ndimage import binary_fill_holes
 import viewdb
 from tests.conftest import sample
 from viewdb import query_image as qi
+from viewdb.catalogue.features import distance_curve
 from viewdb.errors import ImageError
-from viewdb.features import distance_curve
-from viewdb.query_image import LoadedImage, load_image, query_curve, segment
+from viewdb.recognition.image import LoadedImage, load_image, query_curve, segment
 
 # ------------------------------------------------------------------- synthetic photos
 

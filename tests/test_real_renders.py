@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from tests.conftest import sample
+from viewdb.catalogue.features import distance_curve, fourier_point, mirror_curve
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.render import get_renderer
 from viewdb.config import RenderConfig
-from viewdb.features import distance_curve, fourier_point, mirror_curve
-from viewdb.mesh import load_mesh
-from viewdb.render import get_renderer
 
 #: RMS difference allowed between curves of views that are mirror images in 3-D: the
 #: rasteriser's tie rule for edges on pixel centres is the only source of difference.

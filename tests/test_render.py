@@ -6,10 +6,10 @@ import pytest
 import trimesh
 
 from tests.conftest import sample
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.render import get_renderer
+from viewdb.catalogue.sift import lift_points
 from viewdb.config import RenderConfig
-from viewdb.mesh import load_mesh
-from viewdb.render import get_renderer
-from viewdb.sift import lift_points
 
 RED, GREEN, BLUE = (255, 0, 0), (0, 255, 0), (0, 0, 255)
 CYAN, MAGENTA, YELLOW = (0, 255, 255), (255, 0, 255), (255, 255, 0)

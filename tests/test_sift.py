@@ -6,10 +6,10 @@ import pytest
 import trimesh
 
 from tests.conftest import sample
+from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.render import get_renderer
+from viewdb.catalogue.sift import extract_sift, lift_points
 from viewdb.config import RenderConfig
-from viewdb.mesh import load_mesh
-from viewdb.render import get_renderer
-from viewdb.sift import extract_sift, lift_points
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import pytest
 import viewdb
 from tests.conftest import SMALL_DB_MODELS
 from viewdb.camera import grid_views
-from viewdb.features import distance_curve, mirror_curve
+from viewdb.catalogue.features import distance_curve, mirror_curve
 
 SIGMA = viewdb.SkimConfig().sigma
 

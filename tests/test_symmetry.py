@@ -1,4 +1,4 @@
-"""viewdb.symmetry: exact view relations, classification of real renders, no-loss proof.
+"""viewdb.catalogue.symmetry: exact view relations, classification of real renders, no-loss proof.
 
 Render-based tests use silhouette-only renders at 128 px (gap 30: 144 views per model,
 plus two models on the full gap-10 grid); a model's curves are rendered once per module.
@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from tests.conftest import sample
 from tests.reference import naive_view_relations
 from viewdb.camera import camera_pose, grid_views
-from viewdb.symmetry import (
+from viewdb.catalogue.symmetry import (
     DEFAULT_SIGMA,
     SymmetryType,
     ViewClasses,
@@ -385,10 +385,10 @@ def all_curves(stem: str, gap: int) -> dict[tuple[float, float], np.ndarray]:
     """Curves of every grid view, each from its own fresh silhouette render at 128 px."""
     key = (stem, gap)
     if key not in _CURVES:
+        from viewdb.catalogue.features import distance_curve
+        from viewdb.catalogue.mesh import load_mesh
+        from viewdb.catalogue.render import get_renderer
         from viewdb.config import RenderConfig
-        from viewdb.features import distance_curve
-        from viewdb.mesh import load_mesh
-        from viewdb.render import get_renderer
 
         mesh = load_mesh(sample(stem))
         renderer = get_renderer(RenderConfig(image_size=128))

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
-from viewdb.describe import perspective_grid
-from viewdb.features import distance_curve, mirror_curve
+from viewdb.catalogue.describe import perspective_grid
+from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.search.knn import brute_force_knn
 
 

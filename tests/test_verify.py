@@ -1,4 +1,4 @@
-"""Shape verification (viewdb.verify): re-ranking the plan's best objects by how well
+"""Shape verification (viewdb.recognition.verify): re-ranking the plan's best objects by how well
 each one's matched view, rendered, fits the photo's outline and internal edges."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import viewdb
 from tests.conftest import sample
 from viewdb.config import BuildConfig, IndexConfig, PerspectiveConfig, RenderConfig
 from viewdb.http.wire import FitReply, FitRequest, decode_query
-from viewdb.pose import QueryView
+from viewdb.pose.estimate import QueryView
+from viewdb.recognition.verify import SHAPE_WEIGHT, physical_view, rerank_by_fit, verified_score
 from viewdb.search.plans import Candidate
-from viewdb.verify import SHAPE_WEIGHT, physical_view, rerank_by_fit, verified_score
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -168,8 +168,8 @@ def test_a_mirrored_match_is_compared_by_the_colours_of_the_side_the_photo_shows
     """Colour re-ranking uses the same physical view as the shape fit: for a mirrored
     match, the view from the opposite side (whose colours can differ: the marked cube's
     faces are painted differently)."""
-    from viewdb.colour import colour_distance, colour_signature
-    from viewdb.query_image import load_image, segment
+    from viewdb.recognition.colour import colour_distance, colour_signature
+    from viewdb.recognition.image import load_image, segment
 
     telling = 0
     with viewdb.open(tiered_db, read_only=True) as db:

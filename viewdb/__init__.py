@@ -21,6 +21,10 @@ from .api import (
     open,
     render_model,
 )
+from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
+from .catalogue.mesh import DEFAULT_MAX_FACES
+from .catalogue.render import RenderedView
+from .catalogue.symmetry import SymmetryType
 from .config import BuildConfig, FeatureConfig, IndexConfig, RenderConfig, SiftConfig, SkimConfig
 from .errors import (
     FeatureError,
@@ -36,12 +40,8 @@ from .errors import (
     ViewDBError,
 )
 from .http.client import RemoteServer
-from .ingest import FileOutcome, IngestProgress, IngestReport
-from .intrinsics import parse_intrinsics
-from .mesh import DEFAULT_MAX_FACES
-from .render import RenderedView
+from .pose.intrinsics import parse_intrinsics
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
-from .symmetry import SymmetryType
 
 __version__ = "0.1.0"
 

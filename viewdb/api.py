@@ -17,16 +17,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import grid_views, normalise_angle
-from .colour import carries_colour, colour_signature
+from .catalogue.describe import ObjectDescription, describe_view
+from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
+from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
+from .catalogue.render import RenderedView, get_renderer
+from .catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
 from .config import BuildConfig, RenderConfig
-from .describe import ObjectDescription, describe_view
 from .errors import FeatureError, NotFound, PoseError, QueryError, RenderError, StorageError, ViewDBError
-from .ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
-from .mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
-from .pose import CandidateView, PoseEstimate, QueryView, shape_fit
-from .query import QueryResult, pose_object, run_query
-from .remote import ServerTier
-from .render import RenderedView, get_renderer
+from .pose.estimate import CandidateView, PoseEstimate, QueryView, shape_fit
+from .recognition.colour import carries_colour, colour_signature
+from .recognition.pipeline import QueryResult, pose_object, run_query
+from .recognition.server_tier import ServerTier
 from .search.knn import SearchStats, TierArrays, knn, objects_within
 from .search.plans import (
     PLANS,
@@ -44,7 +45,6 @@ from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
 from .storage.tiers import TIERS, TierReader
-from .symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
 
 __all__ = [
     "CandidatePose",
@@ -479,15 +479,15 @@ class ViewDB:
         evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``, ``cs2``; the
         client half runs on ``client``, default this file); the pose of each result is
         chosen among its candidate same-shape views by SIFT or by outline (see
-        :mod:`viewdb.query`). ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix, or a
+        :mod:`viewdb.recognition.pipeline`). ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix, or a
         JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the mesh
         file's own frame and units. ``label_map`` + ``label`` pick the object out of a
         label image instead of ``mask``. ``rerank`` (with intrinsics) re-ranks the k results
         by the IoU of their perspective silhouette fit. ``colour``: a photo with colour
         re-ranks the plan's best objects by how well their colours match too
-        (:mod:`viewdb.colour`); ``verify``: they are re-ranked by how well each one's
+        (:mod:`viewdb.recognition.colour`); ``verify``: they are re-ranked by how well each one's
         matched view, rendered, fits the photo's outline and internal edges
-        (:mod:`viewdb.verify`); ``colour=False, verify=False`` ranks by outline alone, as
+        (:mod:`viewdb.recognition.verify`); ``colour=False, verify=False`` ranks by outline alone, as
         the paper does.
         ``pose_top``: pose only the best this many results (default all k; about 0.4 s
         each).
@@ -515,7 +515,7 @@ class ViewDB:
     ) -> PoseEstimate:
         """The pose of the known object ``name`` in a calibrated photo, from its silhouette
         alone (no recognition): model-to-camera in the OpenCV frame, in the mesh file's own
-        frame and units (:func:`viewdb.query.pose_object`)."""
+        frame and units (:func:`viewdb.recognition.pipeline.pose_object`)."""
         return pose_object(self, image, name, intrinsics, mask=mask, label_map=label_map, label=label)
 
     def _forget(self, name: str) -> None:
@@ -714,11 +714,11 @@ class ViewDB:
     def view_colours(
         self, views: Sequence[tuple[str, float, float]]
     ) -> list[NDArray[np.float32] | None]:
-        """The colour signatures (:func:`viewdb.colour.colour_signature`) of views
+        """The colour signatures (:func:`viewdb.recognition.colour.colour_signature`) of views
         ``(object, azimuth, elevation)``, rendered from the stored meshes (:meth:`render`,
         whose cache the shape verification and the pose then use; signatures are cached
         too); None for an object whose mesh has no colour of its own
-        (:func:`viewdb.colour.carries_colour`)."""
+        (:func:`viewdb.recognition.colour.carries_colour`)."""
         def signature(name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
             if not carries_colour(self.mesh(name)):
                 return None
@@ -734,7 +734,7 @@ class ViewDB:
     ) -> list[float | None]:
         """How well each view ``(object, azimuth, elevation)``, rendered from the stored
         mesh (cached, :meth:`render`), explains the segmented query's shape
-        (:func:`viewdb.pose.shape_fit`, in [0, 1]); None where the view has no silhouette."""
+        (:func:`viewdb.pose.estimate.shape_fit`, in [0, 1]); None where the view has no silhouette."""
         empty = np.zeros((0, 3), np.float32)
         fits: list[float | None] = []
         for name, azimuth, elevation in views:
@@ -887,7 +887,7 @@ def render_model(
 
 def describe_paths(paths: Sequence[str | Path]) -> list[Path]:
     """Expand folders into the mesh files they hold (sorted), keep files as given."""
-    from .mesh import MESH_SUFFIXES
+    from .catalogue.mesh import MESH_SUFFIXES
 
     out: list[Path] = []
     for raw in paths:

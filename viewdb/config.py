@@ -68,7 +68,7 @@ class SiftConfig:
 
 @dataclass(frozen=True)
 class SkimConfig:
-    """Camera view skimming (paper section II.B; :mod:`viewdb.symmetry`)."""
+    """Camera view skimming (paper section II.B; :mod:`viewdb.catalogue.symmetry`)."""
 
     #: RMS difference of two distance curves (mean 1) below which they are the same shape;
     #: 2.5x the worst rasterisation noise measured between truly equal views at 256 px.

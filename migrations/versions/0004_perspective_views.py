@@ -2,7 +2,7 @@
 
 Files from before this revision have none; their objects still search as before (the
 orthographic views), and an ingest of their unchanged source files adds the perspective
-views (only those are rendered: :mod:`viewdb.ingest`).
+views (only those are rendered: :mod:`viewdb.catalogue.ingest`).
 
 Revision ID: 0004
 Revises: 0003

@@ -23,8 +23,8 @@ from typing import Any
 
 from ..api import describe_paths
 from ..api import open as open_db
+from ..catalogue.ingest import IngestProgress
 from ..errors import ViewDBError
-from ..ingest import IngestProgress
 from .config import BenchConfig
 
 __all__ = ["CachedDb", "client_db", "full_db", "index_row", "select_models"]

@@ -19,10 +19,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import camera_pose
+from ..catalogue.gl import pyrender_module
+from ..catalogue.mesh import NormalisedMesh
+from ..catalogue.render import _offscreen, _reraise_interrupt, pyrender_mesh
 from ..errors import RenderError
-from ..gl import pyrender_module
-from ..mesh import NormalisedMesh
-from ..render import _offscreen, _reraise_interrupt, pyrender_mesh
 
 __all__ = ["PhotoSpec", "draw_photo_spec", "encode_jpeg", "render_photo"]
 

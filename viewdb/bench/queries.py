@@ -24,8 +24,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..api import ViewDB
+from ..catalogue.features import distance_curve
 from ..errors import FeatureError, ViewDBError
-from ..features import distance_curve
 from .photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 
 __all__ = ["GridQuery", "PhotoQuery", "grid_queries", "photo_queries"]

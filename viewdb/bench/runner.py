@@ -25,8 +25,8 @@ from typing import Any
 
 from ..api import ViewDB
 from ..api import open as open_db
+from ..catalogue.ingest import IngestProgress
 from ..errors import ViewDBError
-from ..ingest import IngestProgress
 from .cache import CachedDb, client_db, full_db, index_row, select_models
 from .config import CONFIGURATIONS, BenchConfig
 from .log import ResultLog, record_key

@@ -9,7 +9,7 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
-                  re-ranks by them, :mod:`viewdb.verify`)
+                  re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
@@ -51,7 +51,7 @@ from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
-from ..query import pose_matches
+from ..recognition.pipeline import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models
 from .wire import (

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import QueryError, ServerError
-from ..pose import PoseEstimate, QueryView
-from ..remote import Exchange
+from ..pose.estimate import PoseEstimate, QueryView
+from ..recognition.server_tier import Exchange
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 

@@ -25,10 +25,10 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from ..colour import BINS
 from ..errors import QueryError
-from ..pose import PoseEstimate, QueryView
-from ..query_image import MAX_PIXELS, MIN_SIDE
+from ..pose.estimate import PoseEstimate, QueryView
+from ..recognition.colour import BINS
+from ..recognition.image import MAX_PIXELS, MIN_SIDE
 from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
 
 __all__ = [
@@ -151,7 +151,7 @@ class PoseRequest:
     matches: list[Candidate]
     intrinsics: tuple[float, float, float, float] | None = None
     #: Per match, the query's distance curve at the in-plane turn that matched (its
-    #: nearest views add pose candidates, :data:`viewdb.query.NEAR_VIEWS`), or None.
+    #: nearest views add pose candidates, :data:`viewdb.recognition.pipeline.NEAR_VIEWS`), or None.
     curves: list[np.ndarray | None] | None = field(default=None, repr=False)
 
     @classmethod
@@ -252,7 +252,7 @@ def _views_to_list(views: Sequence[tuple[str, float, float]]) -> list[dict[str, 
 @dataclass(frozen=True)
 class ColourRequest:
     """Client → server: the views ``(object, azimuth, elevation)`` whose colour signatures
-    (:mod:`viewdb.colour`) the client needs to re-rank its results."""
+    (:mod:`viewdb.recognition.colour`) the client needs to re-rank its results."""
 
     views: list[tuple[str, float, float]]
 
@@ -301,7 +301,7 @@ class ColourReply:
 @dataclass(frozen=True)
 class FitRequest:
     """Client → server: the segmented query (RGBA PNG) and the stored views
-    ``(object, azimuth, elevation)`` to fit to its shape (:mod:`viewdb.verify`)."""
+    ``(object, azimuth, elevation)`` to fit to its shape (:mod:`viewdb.recognition.verify`)."""
 
     image: bytes = field(repr=False)
     views: list[tuple[str, float, float]]

@@ -25,7 +25,7 @@ DTW
 Coordinates
     The index stores, for each view, the real vector
     ``F c = [Re X_0, ..., Re X_{m-1}, Im X_0, ..., Im X_{m-1}]`` where
-    ``X = np.fft.fft(c, norm="ortho")`` (:func:`viewdb.features.fourier_point`); see
+    ``X = np.fft.fft(c, norm="ortho")`` (:func:`viewdb.catalogue.features.fourier_point`); see
     :func:`fourier_coordinates` and :func:`complex_to_coordinates`.  ``Im X_0`` is
     always 0 for a real curve; it is *kept*, so the layout is a plain ``2m`` vector
     (the row of ``F`` is zero, the box and all points have 0 there, it never adds to a
@@ -62,7 +62,7 @@ DFTs.  Only the distance to the *box* of the query's envelope does.
 
 Mirrored views
 --------------
-The mirrored view's curve is ``c'[i] = c[(-i) % N]`` (:func:`viewdb.features.mirror_curve`),
+The mirrored view's curve is ``c'[i] = c[(-i) % N]`` (:func:`viewdb.catalogue.features.mirror_curve`),
 whose DFT is ``conj(X)``, so ``F c' = S F c`` with ``S = diag(I_m, -I_m)``, an isometry.
 Hence ``Fourier_Dist(box, F c') = Fourier_Dist(S box, F c)`` and
 ``MINDIST(box, S MBR) = MINDIST(S box, MBR)``, where ``S box`` is :func:`mirror_box`
@@ -500,7 +500,7 @@ def group_bounds(
     """Keys of a group's curves and their mirrors, in one pass: ``(2n,)`` with
     ``max(Fourier_Dist(box, p_i), LB_Keogh(L, U, c_i))`` then the same for the mirrors
     (``mirrored_box``, and LB_Keogh against the mirrored envelope ``(P L, P U)``, ``P`` =
-    :func:`viewdb.features.mirror_curve`: see the module doc).
+    :func:`viewdb.catalogue.features.mirror_curve`: see the module doc).
 
     Inputs are the query's envelopes ``(N,)``, its boxes in the indexed coordinates ``(d,)``,
     the curves' coordinates ``(n, d)`` and the curves ``(n, N)``, all float64, contiguous
@@ -703,7 +703,7 @@ def complex_to_coordinates(points: np.ndarray) -> NDArray[np.float64]:
     """Index coordinates of Fourier points: ``[Re X, Im X]`` along the last axis.
 
     ``points`` is complex ``(m,)`` or ``(k, m)`` (e.g. from
-    :func:`viewdb.features.fourier_point`); returns float64 ``(2m,)`` or ``(k, 2m)``,
+    :func:`viewdb.catalogue.features.fourier_point`); returns float64 ``(2m,)`` or ``(k, 2m)``,
     equal to ``F @ c`` for :func:`fourier_coordinates`.
     """
     X = np.asarray(points)

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..symmetry import SymmetryType, skim_plan
+from ..catalogue.symmetry import SymmetryType, skim_plan
 from .bounds import fourier_coordinates
 
 __all__ = [

@@ -39,7 +39,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ..features import mirror_curve
+from ..catalogue.features import mirror_curve
 from .bounds import (
     _group_keys_kernel,
     dtw,

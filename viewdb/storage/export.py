@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig
 from ..errors import StorageError, ViewDBError
 from ..search.grouping import tier_members
-from ..symmetry import SymmetryType
 from .codecs import decode_array
 from .store import Store
 from .tiers import write_groups

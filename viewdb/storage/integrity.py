@@ -21,10 +21,10 @@ import numpy as np
 import sqlalchemy as sa
 
 from ..camera import grid_views
+from ..catalogue.features import fourier_point
+from ..catalogue.symmetry import SymmetryType, skim_plan
 from ..errors import NotFound, StorageError
-from ..features import fourier_point
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
-from ..symmetry import SymmetryType, skim_plan
 from . import schema as s
 from .codecs import decode_array
 from .spatial import FourierIndex

@@ -63,7 +63,7 @@ class ObjectRow:
     ingest_seconds: float
     created_at: str
     skimmed: bool = False
-    #: The symmetry type as stored (JSON of :class:`viewdb.symmetry.SymmetryType`), or None
+    #: The symmetry type as stored (JSON of :class:`viewdb.catalogue.symmetry.SymmetryType`), or None
     #: for objects ingested before revision 0002.
     symmetry: dict[str, Any] | None = None
     #: Perspective views stored (revision 0004).

@@ -226,7 +226,7 @@ class StoredTier:
 def index_stored_objects(conn: Any, config: BuildConfig) -> int:
     """Index every stored object's views in both tiers (for files from before the
     R-trees; the tiers must be empty). Returns the number of objects indexed."""
-    from ..symmetry import SymmetryType
+    from ..catalogue.symmetry import SymmetryType
 
     raw = _raw(conn)
     objects = raw.execute("SELECT id, skimmed, symmetry FROM objects ORDER BY id").fetchall()

@@ -27,8 +27,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from .errors import MeshError
-from .interrupts import interrupts_held
+from ..errors import MeshError
+from ..interrupts import interrupts_held
 
 __all__ = [
     "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "load_mesh", "mesh_from_glb",

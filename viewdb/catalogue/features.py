@@ -98,7 +98,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import FeatureError
+from ..errors import FeatureError
 
 __all__ = ["MIN_AREA", "distance_curve", "fourier_point", "largest_contour", "mirror_curve"]
 

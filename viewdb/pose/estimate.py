@@ -65,10 +65,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .camera import normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
-from .errors import FeatureError, PoseError
-from .features import largest_contour
-from .sift import extract_sift
+from ..camera import normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
+from ..catalogue.features import largest_contour
+from ..catalogue.sift import extract_sift
+from ..errors import FeatureError, PoseError
 
 __all__ = [
     "CandidateView",
@@ -238,7 +238,7 @@ class PoseEstimate:
     #: for a perspective silhouette fit (``refined == "silhouette"``) its IoU.
     score: float
     #: How the pose was refined in the pinhole camera: None, or "silhouette" (the IoU
-    #: search of :mod:`viewdb.silhouette_pose`).
+    #: search of :mod:`viewdb.pose.silhouette`).
     refined: str | None = None
     #: The silhouette IoU of the final pose (perspective fits only).
     iou: float | None = None

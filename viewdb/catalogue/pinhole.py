@@ -1,6 +1,6 @@
 """Rendering a mesh through a pinhole camera (intrinsics) at a given pose.
 
-The views of a database are orthographic (:mod:`viewdb.render`); a real photo is a
+The views of a database are orthographic (:mod:`viewdb.catalogue.render`); a real photo is a
 perspective one. This module renders the silhouette (and depth) of a normalised mesh as a
 calibrated camera would see it, so a pose can be checked and refined against a photo's
 mask and overlays can be drawn.
@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import RenderError
+from ..errors import RenderError
+from ..interrupts import interrupts_held
 from .gl import pyrender_module
-from .interrupts import interrupts_held
 from .mesh import NormalisedMesh
 from .render import _reraise_interrupt, render_depth
 

@@ -15,8 +15,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from .pose import PoseEstimate, QueryView
-from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from ..pose.estimate import PoseEstimate, QueryView
+from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 
 __all__ = ["Exchange", "ServerTier"]
 
@@ -46,7 +46,7 @@ class ServerTier(Protocol):
     def colours(
         self, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
-        """The colour signatures (:func:`viewdb.colour.colour_signature`) of stored views
+        """The colour signatures (:func:`viewdb.recognition.colour.colour_signature`) of stored views
         ``(object, azimuth, elevation)``, rendered from the server's meshes (None: the
         object's mesh has no colour)."""
         ...
@@ -55,7 +55,7 @@ class ServerTier(Protocol):
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:
         """How well each stored view ``(object, azimuth, elevation)``, rendered from the
-        server's meshes, fits the segmented query's shape (:mod:`viewdb.verify`; None: the
+        server's meshes, fits the segmented query's shape (:mod:`viewdb.recognition.verify`; None: the
         view has no silhouette)."""
         ...
 

@@ -102,8 +102,8 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, UnidentifiedImageError
 
-from .errors import FeatureError, ImageError
-from .features import distance_curve
+from ..catalogue.features import distance_curve
+from ..errors import FeatureError, ImageError
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -488,7 +488,7 @@ def segment(
 
 
 def query_curve(seg: Segmentation, samples: int) -> NDArray[np.float64]:
-    """The centroid distance curve (:func:`viewdb.features.distance_curve`) of a segmentation.
+    """The centroid distance curve (:func:`viewdb.catalogue.features.distance_curve`) of a segmentation.
 
     Raises
     ------

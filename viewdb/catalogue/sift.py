@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import pixel_rays_to_camera
+from ..camera import pixel_rays_to_camera
 
 __all__ = ["SiftFeatures", "empty_features", "extract_sift", "lift_points"]
 

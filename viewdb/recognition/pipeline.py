@@ -1,6 +1,6 @@
 """The query engine: photo → segmentation → distance curves → plan → pose.
 
-A query image is segmented (:mod:`viewdb.query_image`); its silhouette's distance curve
+A query image is segmented (:mod:`viewdb.recognition.image`); its silhouette's distance curve
 starts at the top of the centroid's vertical line, so an object turned *in the image
 plane* gives a cyclically shifted curve that the (fixed-start) DTW of the index does not
 match. The engine therefore also tries the silhouette turned by a few in-plane angles
@@ -11,12 +11,12 @@ plan (:meth:`viewdb.ViewDB.recognise`); CS1 stays exact per turn, so CS1 still e
 
 The plan finds its best :data:`POOL` objects (at least k) when they are re-ranked: a
 photo with colour by outline distance times colour mismatch against each one's matched
-view (:mod:`viewdb.colour`), then every photo by how well each one's matched view,
-rendered, fits the photo's outline and internal edges (:mod:`viewdb.verify`); the best
+view (:mod:`viewdb.recognition.colour`), then every photo by how well each one's matched view,
+rendered, fits the photo's outline and internal edges (:mod:`viewdb.recognition.verify`); the best
 k are kept. Both need the meshes (a full file or a server).
 
 For each of the top results the candidate same-shape poses of the matched view (the
-paper's eqs. 1–2) are fetched or regenerated from the mesh, and :mod:`viewdb.pose` picks
+paper's eqs. 1–2) are fetched or regenerated from the mesh, and :mod:`viewdb.pose.estimate` picks
 the pose by SIFT (ratio test + RANSAC, then a full 6-DoF fit) or, for texture-less
 views, by comparing outlines (``method: "shape"``).
 """
@@ -33,12 +33,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .colour import colour_signature, has_colour, rerank
-from .errors import FeatureError, ImageError, QueryError, ViewDBError
-from .features import distance_curve
-from .intrinsics import Intrinsics, parse_intrinsics
-from .pinhole import get_pinhole_renderer
-from .pose import (
+from ..catalogue.features import distance_curve
+from ..catalogue.pinhole import get_pinhole_renderer
+from ..catalogue.render import get_renderer
+from ..errors import FeatureError, ImageError, QueryError, ViewDBError
+from ..pose.estimate import (
     GL_TO_CV,
     CandidateView,
     PoseConfig,
@@ -48,15 +47,16 @@ from .pose import (
     inplane_angle,
     rotation_to_view,
 )
-from .query_image import LoadedImage, Segmentation, label_mask, load_image, segment
-from .render import get_renderer
-from .search.plans import Candidate
-from .silhouette_pose import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
+from ..pose.intrinsics import Intrinsics, parse_intrinsics
+from ..pose.silhouette import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
+from ..search.plans import Candidate
+from .colour import colour_signature, has_colour, rerank
+from .image import LoadedImage, Segmentation, label_mask, load_image, segment
 from .verify import physical_view, rerank_by_fit
 
 if TYPE_CHECKING:
-    from .api import ServerTier, ViewDB
-    from .remote import Exchange
+    from ..api import ServerTier, ViewDB
+    from .server_tier import Exchange
 
 __all__ = [
     "QueryMatch", "QueryResult", "completed_mask", "pose_matches", "pose_object", "rotated_curves",
@@ -82,19 +82,19 @@ class QueryMatch:
     pose: PoseEstimate | None = None
     #: Why there is no pose (e.g. a client file without meshes), if there is none.
     pose_error: str | None = None
-    #: Colour distance between the photo and the matched view (:mod:`viewdb.colour`),
+    #: Colour distance between the photo and the matched view (:mod:`viewdb.recognition.colour`),
     #: None when the results were not re-ranked by colour or the mesh has no colour.
     colour: float | None = None
     #: What the results are ranked by when re-ranked by colour
-    #: (:func:`viewdb.colour.rerank`); None: by ``distance`` alone.
+    #: (:func:`viewdb.recognition.colour.rerank`); None: by ``distance`` alone.
     colour_score: float | None = None
     #: The matched view is a perspective silhouette from this many bounding radii
     #: (:class:`~viewdb.config.PerspectiveConfig`); None: an orthographic view.
     camera_distance: float | None = None
-    #: How well the matched view, rendered, fits the photo's shape (:mod:`viewdb.verify`,
+    #: How well the matched view, rendered, fits the photo's shape (:mod:`viewdb.recognition.verify`,
     #: in [0, 1]); None when the results were not verified or the view has no silhouette.
     shape_fit: float | None = None
-    #: What the results are ranked by when verified (:func:`viewdb.verify.rerank_by_fit`).
+    #: What the results are ranked by when verified (:func:`viewdb.recognition.verify.rerank_by_fit`).
     verified_score: float | None = None
 
     @property
@@ -269,7 +269,7 @@ def _by_colour(
     merged: list[tuple[Candidate, float]], query: NDArray[np.float32],
     signatures: Sequence[NDArray[np.float32] | None],
 ) -> tuple[list[tuple[Candidate, float]], dict[str, tuple[float | None, float]]]:
-    """``merged`` re-ranked by colour (:func:`viewdb.colour.rerank`), and each object's
+    """``merged`` re-ranked by colour (:func:`viewdb.recognition.colour.rerank`), and each object's
     colour distance (None: its mesh has no colour) and score."""
     order, colours, scores = rerank([c.distance for c, _ in merged], query, signatures)
     by_object = {c.object: (d, sc) for (c, _), d, sc in zip(merged, colours, scores, strict=True)}
@@ -279,7 +279,7 @@ def _by_colour(
 def _by_fit(
     merged: list[tuple[Candidate, float]], scores: Sequence[float], fits: Sequence[float | None],
 ) -> tuple[list[tuple[Candidate, float]], dict[str, tuple[float | None, float]]]:
-    """``merged`` re-ranked by shape fit (:func:`viewdb.verify.rerank_by_fit`) from their
+    """``merged`` re-ranked by shape fit (:func:`viewdb.recognition.verify.rerank_by_fit`) from their
     ``scores``, and each object's fit and verified score."""
     order, verified = rerank_by_fit(scores, fits)
     by_object = {c.object: (f, v) for (c, _), f, v in zip(merged, fits, verified, strict=True)}
@@ -343,7 +343,7 @@ def _fit_silhouette(
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
-    fits the query's best (:func:`viewdb.silhouette_pose.search_silhouette_pose`), started
+    fits the query's best (:func:`viewdb.pose.silhouette.search_silhouette_pose`), started
     from evenly spread viewing directions and from the outline estimate."""
     return _silhouette_estimate(db, name, query, config, intrinsics, search,
                                 [(estimate.rotation, estimate.translation), *starts], estimate.candidate)
@@ -517,18 +517,18 @@ def run_query(
     ``label_map`` + ``label`` pick the object out of a label image (its pixels equal to
     ``label``; other labelled pixels may hide it and are left out of the perspective
     silhouette fit), instead of ``mask``. ``intrinsics``: ``(fx, fy, cx, cy)``, a 3×3
-    matrix, ``"fx,fy,cx,cy"`` or a JSON/YAML file (:func:`viewdb.intrinsics.parse_intrinsics`).
+    matrix, ``"fx,fy,cx,cy"`` or a JSON/YAML file (:func:`viewdb.pose.intrinsics.parse_intrinsics`).
 
     ``rerank`` (with intrinsics): the plan's k objects are re-ranked by how well their
     silhouette fits the query under a perspective pose (IoU): each is fitted quickly
-    (:data:`viewdb.silhouette_pose.QUICK`), the best :data:`RERANK_FULL` and the plan's
+    (:data:`viewdb.pose.silhouette.QUICK`), the best :data:`RERANK_FULL` and the plan's
     first result again with the full search, and the results sorted by IoU (``distance``
     stays the curve distance).
 
     ``colour``: when the photo has colour, the plan's best :data:`POOL` (at least k)
-    objects are re-ranked by outline distance times colour mismatch (:mod:`viewdb.colour`).
+    objects are re-ranked by outline distance times colour mismatch (:mod:`viewdb.recognition.colour`).
     ``verify``: they are re-ranked by how well each one's matched view fits the photo's
-    shape (:mod:`viewdb.verify`). Both need the meshes (a full file or a server); the best
+    shape (:mod:`viewdb.recognition.verify`). Both need the meshes (a full file or a server); the best
     k are kept.
 
     ``pose_top``: pose only the best this many results (None: all k; ``rerank`` poses all

@@ -1,7 +1,7 @@
 """Describing an object: render its views and compute every stored feature.
 
 This is the compute half of an ingest and touches no database: it turns a
-:class:`~viewdb.mesh.NormalisedMesh` into an :class:`ObjectDescription` (picklable, so a
+:class:`~viewdb.catalogue.mesh.NormalisedMesh` into an :class:`ObjectDescription` (picklable, so a
 worker process can hand it back to the writer).
 """
 
@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import grid_views
-from .config import BuildConfig
-from .errors import FeatureError
+from ..camera import grid_views
+from ..config import BuildConfig
+from ..errors import FeatureError
 from .features import distance_curve, fourier_point
 from .mesh import NormalisedMesh
 from .render import RenderedView, Renderer, get_renderer

@@ -8,11 +8,11 @@ finds that pose in two steps.
 1. **Orthographic search.** The mesh's silhouette is rendered from evenly spread viewing
    directions (a Fibonacci sphere, :data:`SEARCH_DIRECTIONS`) and each outline is aligned to
    the query's in the image plane (centroid, area, in-plane angle by the symmetric chamfer
-   distance of :mod:`viewdb.pose`), giving ranked weak-perspective hypotheses
+   distance of :mod:`viewdb.pose.estimate`), giving ranked weak-perspective hypotheses
    ``(h, v, inplane, magnification, origin pixel)``.
 2. **Lift and refine.** Each hypothesis is lifted to the pinhole camera (below), then the
    6-DoF pose is refined by a pattern search that maximises the silhouette IoU between the
-   mesh rendered through the intrinsics (:mod:`viewdb.pinhole`) and the query mask, in a
+   mesh rendered through the intrinsics (:mod:`viewdb.catalogue.pinhole`) and the query mask, in a
    window around the object. The best few hypotheses are refined coarsely, the best of
    those finely.
 
@@ -42,9 +42,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import FeatureError, PoseError
-from .pinhole import Window
-from .pose import (
+from ..catalogue.pinhole import Window
+from ..errors import FeatureError, PoseError
+from .estimate import (
     GL_TO_CV,
     CandidateView,
     PoseConfig,

@@ -179,7 +179,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import camera_direction, rotation_x, rotation_y
+from ..camera import camera_direction, rotation_x, rotation_y
 
 __all__ = [
     "DEFAULT_SIGMA",
@@ -655,7 +655,8 @@ def candidate_poses(
 
 def reverse_curve(curve: NDArray[np.floating]) -> NDArray[np.float64]:
     """``c'[i] = c[−i mod N]``: the curve of the left–right mirrored silhouette
-    (the same as :func:`viewdb.features.mirror_curve`, kept here so this module needs numpy only)."""
+    (the same as :func:`viewdb.catalogue.features.mirror_curve`, kept here so this
+    module needs numpy only)."""
     x = np.asarray(curve, dtype=np.float64)
     return np.roll(x[::-1], 1)
 

@@ -1,7 +1,7 @@
 """Running an ingest: which files to describe, in how many processes, and reporting.
 
 Workers (``jobs > 1``) are spawned processes: each imports pyrender itself and keeps one
-renderer for its life. They only compute (:func:`~viewdb.describe.describe_object`); the
+renderer for its life. They only compute (:func:`~viewdb.catalogue.describe.describe_object`); the
 calling process writes each object in one transaction, so an interrupted ingest leaves
 every object either complete or absent.
 """
@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .camera import grid_views
-from .config import BuildConfig
+from ..camera import grid_views
+from ..config import BuildConfig
+from ..errors import MeshError, ViewDBError
 from .describe import (
     ObjectDescription,
     PerspectiveView,
@@ -27,7 +28,6 @@ from .describe import (
     describe_perspective,
     perspective_grid,
 )
-from .errors import MeshError, ViewDBError
 from .mesh import LoadOptions, file_hash, load_mesh
 
 __all__ = ["FileOutcome", "IngestProgress", "IngestReport", "PerspectiveAddition", "run_ingest"]

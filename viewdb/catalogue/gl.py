@@ -27,7 +27,7 @@ from __future__ import annotations
 import os
 from types import ModuleType
 
-from .errors import RenderError
+from ..errors import RenderError
 
 __all__ = ["pyrender_module"]
 

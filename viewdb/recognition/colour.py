@@ -15,7 +15,7 @@ The query engine re-ranks its results by their outline distance times
 distance is the Bhattacharyya distance between the photo's signature and that of the
 result's matched view, rendered from the mesh (0 = the same colours, 1 = none shared); for
 a mirrored match, the view from the opposite side, the side the photo shows
-(:func:`viewdb.verify.physical_view`).
+(:func:`viewdb.recognition.verify.physical_view`).
 A photo without colour (greyscale, or every pixel nearly neutral: :func:`has_colour`)
 is not re-ranked. A mesh whose file gives no colour (no texture, no vertex or face
 colours, only a neutral grey material: :func:`carries_colour`) has no signature: a grey
@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .interrupts import interrupts_held
+from ..interrupts import interrupts_held
 
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
@@ -99,7 +99,7 @@ def reranked_score(distance: float, colour: float, weight: float = COLOUR_WEIGHT
 
 
 def carries_colour(mesh: Any) -> bool:
-    """Whether a normalised mesh (:class:`viewdb.mesh.NormalisedMesh`) has colour of its
+    """Whether a normalised mesh (:class:`viewdb.catalogue.mesh.NormalisedMesh`) has colour of its
     own: a texture image, vertex or face colours, or a material colour that is not grey."""
     with interrupts_held():  # trimesh's visuals swallow BaseException in places
         return any(_carries_colour(geometry.visual) for geometry in mesh.scene.geometry.values())

@@ -10,14 +10,14 @@ right one is in the top few. What is *inside* the outline tells them apart.
 So the query engine renders each of its best objects' matched view (for a match of the
 mirrored curve, the view from the opposite side: an orthographic silhouette seen from
 behind is the mirror image, :func:`physical_view`) and fits it to the photo as the
-pose's shape method does (:func:`viewdb.pose.shape_fit`: the outline aligned by
+pose's shape method does (:func:`viewdb.pose.estimate.shape_fit`: the outline aligned by
 centroid, area and in-plane angle, then the internal edges — creases, shading, texture
 — compared under that alignment; a fit in [0, 1]). The results are ranked by
 
     score × (1 + SHAPE_WEIGHT × (1 − fit))
 
 where ``score`` is the outline distance, or the colour re-ranked score
-(:mod:`viewdb.colour`) when there was one. The fit alone ranks worse than the outline
+(:mod:`viewdb.recognition.colour`) when there was one. The fit alone ranks worse than the outline
 distance (the views are on a grid, the photo is not); the product keeps the outline's
 order among equally fitting objects and lets a much better fit overtake a slightly
 closer outline.
@@ -27,8 +27,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .camera import normalise_angle
-from .search.plans import Candidate
+from ..camera import normalise_angle
+from ..search.plans import Candidate
 
 __all__ = ["SHAPE_WEIGHT", "physical_view", "rerank_by_fit", "verified_score"]
 

@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import camera_pose
-from .config import RenderConfig
-from .errors import RenderError
+from ..camera import camera_pose
+from ..config import RenderConfig
+from ..errors import RenderError
+from ..interrupts import interrupts_held
 from .gl import pyrender_module
-from .interrupts import interrupts_held
 from .mesh import NormalisedMesh
 
 __all__ = ["RenderedView", "Renderer", "get_renderer", "headlight_shading", "render_depth"]
@@ -230,7 +230,7 @@ def pyrender_mesh(mesh: NormalisedMesh):  # type: ignore[no-untyped-def]
     hence the SIFT features, of the same view would differ between renders; the
     primitives of one mesh are drawn in list order.
 
-    The scene's transforms are baked into its geometry (:mod:`viewdb.mesh`); normals do
+    The scene's transforms are baked into its geometry (:mod:`viewdb.catalogue.mesh`); normals do
     not matter in FLAT mode, and face colours need unshared (non-smooth) vertices.
     Ctrl-C is held meanwhile: trimesh's visuals swallow ``BaseException`` in places.
     """
