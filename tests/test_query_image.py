@@ -25,9 +25,9 @@ from scipy.ndimage import binary_fill_holes
 
 import viewdb
 from tests.conftest import sample
-from viewdb import query_image as qi
 from viewdb.catalogue.features import distance_curve
 from viewdb.errors import ImageError
+from viewdb.recognition import image as qi
 from viewdb.recognition.image import LoadedImage, load_image, query_curve, segment
 
 # ------------------------------------------------------------------- synthetic photos
