@@ -1,7 +1,7 @@
 """``viewdb check``: verify that a database file is whole and self-consistent.
 
 Checks, in order: the schema revision is the one this viewdb writes (or, opened
-read-only, one it reads as it is: :data:`~viewdb.storage.store.READ_ONLY_COMPATIBLE`); SQLite's own
+read-only, one it reads as it is: :data:`~viewdb.storage.connection.READ_ONLY_COMPATIBLE`); SQLite's own
 ``integrity_check`` and ``foreign_key_check``; every view has exactly one curve, Fourier
 point and SIFT row; every blob decodes with the dtype and shape the schema promises; each
 Fourier point is the orthonormal DFT of its stored curve; each object's mesh is a GLB and
@@ -27,8 +27,9 @@ from ..errors import NotFound, StorageError
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from . import schema as s
 from .codecs import decode_array
+from .connection import READ_ONLY_COMPATIBLE
 from .spatial import FourierIndex
-from .store import READ_ONLY_COMPATIBLE, Store
+from .store import Store
 from .tiers import TIERS
 
 __all__ = ["CheckReport", "check_store"]
