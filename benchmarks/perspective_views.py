@@ -35,8 +35,9 @@ from viewdb.catalogue.features import distance_curve
 from viewdb.catalogue.gl import pyrender_module
 from viewdb.catalogue.render import _offscreen
 from viewdb.errors import FeatureError
-from viewdb.recognition.image import load_image, segment
+from viewdb.recognition.image import load_image
 from viewdb.recognition.pipeline import rotated_curves
+from viewdb.recognition.segmentation import segment
 from viewdb.search.knn import TierArrays, knn
 
 SIZE = 256

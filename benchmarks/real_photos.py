@@ -58,7 +58,8 @@ import viewdb
 from viewdb.catalogue.mesh import load_mesh
 from viewdb.catalogue.pinhole import Window, get_pinhole_renderer
 from viewdb.pose.estimate import rotation_angle
-from viewdb.recognition.image import load_image, segment
+from viewdb.recognition.image import load_image
+from viewdb.recognition.segmentation import segment
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"

@@ -169,7 +169,8 @@ def test_a_mirrored_match_is_compared_by_the_colours_of_the_side_the_photo_shows
     match, the view from the opposite side (whose colours can differ: the marked cube's
     faces are painted differently)."""
     from viewdb.recognition.colour import colour_distance, colour_signature
-    from viewdb.recognition.image import load_image, segment
+    from viewdb.recognition.image import load_image
+    from viewdb.recognition.segmentation import segment
 
     telling = 0
     with viewdb.open(tiered_db, read_only=True) as db:

@@ -11,8 +11,8 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "IndexConfig", "PerspectiveConfig", "RenderConfig",
-    "SiftConfig", "SkimConfig", "default_client_gap",
+    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "PerspectiveConfig", "RenderConfig",
+    "SegmentationConfig", "SiftConfig", "SkimConfig", "default_client_gap",
 ]
 
 
@@ -133,6 +133,58 @@ class PerspectiveConfig:
     @property
     def enabled(self) -> bool:
         return bool(self.distances)
+
+
+@dataclass(frozen=True)
+class ImageConfig:
+    """Limits on query images (:mod:`viewdb.recognition.image`, the HTTP query decoder)."""
+
+    #: Default ``max_pixels`` of :func:`~viewdb.recognition.image.load_image`: larger
+    #: images are refused undecoded.
+    max_pixels: int = 40_000_000
+    #: Smallest accepted width and height, in pixels.
+    min_side: int = 16
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """Cutting the object out of a query photo (:mod:`viewdb.recognition.segmentation`)."""
+
+    #: A kept object must cover at least this share of the image ...
+    min_object_fraction: float = 0.005
+    #: ... and at least this many pixels ...
+    min_object_pixels: int = 64
+    #: ... and at most this share (else no background was found).
+    max_object_fraction: float = 0.98
+    #: The colour methods work on a copy scaled to at most this many pixels on the longer side.
+    work_max_side: int = 1024
+    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``).
+    default_method: str = "grabcut"
+    #: Width of the border strip that samples the background, as a share of the shorter side.
+    border_strip: float = 0.02
+    #: Colour clusters of the background model; clusters holding less than
+    #: ``min_cluster_share`` of the border samples are dropped (object pixels on the border).
+    background_clusters: int = 4
+    min_cluster_share: float = 0.01
+    #: At most this many border pixels (evenly spaced along the strip) fit the model.
+    border_samples: int = 4000
+    #: A pixel is object when its Lab distance to the background model exceeds
+    #: ``max(min_threshold, threshold_factor · the border_quantile quantile of the border's
+    #: own distances)``.
+    min_threshold: float = 8.0
+    threshold_factor: float = 2.0
+    border_quantile: float = 0.99
+    #: The closing that bridges cracks adds only pixels at least this share of the local
+    #: object contrast away from the background.
+    bridge_share: float = 0.1
+    #: GrabCut iterations.
+    grabcut_iterations: int = 4
+
+    def __post_init__(self) -> None:
+        if self.default_method not in ("border", "otsu", "grabcut"):
+            raise ValueError(
+                f"default_method must be 'border', 'otsu' or 'grabcut', got {self.default_method!r}"
+            )
 
 
 def default_client_gap(gap: float) -> float:

@@ -25,10 +25,10 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from ..config import ImageConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.colour import BINS
-from ..recognition.image import MAX_PIXELS, MIN_SIDE
 from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
 
 __all__ = [
@@ -53,7 +53,10 @@ def encode_query(query: QueryView) -> bytes:
     return data.tobytes()
 
 
-def decode_query(data: bytes, max_pixels: int = MAX_PIXELS) -> QueryView:
+#: The query image limits (the same as the library's loader).
+_IMAGE = ImageConfig()
+
+def decode_query(data: bytes, max_pixels: int = _IMAGE.max_pixels) -> QueryView:
     """The inverse of :func:`encode_query`: an RGBA PNG (size checked before decoding)."""
     if not data.startswith(PNG_SIGNATURE):
         raise QueryError("image must be a PNG")
@@ -70,8 +73,8 @@ def decode_query(data: bytes, max_pixels: int = MAX_PIXELS) -> QueryView:
         raise QueryError(f"image is not a readable PNG ({type(exc).__name__})") from exc
     if width * height > max_pixels:
         raise QueryError(f"image too large: {width}x{height}, more than {max_pixels:,} pixels")
-    if min(width, height) < MIN_SIDE:
-        raise QueryError(f"image too small: {width}x{height}, at least {MIN_SIDE} on each side")
+    if min(width, height) < _IMAGE.min_side:
+        raise QueryError(f"image too small: {width}x{height}, at least {_IMAGE.min_side} on each side")
     if mode != "RGBA":
         raise QueryError(f"image must be RGBA (8 bits, alpha = object mask), not {mode}")
     arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)

@@ -1,6 +1,6 @@
 """The query engine: photo → segmentation → distance curves → plan → pose.
 
-A query image is segmented (:mod:`viewdb.recognition.image`); its silhouette's distance curve
+A query image is segmented (:mod:`viewdb.recognition.segmentation`); its silhouette's distance curve
 starts at the top of the centroid's vertical line, so an object turned *in the image
 plane* gives a cyclically shifted curve that the (fixed-start) DTW of the index does not
 match. The engine therefore also tries the silhouette turned by a few in-plane angles
@@ -51,7 +51,8 @@ from ..pose.intrinsics import Intrinsics, parse_intrinsics
 from ..pose.silhouette import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
 from ..search.plans import Candidate
 from .colour import colour_signature, has_colour, rerank
-from .image import LoadedImage, Segmentation, label_mask, load_image, segment
+from .image import LoadedImage, load_image
+from .segmentation import Segmentation, label_mask, segment
 from .verify import physical_view, rerank_by_fit
 
 if TYPE_CHECKING:
