@@ -57,7 +57,7 @@ from scipy.spatial import cKDTree
 import viewdb
 from viewdb.catalogue.mesh import load_mesh
 from viewdb.catalogue.pinhole import Window, get_pinhole_renderer
-from viewdb.pose.estimate import rotation_angle
+from viewdb.pose.frames import rotation_angle
 from viewdb.recognition.image import load_image
 from viewdb.recognition.segmentation import segment
 

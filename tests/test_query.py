@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import viewdb
-from viewdb.pose.estimate import rotation_angle, view_rotation
+from viewdb.pose.frames import rotation_angle, view_rotation
 from viewdb_cli.main import main
 
 

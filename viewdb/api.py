@@ -24,7 +24,8 @@ from .catalogue.render import RenderedView, get_renderer
 from .catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
 from .config import BuildConfig, RenderConfig
 from .errors import FeatureError, NotFound, PoseError, QueryError, RenderError, StorageError, ViewDBError
-from .pose.estimate import CandidateView, PoseEstimate, QueryView, shape_fit
+from .pose.estimate import CandidateView, PoseEstimate, QueryView
+from .pose.shape_pose import shape_fit
 from .recognition.colour import carries_colour, colour_signature
 from .recognition.pipeline import QueryResult, pose_object, run_query
 from .recognition.server_tier import ServerTier
@@ -734,7 +735,7 @@ class ViewDB:
     ) -> list[float | None]:
         """How well each view ``(object, azimuth, elevation)``, rendered from the stored
         mesh (cached, :meth:`render`), explains the segmented query's shape
-        (:func:`viewdb.pose.estimate.shape_fit`, in [0, 1]); None where the view has no silhouette."""
+        (:func:`viewdb.pose.shape_pose.shape_fit`, in [0, 1]); None where the view has no silhouette."""
         empty = np.zeros((0, 3), np.float32)
         fits: list[float | None] = []
         for name, azimuth, elevation in views:

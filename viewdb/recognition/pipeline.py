@@ -36,19 +36,12 @@ from numpy.typing import NDArray
 from ..catalogue.features import distance_curve
 from ..catalogue.pinhole import get_pinhole_renderer
 from ..catalogue.render import get_renderer
+from ..config import SilhouetteConfig
 from ..errors import FeatureError, ImageError, QueryError, ViewDBError
-from ..pose.estimate import (
-    GL_TO_CV,
-    CandidateView,
-    PoseConfig,
-    PoseEstimate,
-    QueryView,
-    estimate_pose,
-    inplane_angle,
-    rotation_to_view,
-)
+from ..pose.estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose
+from ..pose.frames import GL_TO_CV, inplane_angle, rotation_to_view
 from ..pose.intrinsics import Intrinsics, parse_intrinsics
-from ..pose.silhouette import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
+from ..pose.silhouette import QUICK, search_silhouette_pose, to_mesh_units
 from ..search.plans import Candidate
 from .colour import colour_signature, has_colour, rerank
 from .image import LoadedImage, load_image
