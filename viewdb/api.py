@@ -21,7 +21,8 @@ from .catalogue.describe import ObjectDescription, describe_view
 from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
 from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
 from .catalogue.render import RenderedView, get_renderer
-from .catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
+from .catalogue.skimming import ViewClasses, plan_without_skimming, skim_plan
+from .catalogue.symmetry import SymmetryType
 from .config import BuildConfig, RenderConfig
 from .errors import FeatureError, NotFound, PoseError, QueryError, RenderError, StorageError, ViewDBError
 from .pose.estimate import CandidateView, PoseEstimate, QueryView

@@ -22,7 +22,8 @@ import sqlalchemy as sa
 
 from ..camera import grid_views
 from ..catalogue.features import fourier_point
-from ..catalogue.symmetry import SymmetryType, skim_plan
+from ..catalogue.skimming import skim_plan
+from ..catalogue.symmetry import SymmetryType
 from ..errors import NotFound, StorageError
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from . import schema as s
