@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from .camera import grid_views, normalise_angle
 from .catalogue.describe import ObjectDescription, describe_view
+from .catalogue.features import mirror_curve
 from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
 from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
 from .catalogue.render import RenderedView, get_renderer
@@ -47,6 +48,7 @@ from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import ObjectRow, Store
 from .storage.tiers import TIERS, TierReader
+from .typed import Intrinsics
 
 __all__ = [
     "CandidatePose",
@@ -379,7 +381,7 @@ class ViewDB:
         if curve is None:
             return None
         out = np.asarray(curve, np.float64)
-        return np.ascontiguousarray(np.roll(out[::-1], 1)) if mirrored else out
+        return mirror_curve(out) if mirrored else out
 
     def _stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
         """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
@@ -466,7 +468,7 @@ class ViewDB:
         band: int = 6,
         rotations: int = 12,
         pose: bool = True,
-        intrinsics: tuple[float, float, float, float] | str | Path | Sequence[Any] | None = None,
+        intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
         label_map: NDArray[Any] | str | Path | None = None,
         label: int | None = None,
         rerank: bool = False,
@@ -509,7 +511,7 @@ class ViewDB:
         self,
         image: str | Path | NDArray[Any],
         name: str,
-        intrinsics: tuple[float, float, float, float] | str | Path | Sequence[Any],
+        intrinsics: Intrinsics | str | Path | Sequence[Any],
         *,
         mask: NDArray[Any] | str | Path | None = None,
         label_map: NDArray[Any] | str | Path | None = None,

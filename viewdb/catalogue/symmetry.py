@@ -330,7 +330,7 @@ def _ring_proposals(
     """
     n = len(curves)
     c = np.array(curves, dtype=np.float64)
-    rev = np.array([mirror_curve(x) for x in c])
+    rev = mirror_curve(c)
     bis = np.sqrt(np.mean((c - rev) ** 2, axis=1))
     bases = list(range(n)) if vertical else [k for k in range(n) if bis[k] <= sigma]
     out: list[_Proposal] = []
@@ -481,7 +481,7 @@ class _Verifier:
         lab = vc.labels[idx]
         cid = np.minimum(lab[:, 0], lab[:, 1])
         selfm = lab[:, 0] == lab[:, 1]
-        rev = np.roll(cur[:, ::-1], 1, axis=1)
+        rev = mirror_curve(cur)
         first: dict[int, int] = {}
         ref = np.empty(idx.size, dtype=np.int64)
         for r, c in enumerate(cid):

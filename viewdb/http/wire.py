@@ -30,6 +30,7 @@ from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.colour import BINS
 from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
+from ..typed import Intrinsics
 
 __all__ = [
     "ColourReply", "ColourRequest", "FitReply", "FitRequest", "PoseReply", "PoseRequest",
@@ -135,7 +136,7 @@ def pose_from_dict(data: Any) -> PoseEstimate:
         raise QueryError(f"malformed pose ({type(exc).__name__}: {exc})") from exc
 
 
-def _intrinsics(x: Any) -> tuple[float, float, float, float] | None:
+def _intrinsics(x: Any) -> Intrinsics | None:
     if x is None:
         return None
     if not isinstance(x, list) or len(x) != 4:
@@ -152,7 +153,7 @@ class PoseRequest:
 
     image: bytes = field(repr=False)
     matches: list[Candidate]
-    intrinsics: tuple[float, float, float, float] | None = None
+    intrinsics: Intrinsics | None = None
     #: Per match, the query's distance curve at the in-plane turn that matched (its
     #: nearest views add pose candidates, :data:`viewdb.recognition.pipeline.NEAR_VIEWS`), or None.
     curves: list[np.ndarray | None] | None = field(default=None, repr=False)
@@ -160,7 +161,7 @@ class PoseRequest:
     @classmethod
     def from_query(
         cls, query: QueryView, matches: Sequence[Candidate],
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: Intrinsics | None = None,
         curves: Sequence[np.ndarray | None] | None = None,
     ) -> PoseRequest:
         return cls(encode_query(query), list(matches), _intrinsics(

@@ -193,7 +193,7 @@ RERANK_FULL = 1
 
 def _rerank(
     db: ViewDB, query: QueryView, matches: list[QueryMatch], found: dict[str, Candidate],
-    config: PoseConfig, camera: tuple[float, float, float, float],
+    config: PoseConfig, camera: Intrinsics,
 ) -> list[QueryMatch]:
     """Sort the results by the IoU of their perspective silhouette fit (module doc)."""
     def iou(m: QueryMatch) -> float:
@@ -288,7 +288,7 @@ NEAR_VIEWS = 4
 
 def _pose(
     db: ViewDB, query: QueryView, match: Candidate, config: PoseConfig,
-    intrinsics: tuple[float, float, float, float] | None, search: SilhouetteConfig | None = None,
+    intrinsics: Intrinsics | None, search: SilhouetteConfig | None = None,
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
     curve: NDArray[np.float64] | None = None,
 ) -> PoseEstimate:
@@ -333,7 +333,7 @@ SILHOUETTE_SEARCH_SIZE = 128
 
 def _fit_silhouette(
     db: ViewDB, name: str, query: QueryView, estimate: PoseEstimate, config: PoseConfig,
-    intrinsics: tuple[float, float, float, float], search: SilhouetteConfig | None = None,
+    intrinsics: Intrinsics, search: SilhouetteConfig | None = None,
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
@@ -345,7 +345,7 @@ def _fit_silhouette(
 
 def _silhouette_estimate(
     db: ViewDB, name: str, query: QueryView, config: PoseConfig,
-    intrinsics: tuple[float, float, float, float], search: SilhouetteConfig | None,
+    intrinsics: Intrinsics, search: SilhouetteConfig | None,
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], candidate: int = 0,
 ) -> PoseEstimate:
     mesh = db.mesh(name)
@@ -408,7 +408,7 @@ SHAPE_REFINE_STEP = 2.0
 
 def _refine_shape(
     db: ViewDB, name: str, query: QueryView, start: CandidateView, estimate: PoseEstimate,
-    config: PoseConfig, intrinsics: tuple[float, float, float, float] | None,
+    config: PoseConfig, intrinsics: Intrinsics | None,
 ) -> PoseEstimate:
     """Texture-less objects: walk the viewing direction off the grid, rendering the mesh
     around the best outline match (steps halving from half the grid gap down to
@@ -442,7 +442,7 @@ def _refine_shape(
 
 def pose_matches(
     db: ViewDB, query: QueryView, matches: Sequence[Candidate],
-    intrinsics: tuple[float, float, float, float] | None = None, config: PoseConfig | None = None,
+    intrinsics: Intrinsics | None = None, config: PoseConfig | None = None,
     curves: Sequence[NDArray[np.float64] | None] | None = None,
 ) -> list[tuple[PoseEstimate | None, str | None]]:
     """``(pose, None)`` or ``(None, why not)`` for each match, from the full file ``db``

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from ..pose.estimate import PoseEstimate, QueryView
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from ..typed import Intrinsics
 
 __all__ = ["Exchange", "ServerTier"]
 
@@ -61,7 +62,7 @@ class ServerTier(Protocol):
 
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: Intrinsics | None = None,
         curves: Sequence[NDArray[np.float64] | None] | None = None,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         """``(pose, None)`` or ``(None, why not)`` per match, from the segmented query
