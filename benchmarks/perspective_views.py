@@ -36,8 +36,8 @@ from viewdb.catalogue.gl import pyrender_module
 from viewdb.catalogue.render import _offscreen
 from viewdb.errors import FeatureError
 from viewdb.recognition.image import load_image
-from viewdb.recognition.pipeline import rotated_curves
 from viewdb.recognition.segmentation import segment
+from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.knn import TierArrays, knn
 
 SIZE = 256
