@@ -17,8 +17,9 @@ Projection follows the pose's frame (:mod:`viewdb.pose.estimate`, public contrac
   mesh file's own coordinates (``centre + scale·normalised``), as a query with
   intrinsics reports it.
 
-The drawing is pure NumPy and OpenCV, no renderer: the triangles are filled far to near
-into a face-index image (the painter's algorithm, at the drawn image's resolution), from
+The drawing is pure NumPy and OpenCV, no renderer: the triangles are scan-converted
+into a face-index image with a depth buffer (a pixel shows the nearest face whose
+projection holds its centre, as a GPU rasterises, at the drawn image's resolution), from
 which the outline, the visible creases and depth steps and the shading are read. The
 photo may be shrunk first (:attr:`viewdb.config.OverlayConfig.max_side`).
 
@@ -53,7 +54,7 @@ __all__ = [
 
 #: Colours of the model's x, y and z axes.
 AXIS_COLOURS = ((255, 64, 64), (64, 220, 64), (72, 128, 255))
-#: Sub-pixel bits of the polygon coordinates handed to OpenCV.
+#: Sub-pixel bits of the line coordinates handed to OpenCV.
 _SHIFT = 4
 #: Projected coordinates beyond this many pixels (a vertex next to the camera plane) are
 #: not drawn: OpenCV's fixed-point coordinates would overflow.
@@ -155,6 +156,9 @@ class _Projection:
     uv: NDArray[np.float64]  # (n, 2) pixel coordinates, centres on integers
     depth: NDArray[np.float64]  # (n,) distance from the camera, in bounding radii
     valid: NDArray[np.bool_]  # (n,) in front of the camera
+    #: (n,) grows with the distance from the camera, and is linear across a face's
+    #: projection (the depth for an orthographic camera, −1/depth for a pinhole)
+    key: NDArray[np.float64]
 
 
 def _project(pose: OverlayPose, mesh: NormalisedMesh, points: NDArray[np.float64],
@@ -173,6 +177,7 @@ def _project(pose: OverlayPose, mesh: NormalisedMesh, points: NDArray[np.float64
         u = q[:, 0] * width / 2.0 + width / 2.0 - 0.5
         w = height / 2.0 - 0.5 - q[:, 1] * width / 2.0
         depth, valid = -cam[:, 2], np.ones(len(cam), dtype=bool)
+        key = depth
     else:
         if intrinsics is None:
             raise QueryError(f"the pose of {pose.name!r} is a pinhole (OpenCV frame) pose: "
@@ -182,69 +187,90 @@ def _project(pose: OverlayPose, mesh: NormalisedMesh, points: NDArray[np.float64
         valid = z > _NEAR * unit
         safe = np.where(valid, z, 1.0)
         u, w = fx * cam[:, 0] / safe + cx, fy * cam[:, 1] / safe + cy
-        depth = z
+        depth, key = z, -1.0 / safe
     dh, dw = drawn_shape
     uv = np.stack([(u + 0.5) * dw / width - 0.5, (w + 0.5) * dh / height - 0.5], axis=1)
     valid = valid & np.isfinite(uv).all(axis=1) & (np.abs(uv) < _FAR_PIXELS).all(axis=1)
-    return _Projection(uv, depth / unit, valid)
+    return _Projection(uv, depth / unit, valid, key)
 
 
 def _face_ids(proj: _Projection, faces: NDArray[np.int64], shape: tuple[int, int]) -> NDArray[np.int32]:
-    """The index of the face seen at each pixel (−1: none): faces filled far to near,
-    long ones cut into pieces first so that ordering them by their mean depth is right
-    to within a few pixels (a cylinder's tall side faces, seen edge-on)."""
+    """The index of the face seen at each pixel (−1: none), by a depth buffer: a pixel
+    belongs to the nearest face whose projection holds its centre."""
     h, w = shape
-    ids = np.full((h, w), -1, dtype=np.int32)
+    ids = np.full(h * w, -1, dtype=np.int32)
     if len(faces) == 0:
-        return ids
+        return ids.reshape(h, w)
     tri = proj.uv[faces]
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     ok = proj.valid[faces].all(axis=1)
-    ok &= (hi[:, 0] >= -0.5) & (hi[:, 1] >= -0.5) & (lo[:, 0] <= w - 0.5) & (lo[:, 1] <= h - 0.5)
+    ok &= (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= w - 1) & (lo[:, 1] <= h - 1)
     index = np.flatnonzero(ok)
-    tri, depth, index = _cut(tri[index], proj.depth[faces[index]], index)
-    order = np.argsort(-depth.mean(axis=1), kind="stable")
-    fixed = np.round(tri[order] * (1 << _SHIFT)).astype(np.int32)
-    for points, face in zip(fixed, index[order].tolist(), strict=True):
-        cv2.fillConvexPoly(ids, points, face, cv2.LINE_8, _SHIFT)
-    return ids
+    tri, depth = tri[index], proj.key[faces[index]]
+    # the rows of pixel centres each face crosses, and where each row enters and leaves it
+    y0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)), 0, h).astype(np.int64)
+    y1 = np.clip(np.floor(tri[:, :, 1].max(axis=1)), -1, h - 1).astype(np.int64)
+    rows = np.maximum(y1 - y0 + 1, 0)
+    piece = np.repeat(np.arange(len(tri)), rows)  # the face of each row
+    y = (y0[piece] + np.arange(len(piece)) - np.repeat(np.cumsum(rows) - rows, rows)).astype(np.float64)
+    left, right = _span(tri[piece], y)
+    x0 = np.clip(np.ceil(left), 0, w).astype(np.int64)
+    x1 = np.clip(np.floor(right), -1, w - 1).astype(np.int64)
+    runs = np.maximum(x1 - x0 + 1, 0)
+    plane = _planes(tri, depth)
+    zbuf = np.full(h * w, np.inf)
+    # each run's pixels, a bounded number at a time: depth test twice (nearest depth, then
+    # the face that has it)
+    ends = np.cumsum(runs)
+    first = 0
+    while first < len(runs):
+        last = max(int(np.searchsorted(ends, ends[first] - runs[first] + _CHUNK, side="right")), first + 1)
+        part = slice(first, last)
+        r = runs[part]
+        run = np.repeat(np.arange(first, last), r)
+        px = x0[run] + np.arange(len(run)) - np.repeat(np.cumsum(r) - r, r)
+        py = y[run]
+        owner = piece[run]
+        z = plane[owner, 0] * px + plane[owner, 1] * py + plane[owner, 2]
+        pix = py.astype(np.int64) * w + px
+        np.minimum.at(zbuf, pix, z)
+        won = z <= zbuf[pix]
+        ids[pix[won]] = index[owner[won]].astype(np.int32)
+        first = last
+    return ids.reshape(h, w)
 
 
-#: Faces longer than this many pixels on the drawn image are halved, repeatedly.
-_PIECE_PIXELS = 24.0
+#: Pixels depth-tested at a time.
+_CHUNK = 1 << 20
 
 
-def _cut(tri: NDArray[np.float64], depth: NDArray[np.float64], index: NDArray[np.int64]
-         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
-    """Triangles (n, 3, 2) with their corners' depths (n, 3) and face indices, each
-    long one halved through the middle of its longest edge until no edge is longer than
-    :data:`_PIECE_PIXELS` (a sliver is cut across, not into slivers)."""
-    done_t, done_d, done_i = [], [], []
-    rows = np.arange(len(tri))
-    for _ in range(64):
-        edge = np.linalg.norm(np.roll(tri, -1, axis=1) - tri, axis=2)  # edge k: corner k to k+1
-        longest = edge.argmax(axis=1)
-        long = edge[np.arange(len(tri)), longest] > _PIECE_PIXELS
-        done_t.append(tri[~long])
-        done_d.append(depth[~long])
-        done_i.append(index[~long])
-        if not long.any():
-            break
-        t, d, i, k = tri[long], depth[long], index[long], longest[long]
-        rows = np.arange(len(t))
-        a, b, c = k, (k + 1) % 3, (k + 2) % 3
-        mid_t = (t[rows, a] + t[rows, b]) / 2.0
-        mid_d = (d[rows, a] + d[rows, b]) / 2.0
-        tri = np.concatenate([np.stack([t[rows, a], mid_t, t[rows, c]], axis=1),
-                              np.stack([mid_t, t[rows, b], t[rows, c]], axis=1)])
-        depth = np.concatenate([np.stack([d[rows, a], mid_d, d[rows, c]], axis=1),
-                                np.stack([mid_d, d[rows, b], d[rows, c]], axis=1)])
-        index = np.concatenate([i, i])
-    else:
-        done_t.append(tri)
-        done_d.append(depth)
-        done_i.append(index)
-    return np.concatenate(done_t), np.concatenate(done_d), np.concatenate(done_i)
+def _span(
+    tri: NDArray[np.float64], y: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Where the row ``y`` enters and leaves each triangle (n, 3, 2): ``(left, right)``."""
+    left = np.full(len(y), np.inf)
+    right = np.full(len(y), -np.inf)
+    for k in range(3):
+        p, q = tri[:, k], tri[:, (k + 1) % 3]
+        dy = q[:, 1] - p[:, 1]
+        crosses = ((p[:, 1] - y) * (q[:, 1] - y) <= 0) & (dy != 0)
+        x = p[:, 0] + (y - p[:, 1]) * (q[:, 0] - p[:, 0]) / np.where(dy != 0, dy, 1.0)
+        left = np.where(crosses, np.minimum(left, x), left)
+        right = np.where(crosses, np.maximum(right, x), right)
+    return left, right
+
+
+def _planes(tri: NDArray[np.float64], depth: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per triangle ``(a, b, c)`` with depth ``a·u + b·w + c`` over its projection (the
+    corners' mean depth for a degenerate one)."""
+    m = np.concatenate([tri, np.ones((len(tri), 3, 1))], axis=2)
+    det = np.linalg.det(m) if len(tri) else np.zeros(0)
+    solvable = np.abs(det) > 1e-9
+    out = np.zeros((len(tri), 3))
+    out[:, 2] = depth.mean(axis=1) if len(tri) else 0.0
+    if solvable.any():
+        out[solvable] = np.linalg.solve(m[solvable], depth[solvable][:, :, None])[:, :, 0]
+    return out
 
 
 def project_silhouette(
@@ -256,19 +282,6 @@ def project_silhouette(
     geometry = mesh.geometry
     proj = _project(pose, mesh, np.asarray(geometry.vertices), photo, photo, intrinsics)
     return _face_ids(proj, np.asarray(geometry.faces, dtype=np.int64), photo) >= 0
-
-
-def _plane_depth(proj: _Projection, faces: NDArray[np.int64]) -> NDArray[np.float64]:
-    """Per face ``(a, b, c)`` with depth ≈ ``a·u + b·w + c`` over its projection."""
-    tri, d = proj.uv[faces], proj.depth[faces]
-    m = np.concatenate([tri, np.ones((len(faces), 3, 1))], axis=2)
-    det = np.linalg.det(m)
-    solvable = np.abs(det) > 1e-9
-    out = np.zeros((len(faces), 3))
-    out[:, 2] = d.mean(axis=1)
-    if solvable.any():
-        out[solvable] = np.linalg.solve(m[solvable], d[solvable][:, :, None])[:, :, 0]
-    return out
 
 
 def _corners(geometry: Any) -> NDArray[np.int64]:
@@ -369,7 +382,7 @@ def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, colour: 
         light = shade[np.maximum(ids, 0)][:, :, None] * np.asarray(colour, np.float32)[None, None, :]
         canvas.paint(seen, light, config.fill_opacity)
     if config.edge_width > 0:
-        edges = _edges(ids, normals, _plane_depth(proj, faces), _corners(geometry), config)
+        edges = _edges(ids, normals, _planes(proj.uv[faces], proj.depth[faces]), _corners(geometry), config)
         width = _width(config.edge_width, shape)
         if width > 1:
             edges = cv2.dilate(edges.astype(np.uint8), np.ones((width, width), np.uint8)) > 0
