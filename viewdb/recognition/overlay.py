@@ -44,6 +44,7 @@ from ..pose.estimate import PoseEstimate
 
 __all__ = [
     "OverlayPose",
+    "Placement",
     "display_size",
     "draw_overlay",
     "overlay_layer",
@@ -161,15 +162,19 @@ class _Projection:
     key: NDArray[np.float64]
 
 
-def _project(pose: OverlayPose, mesh: NormalisedMesh, points: NDArray[np.float64],
+#: Where a normalised mesh sits in its file: ``original = centre + scale · normalised``.
+Placement = tuple[Sequence[float], float]
+
+
+def _project(pose: OverlayPose, place: Placement, points: NDArray[np.float64],
              photo_shape: tuple[int, int], drawn_shape: tuple[int, int],
              intrinsics: tuple[float, float, float, float] | None) -> _Projection:
     """``points`` (normalised model space) in the drawn image's pixels."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     unit = 1.0
     if pose.units == "mesh":
-        unit = float(mesh.scale)
-        pts = np.asarray(mesh.centre, dtype=np.float64) + unit * pts
+        unit = float(place[1])
+        pts = np.asarray(place[0], dtype=np.float64) + unit * pts
     cam = pts @ pose.rotation.T + pose.translation
     height, width = photo_shape
     if pose.frame == "viewdb":
@@ -275,12 +280,16 @@ def _planes(tri: NDArray[np.float64], depth: NDArray[np.float64]) -> NDArray[np.
 
 def project_silhouette(
     pose: OverlayPose, mesh: NormalisedMesh, shape: Sequence[int],
-    intrinsics: tuple[float, float, float, float] | None = None,
+    intrinsics: tuple[float, float, float, float] | None = None, placement: Placement | None = None,
 ) -> NDArray[np.bool_]:
-    """The silhouette (bool, H × W) of ``mesh`` at ``pose`` in a photo of ``shape``."""
+    """The silhouette (bool, H × W) of ``mesh`` at ``pose`` in a photo of ``shape``.
+    ``placement``: ``(centre, scale)`` of the mesh in its file, for a pose in the mesh's
+    units (default the mesh's own: a mesh read from a database file has none, see
+    :func:`draw_overlay`)."""
     photo = (int(shape[0]), int(shape[1]))
     geometry = mesh.geometry
-    proj = _project(pose, mesh, np.asarray(geometry.vertices), photo, photo, intrinsics)
+    place = placement or (mesh.centre, mesh.scale)
+    proj = _project(pose, place, np.asarray(geometry.vertices), photo, photo, intrinsics)
     return _face_ids(proj, np.asarray(geometry.faces, dtype=np.int64), photo) >= 0
 
 
@@ -364,13 +373,13 @@ def _lighter(colour: Sequence[int]) -> tuple[float, ...]:
     return tuple(c + (255 - c) * 0.55 for c in colour)
 
 
-def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, colour: Sequence[int],
-              photo_shape: tuple[int, int], intrinsics: tuple[float, float, float, float] | None,
-              config: OverlayConfig) -> None:
+def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, place: Placement,
+              colour: Sequence[int], photo_shape: tuple[int, int],
+              intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
     shape = canvas.alpha.shape
     geometry = mesh.geometry
     faces = np.asarray(geometry.faces, dtype=np.int64)
-    proj = _project(pose, mesh, np.asarray(geometry.vertices), photo_shape, shape, intrinsics)
+    proj = _project(pose, place, np.asarray(geometry.vertices), photo_shape, shape, intrinsics)
     ids = _face_ids(proj, faces, shape)
     seen = ids >= 0
     if not seen.any():
@@ -393,16 +402,16 @@ def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, colour: 
         cv2.polylines(line, contours, True, 255, _width(config.outline_width, shape), cv2.LINE_AA)
         canvas.paint(line, colour)
     if config.axis_length > 0:
-        _draw_axes(canvas, pose, mesh, photo_shape, intrinsics, config)
+        _draw_axes(canvas, pose, place, photo_shape, intrinsics, config)
     if config.labels:
         _draw_label(canvas, pose, seen, colour, config)
 
 
-def _draw_axes(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, photo_shape: tuple[int, int],
+def _draw_axes(canvas: _Canvas, pose: OverlayPose, place: Placement, photo_shape: tuple[int, int],
                intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
     shape = canvas.alpha.shape
     ends = np.vstack([np.zeros(3), np.eye(3) * config.axis_length])
-    proj = _project(pose, mesh, ends, photo_shape, shape, intrinsics)
+    proj = _project(pose, place, ends, photo_shape, shape, intrinsics)
     if not proj.valid[0]:
         return
     width = _width(config.outline_width, shape)
@@ -449,13 +458,15 @@ def _draw_label(canvas: _Canvas, pose: OverlayPose, seen: NDArray[np.bool_], col
 
 # ------------------------------------------------------------------------ public
 def _paint_all(canvas: _Canvas, photo_shape: tuple[int, int], poses: Sequence[OverlayPose],
-               mesh_of: Callable[[str], NormalisedMesh],
+               mesh_of: Callable[[str], NormalisedMesh], placement: Callable[[str], Placement] | None,
                intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
     if any(p.frame == "opencv" for p in poses) and intrinsics is None:
         raise QueryError("a pinhole (OpenCV frame) pose is drawn with the camera intrinsics: give them")
     for i in reversed(range(len(poses))):  # the best last, on top
         colour = config.colours[i % len(config.colours)]
-        _draw_one(canvas, poses[i], mesh_of(poses[i].name), colour, photo_shape, intrinsics, config)
+        mesh = mesh_of(poses[i].name)
+        place = (mesh.centre, mesh.scale) if placement is None else placement(poses[i].name)
+        _draw_one(canvas, poses[i], mesh, place, colour, photo_shape, intrinsics, config)
 
 
 def overlay_layer(
@@ -464,17 +475,16 @@ def overlay_layer(
     mesh_of: Callable[[str], NormalisedMesh],
     *,
     intrinsics: tuple[float, float, float, float] | None = None,
+    placement: Callable[[str], Placement] | None = None,
     config: OverlayConfig | None = None,
 ) -> NDArray[np.uint8]:
     """The overlay alone, as straight-alpha RGBA (uint8, at :func:`display_size`) over
     a transparent background, for a photo of ``shape`` (H, W, ...): to lay over the
-    photo elsewhere (a web page). ``poses`` best first, each in its own colour
-    (``config.colours``); ``mesh_of(name)`` gives each object's normalised mesh (e.g.
-    :meth:`viewdb.ViewDB.mesh`)."""
+    photo elsewhere (a web page). The arguments are those of :func:`draw_overlay`."""
     config = config or OverlayConfig()
     photo_shape = (int(shape[0]), int(shape[1]))
     canvas = _Canvas(display_size(photo_shape, config))
-    _paint_all(canvas, photo_shape, poses, mesh_of, intrinsics, config)
+    _paint_all(canvas, photo_shape, poses, mesh_of, placement, intrinsics, config)
     return canvas.rgba()
 
 
@@ -484,10 +494,18 @@ def draw_overlay(
     mesh_of: Callable[[str], NormalisedMesh],
     *,
     intrinsics: tuple[float, float, float, float] | None = None,
+    placement: Callable[[str], Placement] | None = None,
     config: OverlayConfig | None = None,
 ) -> NDArray[np.uint8]:
     """The photo (RGB or RGBA uint8, H × W) with each pose's mesh drawn over it (see the
-    module doc); RGB uint8 at :func:`display_size`. The photo is not changed."""
+    module doc); RGB uint8 at :func:`display_size`. The photo is not changed.
+
+    ``poses`` best first, each in its own colour (``config.colours``); ``mesh_of(name)``
+    gives each object's normalised mesh (e.g. :meth:`viewdb.ViewDB.mesh`).
+    ``intrinsics`` ``(fx, fy, cx, cy)`` are needed for pinhole (``opencv``) poses, and
+    ``placement(name)`` (the ``(centre, scale)`` of :class:`viewdb.ObjectInfo`) for poses
+    in the mesh's own units when ``mesh_of`` gives meshes without their placement, as a
+    database's stored meshes are."""
     config = config or OverlayConfig()
     photo = np.asarray(photo)
     if photo.dtype != np.uint8 or photo.ndim not in (2, 3):
@@ -495,5 +513,6 @@ def draw_overlay(
                          f"of shape {photo.shape}")
     base = shrink_photo(photo, config)
     canvas = _Canvas(base.shape[:2])
-    _paint_all(canvas, (int(photo.shape[0]), int(photo.shape[1])), poses, mesh_of, intrinsics, config)
+    _paint_all(canvas, (int(photo.shape[0]), int(photo.shape[1])), poses, mesh_of, placement, intrinsics,
+               config)
     return canvas.over(base)
