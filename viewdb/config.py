@@ -222,6 +222,9 @@ class OverlayConfig:
     #: Longest side of the drawn image in pixels (the photo is shrunk to it first);
     #: None: the photo's own size.
     max_side: int | None = None
+    #: A photo whose longer side is shorter than this is enlarged to it first (so that
+    #: lines and labels stay legible over a small photo); None: never enlarged.
+    min_side: int | None = None
     #: Width of the outline (the posed mesh's silhouette, its holes included).
     outline_width: float = 3.0
     #: Width of the internal edges (creases and parts in front of others).
@@ -247,6 +250,8 @@ class OverlayConfig:
     def __post_init__(self) -> None:
         if self.max_side is not None and self.max_side < 16:
             raise ValueError(f"max_side must be at least 16 pixels, got {self.max_side}")
+        if self.min_side is not None and not 16 <= self.min_side <= (self.max_side or self.min_side):
+            raise ValueError(f"min_side must be at least 16 pixels and at most max_side, got {self.min_side}")
         for name in ("outline_width", "edge_width", "axis_length", "label_size", "occlusion_depth"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be at least 0, got {getattr(self, name)}")
@@ -263,18 +268,23 @@ class WebConfig:
     """The web page of ``viewdb serve`` and the endpoints behind it (:mod:`viewdb.http.web`)."""
 
     #: The photo and each result's overlay come back at most this many pixels on the
-    #: longer side (a phone's photo is shrunk; the query itself runs at full size).
+    #: longer side (a phone's photo is shrunk; the query itself runs at full size)...
     display_side: int = 1024
+    #: ... and at least this many (a small photo is enlarged, so the overlay is legible).
+    display_min_side: int = 512
     #: JPEG quality of the photo sent back to draw the overlays on.
     photo_quality: int = 85
     #: Most results one query through the page may ask for.
     max_k: int = 10
     #: View PNGs (thumbnails, the turntable) kept rendered per worker.
     view_cache: int = 512
+    #: The view ``(azimuth, elevation)`` that pictures each object in the catalogue.
+    picture_view: tuple[float, float] = (30.0, 20.0)
 
     def __post_init__(self) -> None:
-        if self.display_side < 64:
-            raise ValueError(f"display_side must be at least 64, got {self.display_side}")
+        if not 64 <= self.display_min_side <= self.display_side:
+            raise ValueError("display_side and display_min_side must be at least 64, in that order, "
+                             f"got {self.display_side} and {self.display_min_side}")
         if not 1 <= self.photo_quality <= 100:
             raise ValueError(f"photo_quality must be in [1, 100], got {self.photo_quality}")
         if self.max_k < 1 or self.view_cache < 1:

@@ -21,7 +21,8 @@ The drawing is pure NumPy and OpenCV, no renderer: the triangles are scan-conver
 into a face-index image with a depth buffer (a pixel shows the nearest face whose
 projection holds its centre, as a GPU rasterises, at the drawn image's resolution), from
 which the outline, the visible creases and depth steps and the shading are read. The
-photo may be shrunk first (:attr:`viewdb.config.OverlayConfig.max_side`).
+photo may be shrunk or enlarged first (:attr:`viewdb.config.OverlayConfig.max_side`,
+``min_side``).
 
 >>> layer = draw_overlay(photo, poses_from_json(result.to_dict()), db.mesh)  # doctest: +SKIP
 """
@@ -50,7 +51,7 @@ __all__ = [
     "overlay_layer",
     "poses_from_json",
     "project_silhouette",
-    "shrink_photo",
+    "resized_photo",
 ]
 
 #: Colours of the model's x, y and z axes.
@@ -131,23 +132,30 @@ def poses_from_json(data: Mapping[str, Any]) -> list[OverlayPose]:
 
 # ------------------------------------------------------------------------ geometry
 def display_size(shape: Sequence[int], config: OverlayConfig | None = None) -> tuple[int, int]:
-    """``(height, width)`` of the drawn image for a photo of ``shape`` (H, W, ...)."""
+    """``(height, width)`` of the drawn image for a photo of ``shape`` (H, W, ...): the
+    photo's, shrunk to ``config.max_side`` or enlarged to ``config.min_side``."""
     height, width = int(shape[0]), int(shape[1])
-    side = (config or OverlayConfig()).max_side
-    if side is None or max(height, width) <= side:
+    config = config or OverlayConfig()
+    longer = max(height, width)
+    if config.max_side is not None and longer > config.max_side:
+        f = config.max_side / longer
+    elif config.min_side is not None and longer < config.min_side:
+        f = config.min_side / longer
+    else:
         return height, width
-    f = side / max(height, width)
     return max(1, round(height * f)), max(1, round(width * f))
 
 
-def shrink_photo(photo: NDArray[np.uint8], config: OverlayConfig | None = None) -> NDArray[np.uint8]:
-    """The photo at the size its overlay is drawn (area-averaged), RGB."""
-    rgb = np.asarray(photo)[:, :, :3] if np.asarray(photo).ndim == 3 else np.repeat(
-        np.asarray(photo)[:, :, None], 3, axis=2)
+def resized_photo(photo: NDArray[np.uint8], config: OverlayConfig | None = None) -> NDArray[np.uint8]:
+    """The photo (RGB) resized to the size its overlay is drawn at (:func:`display_size`)."""
+    arr = np.asarray(photo)
+    rgb = arr[:, :, :3] if arr.ndim == 3 else np.repeat(arr[:, :, None], 3, axis=2)
+    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
     h, w = display_size(rgb.shape, config)
     if (h, w) == rgb.shape[:2]:
-        return np.ascontiguousarray(rgb, dtype=np.uint8)
-    return cv2.resize(np.ascontiguousarray(rgb, dtype=np.uint8), (w, h), interpolation=cv2.INTER_AREA)
+        return rgb
+    smaller = h * w < rgb.shape[0] * rgb.shape[1]
+    return cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA if smaller else cv2.INTER_CUBIC)
 
 
 @dataclass(frozen=True)
@@ -511,7 +519,7 @@ def draw_overlay(
     if photo.dtype != np.uint8 or photo.ndim not in (2, 3):
         raise QueryError(f"the photo must be an 8-bit grey or RGB(A) image, got {photo.dtype} "
                          f"of shape {photo.shape}")
-    base = shrink_photo(photo, config)
+    base = resized_photo(photo, config)
     canvas = _Canvas(base.shape[:2])
     _paint_all(canvas, (int(photo.shape[0]), int(photo.shape[1])), poses, mesh_of, placement, intrinsics,
                config)
