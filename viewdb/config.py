@@ -11,8 +11,8 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig", "RenderConfig",
-    "SiftConfig", "SkimConfig", "WebConfig", "default_client_gap",
+    "BuildConfig", "FeatureConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig", "PosingConfig",
+    "RecognitionConfig", "RenderConfig", "SiftConfig", "SkimConfig", "WebConfig", "default_client_gap",
 ]
 
 
@@ -211,6 +211,50 @@ class BuildConfig:
             # ingest of their unchanged sources adds the perspective views they lack
             perspective=PerspectiveConfig(**data.get("perspective", {})),
         )
+
+
+@dataclass(frozen=True)
+class RecognitionConfig:
+    """Tunables of the query pipeline (:mod:`viewdb.recognition.pipeline`)."""
+
+    #: Objects the plan finds (at least k) before the colour and shape re-rankings keep
+    #: the best k.
+    pool: int = 5
+    #: An occluder's pixels inside the silhouette's convex hull make a completed query
+    #: shape only when they are at least this share of the silhouette's area
+    #: (:func:`viewdb.recognition.shapes.completed_mask`).
+    hidden_min_share: float = 0.02
+
+    def __post_init__(self) -> None:
+        if self.pool < 1:
+            raise ValueError(f"pool must be at least 1, got {self.pool}")
+        if not 0.0 <= self.hidden_min_share <= 1.0:
+            raise ValueError(f"hidden_min_share must be in [0, 1], got {self.hidden_min_share}")
+
+
+@dataclass(frozen=True)
+class PosingConfig:
+    """How a recognised match is posed from its catalogue (:mod:`viewdb.pose.matched`)."""
+
+    #: Most candidate poses examined per result (a sphere has every grid view as one).
+    max_candidates: int = 24
+    #: Besides the matched view's same-shape poses, those of the object's next nearest
+    #: views (by the query curve) are candidates too: a silhouette often matches several
+    #: sides of an object about equally, and SIFT can tell them apart.
+    near_views: int = 4
+    #: Image size of the orthographic silhouettes the perspective silhouette search aligns.
+    silhouette_search_size: int = 128
+    #: The off-grid shape refinement stops at this step (degrees).
+    shape_refine_step: float = 2.0
+    #: IoU re-ranking: results fitted again with the full silhouette search after the
+    #: quick one (besides the plan's first).
+    rerank_full: int = 1
+
+    def __post_init__(self) -> None:
+        if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0:
+            raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0")
+        if not (16 <= self.silhouette_search_size <= 4096 and self.shape_refine_step > 0):
+            raise ValueError("need 16 <= silhouette_search_size <= 4096 and shape_refine_step > 0")
 
 
 @dataclass(frozen=True)
