@@ -26,12 +26,17 @@ from PIL import Image
 
 import viewdb
 from tests.serving import ServerProcess, multipart, request
+from viewdb.config import OverlayConfig
 from viewdb.http import models
 from viewdb.http.app import ENV_DB, ENV_UI, app_from_env
+from viewdb.recognition.overlay import OverlayPose, overlay_layer
 
 TOKEN = "web-s3cret"
 #: The server's limit on a photo's upload (bytes).
 LIMIT = 300_000
+#: A pose as the query's JSON gives it.
+POSE = {"rotation": np.eye(3).tolist(), "translation": [0.0, 0.0, -3.0], "scale": 1.0, "frame": "viewdb",
+        "units": "normalised"}
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +102,7 @@ def test_page_needs_no_token_but_every_endpoint_does(server):
     status, script = request(server.url, "GET", "/static/app.js")
     assert status == 200 and b"fetch(" in script
     for method, path in [("GET", "/objects"), ("GET", "/objects/mug/views"), ("GET", "/info"),
-                         ("GET", "/objects/mug/views/30/20.png"), ("POST", "/query")]:
+                         ("GET", "/objects/mug/views/30/20.png"), ("POST", "/query"), ("POST", "/overlay")]:
         status, reply = request(server.url, method, path, b"" if method == "POST" else None)
         assert status == 401 and "token" in reply["error"], (path, reply)
         status, reply = request(server.url, method, path, b"" if method == "POST" else None, token="wrong")
@@ -127,6 +132,15 @@ def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_p
                      photo.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 0
     drawn = layer[:, :, 3] > 0
     assert (drawn & mug).sum() > 0.9 * mug.sum()  # the overlay covers the mug
+    # the other results' overlays are drawn on request, as the library draws them
+    second = answer["results"][1]
+    assert second["overlay"] is None and second["pose"] is not None
+    size = {"width": answer["photo"]["source_width"], "height": answer["photo"]["source_height"]}
+    status, png = request(server.url, "POST", "/overlay", {"result": second, **size}, token=TOKEN)
+    assert status == 200
+    config = OverlayConfig(max_side=1024, min_side=512, colours=(OverlayConfig().colours[1],))
+    mine = overlay_layer(grey.shape, [OverlayPose.from_json(second)], db.mesh, config=config)
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(png))), mine)
     # the thumbnail is the matched view (from the side the photo shows), rendered
     status, png = request(server.url, "GET", "/" + top["thumbnail"], token=TOKEN)
     assert status == 200
@@ -194,6 +208,12 @@ def test_bad_input_gets_a_one_line_error_and_the_server_stays_up(server, demo_ph
         (request(server.url, "GET", "/objects/nope/views/0/0.png", token=TOKEN), 404, "no object named"),
         (request(server.url, "GET", "/objects/mug/views/east/0.png", token=TOKEN), 422, "azimuth must be"),
         (request(server.url, "GET", "/objects/mug/views/0/nan.png", token=TOKEN), 422, "elevation must be"),
+        (request(server.url, "POST", "/overlay", b"{not json", token=TOKEN), 400, "not valid JSON"),
+        (request(server.url, "POST", "/overlay", {"result": {}, "width": 64}, token=TOKEN), 422, "height must be"),
+        (request(server.url, "POST", "/overlay", {"result": {"object": "mug", "pose": {"rotation": 1}},
+                                                  "width": 64, "height": 64}, token=TOKEN), 422, "not a pose"),
+        (request(server.url, "POST", "/overlay", {"result": {"object": "nope", "pose": POSE}, "width": 64,
+                                                  "height": 64}, token=TOKEN), 404, "no object named 'nope'"),
     ]
     for (status, reply), want_status, want in cases:
         assert status == want_status and want in reply["error"], (status, reply, want)
@@ -206,7 +226,8 @@ def test_the_schema_documents_the_endpoints(server):
     status, schema = request(server.url, "GET", "/openapi.json")
     assert status == 200
     paths = schema["paths"]
-    assert {"/query", "/objects", "/objects/{name}/views", "/objects/{name}/views/{azimuth}/{elevation}.png"} <= set(paths)
+    assert {"/query", "/overlay", "/objects", "/objects/{name}/views",
+            "/objects/{name}/views/{azimuth}/{elevation}.png"} <= set(paths)
     assert "/" not in paths
     body = paths["/query"]["post"]["requestBody"]["content"]["multipart/form-data"]["schema"]
     form = schema["components"]["schemas"][body["$ref"].split("/")[-1]]
@@ -362,10 +383,12 @@ def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo
         wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#ranking img')]"
                                       ".every(i => i.naturalWidth > 0)"))
         assert "round trip" in browser.find_element(By.ID, "timing").text
-        # choosing another result shows its overlay
+        # choosing another result shows its overlay, drawn on request
         second = browser.find_elements(By.CSS_SELECTOR, "#ranking li")[1]
         second.click()
         assert second.get_attribute("aria-selected") == "true"
+        wait(browser, lambda d: js(d, "const i = document.getElementById('overlay-img');"
+                                      "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))
         browser.set_window_size(390, 844)
         wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
         no_horizontal_scroll(browser)

@@ -13,7 +13,7 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
-``POST /query``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
+``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
                   the web page's endpoints: the whole query on the server, with pictures
                   (:mod:`viewdb.http.web`)
 ``GET /``         the web page (no token; not with ``ui=False``, ``viewdb serve --no-ui``)
@@ -355,7 +355,8 @@ def create_app(
                                  routes=app.routes)
             components = schema.setdefault("components", {}).setdefault("schemas", {})
             for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel):
+                          models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
+                          models.OverlayRequestModel):
                 doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
                 components.update(doc.pop("$defs", {}))
                 components[model.__name__] = doc

@@ -16,6 +16,7 @@ __all__ = [
     "CandidateModel",
     "ErrorModel",
     "ObjectsReplyModel",
+    "OverlayRequestModel",
     "PoseEntryModel",
     "PoseModel",
     "PoseReplyModel",
@@ -26,6 +27,7 @@ __all__ = [
     "WalkRequestModel",
     "WebQueryFormModel",
     "WebQueryReplyModel",
+    "json_body",
     "multipart_body",
 ]
 
@@ -186,7 +188,8 @@ class WebResultModel(BaseModel):
     pose: dict[str, object] | None = Field(description="as in viewdb query --json (null: not posed)")
     pose_error: str | None = None
     overlay: str | None = Field(description="data: URL of a transparent PNG of the posed mesh, as "
-                                            "large as `photo`, to lay over it (null: not posed)")
+                                            "large as `photo`, to lay over it: the best posed result's "
+                                            "(the others: POST /overlay; null: not drawn)")
     thumbnail: str = Field(description="URL (relative to the server's root) of the matched view's "
                                        "picture, from the side the photo shows")
     colour: str = Field(description="the colour its overlay is drawn in, #rrggbb")
@@ -195,6 +198,8 @@ class WebResultModel(BaseModel):
 class WebPhotoModel(BaseModel):
     width: int
     height: int
+    source_width: int = Field(description="the photo's own width (POST /overlay takes it)")
+    source_height: int
     src: str = Field(description="data: URL of the photo as the server read it (upright, shrunk), JPEG")
 
 
@@ -238,6 +243,21 @@ class ViewsReplyModel(BaseModel):
     object: str
     gap: float
     views: list[StoredViewModel] = Field(description="by elevation, then azimuth")
+
+
+class OverlayRequestModel(BaseModel):
+    """``POST /overlay``: draw one result's pose."""
+
+    result: dict[str, object] = Field(description="one result of POST /query (its object, rank, score, pose)")
+    width: int = Field(ge=16, le=100_000, description="the photo's width in pixels (photo.source_width)")
+    height: int = Field(ge=16, le=100_000, description="the photo's height in pixels (photo.source_height)")
+
+
+def json_body(model: type[BaseModel]) -> dict[str, object]:
+    """``openapi_extra`` declaring a JSON request body of ``model`` (documented; the
+    endpoint reads and checks the body itself)."""
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
 
 
 def multipart_body(model: type[BaseModel]) -> dict[str, object]:

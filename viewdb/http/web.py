@@ -5,7 +5,10 @@
                  file); the reply is the ``viewdb query --json`` document plus, to show
                  it, the photo as the server decoded it (shrunk, JPEG) and per posed
                  result its overlay (:mod:`viewdb.recognition.overlay`, a transparent PNG
-                 laid over that photo) and the URL of its matched view's picture
+                 laid over that photo; the best posed result's, the others' from
+                 ``POST /overlay``) and the URL of its matched view's picture
+``POST /overlay`` one result's overlay (JSON: the result as ``POST /query`` gave it and
+                 the photo's size): a transparent PNG
 ``GET /objects`` every object with its symmetry, views stored and grid, and a picture
 ``GET /objects/{name}/views``  the views the file stores of one object (a turntable)
 ``GET /objects/{name}/views/{azimuth}/{elevation}.png``  a view rendered from the stored
@@ -22,6 +25,7 @@ The endpoints need the bearer token as every other one does; the page asks for i
 from __future__ import annotations
 
 import base64
+import json
 import math
 import tempfile
 import time
@@ -45,7 +49,7 @@ from ..api import ViewDB
 from ..camera import normalise_angle
 from ..config import OverlayConfig, WebConfig
 from ..errors import ImageError, ViewDBError
-from ..recognition.image import load_image
+from ..recognition.image import MAX_PIXELS, load_image
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.verify import physical_view
 from ..search.plans import Candidate
@@ -153,6 +157,25 @@ def _decode(data: bytes, name: str) -> tuple[NDArray[np.uint8], NDArray[np.uint8
     return loaded.rgb, loaded.alpha
 
 
+def _drawing(config: WebConfig) -> OverlayConfig:
+    return OverlayConfig(max_side=config.display_side, min_side=config.display_min_side)
+
+
+def _colour(rank: int | None, drawing: OverlayConfig) -> tuple[int, int, int]:
+    return drawing.colours[((rank or 1) - 1) % len(drawing.colours)]
+
+
+def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], config: WebConfig) -> bytes | None:
+    """One result's overlay (a transparent PNG the size the photo is shown at), in the
+    colour of its rank; None when it has no pose."""
+    pose = OverlayPose.from_json(result)
+    if pose is None:
+        return None
+    drawing = _drawing(config)
+    drawing = replace(drawing, colours=(_colour(pose.rank, drawing),))
+    return _encode(overlay_layer(shape, [pose], db.mesh, config=drawing), ".png")
+
+
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread."""
     rgb, alpha = _decode(data, name)
@@ -163,26 +186,51 @@ def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: 
         raise ImageError(exc.message, name) from exc
     result["image"] = name
     start = time.perf_counter()
-    drawing = OverlayConfig(max_side=config.display_side, min_side=config.display_min_side)
+    drawing = _drawing(config)
     shown = resized_photo(rgb, drawing)
+    quality = [cv2.IMWRITE_JPEG_QUALITY, config.photo_quality]
     result["photo"] = {"width": int(shown.shape[1]), "height": int(shown.shape[0]),
-                       "src": _data_url("image/jpeg", _encode(shown, ".jpg", [cv2.IMWRITE_JPEG_QUALITY,
-                                                                              config.photo_quality]))}
+                       "source_width": int(rgb.shape[1]), "source_height": int(rgb.shape[0]),
+                       "src": _data_url("image/jpeg", _encode(shown, ".jpg", quality))}
     hashes = {o.name: o.content_hash for o in db.objects()}
-    for i, entry in enumerate(result["results"]):
-        pose = OverlayPose.from_json(entry)
-        colour = drawing.colours[i % len(drawing.colours)]
-        entry["colour"] = "#{:02x}{:02x}{:02x}".format(*colour)
+    drawn = False
+    for entry in result["results"]:
+        entry["colour"] = "#{:02x}{:02x}{:02x}".format(*_colour(entry.get("rank"), drawing))
         entry["overlay"] = None
-        if pose is not None:
-            layer = overlay_layer(rgb.shape, [pose], db.mesh, config=replace(drawing, colours=(colour,)))
-            entry["overlay"] = _data_url("image/png", _encode(layer, ".png"))
+        if not drawn and entry.get("pose"):  # the best posed result's; the others on request
+            png = draw_layer(db, entry, rgb.shape[:2], config)
+            entry["overlay"] = None if png is None else _data_url("image/png", png)
+            drawn = True
         view = entry["view"]
         h, v = physical_view(Candidate(entry["object"], entry["distance"], view["azimuth"],
                                        view["elevation"], bool(view["mirrored"])))
         entry["thumbnail"] = view_url(entry["object"], h, v, hashes.get(entry["object"], ""))
     result["timing_ms"]["overlay"] = round((time.perf_counter() - start) * 1e3, 3)
     return _finite(result)
+
+
+def _overlay_request(data: Any) -> tuple[dict[str, Any], tuple[int, int]]:
+    """The result and photo size of a ``POST /overlay`` body, checked."""
+    if not isinstance(data, dict) or not isinstance(data.get("result"), dict):
+        raise HTTPException(422, "expected {\"result\": <one result of POST /query>, \"width\": int, "
+                                 "\"height\": int}")
+    size = []
+    for key in ("height", "width"):
+        value = data.get(key)
+        if not isinstance(value, int) or isinstance(value, bool) or not 16 <= value <= 100_000:
+            raise HTTPException(422, f"{key} must be the photo's {key} in pixels (16 to 100000), "
+                                     f"got {value!r}")
+        size.append(value)
+    if size[0] * size[1] > MAX_PIXELS:
+        raise HTTPException(422, f"a photo of {size[1]}x{size[0]} pixels is larger than any query accepts")
+    result = data["result"]
+    if not isinstance(result.get("object"), str) or not isinstance(result.get("pose"), dict):
+        raise HTTPException(422, "the result needs its object's name and its pose")
+    try:
+        OverlayPose.from_json(result)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise HTTPException(422, f"the result's pose is not a pose: {exc}") from exc
+    return result, (size[0], size[1])
 
 
 # ------------------------------------------------------------------ the router
@@ -192,7 +240,7 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
     router = APIRouter(dependencies=guarded)
     pictures: OrderedDict[tuple[str, str, float, float], bytes] = OrderedDict()
     errors = {code: {"model": models.ErrorModel, "description": what} for code, what in (
-        (401, "missing or wrong bearer token"), (404, "no such object"),
+        (400, "the body is not JSON"), (401, "missing or wrong bearer token"), (404, "no such object"),
         (413, "the photo is over the server's limit"),
         (422, "the photo is not an image, shows no object, or an option is out of range"),
     )}
@@ -221,6 +269,19 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         except ImageError as exc:
             raise HTTPException(422, str(exc)) from exc
         return out
+
+    @router.post("/overlay", responses={200: {"content": {"image/png": {}}, "description": "the overlay"},
+                                        **errors},
+                 openapi_extra=models.json_body(models.OverlayRequestModel), response_class=Response,
+                 summary="One result's overlay, to lay over the photo as POST /query shows it")
+    async def overlay(request: Request) -> Response:
+        try:
+            data = json.loads(await request.body() or b"null")
+        except ValueError as exc:
+            raise HTTPException(400, f"body is not valid JSON: {exc}") from exc
+        result, shape = _overlay_request(data)
+        png, _ = await run(lambda db: draw_layer(db, result, shape, config))
+        return Response(png, media_type="image/png")
 
     @router.get("/objects", responses={200: {"model": models.ObjectsReplyModel}, **errors},
                 summary="Every object, with its symmetry, views stored and a picture")

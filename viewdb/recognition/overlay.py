@@ -347,30 +347,30 @@ class _Canvas:
 
     def paint(self, coverage: NDArray[np.generic], colour: Sequence[float] | NDArray[np.floating],
               opacity: float = 1.0) -> None:
-        """Paint ``colour`` (RGB 0–255, one for all, or per pixel (H, W, 3)) where
-        ``coverage`` (H, W; uint8 0–255 or bool) says, times ``opacity``."""
+        """Paint ``colour`` (RGB 0–255: one for all, or (n, 3), one per covered pixel in
+        ``np.nonzero`` order) where ``coverage`` (H, W; uint8 0–255 or bool) says, times
+        ``opacity``."""
         cover = np.asarray(coverage)
-        rows, cols = np.flatnonzero(cover.any(axis=1)), np.flatnonzero(cover.any(axis=0))
-        if len(rows) == 0:
+        ys, xs = np.nonzero(cover)
+        if len(ys) == 0:
             return
-        box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
         scale = opacity / 255.0 if cover.dtype == np.uint8 else opacity
-        a = cover[box].astype(np.float32) * np.float32(scale)
+        a = cover[ys, xs].astype(np.float32) * np.float32(scale)
         c = np.asarray(colour, dtype=np.float32) / 255.0
-        if c.ndim == 3:
-            c = c[box]
-        self.rgb[box] = self.rgb[box] * (1.0 - a[:, :, None]) + c * a[:, :, None]
-        self.alpha[box] = self.alpha[box] * (1.0 - a) + a
+        self.rgb[ys, xs] = self.rgb[ys, xs] * (1.0 - a[:, None]) + c * a[:, None]
+        self.alpha[ys, xs] = self.alpha[ys, xs] * (1.0 - a) + a
 
     def over(self, photo: NDArray[np.uint8]) -> NDArray[np.uint8]:
         out = self.rgb * 255.0 + photo.astype(np.float32) * (1.0 - self.alpha[:, :, None])
         return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
     def rgba(self) -> NDArray[np.uint8]:
-        a = self.alpha[:, :, None]
-        rgb = np.where(a > 0, self.rgb / np.maximum(a, 1e-6), 0.0) * 255.0
-        out = np.concatenate([rgb, a * 255.0], axis=2)
-        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+        out = np.zeros((*self.alpha.shape, 4), dtype=np.uint8)
+        ys, xs = np.nonzero(self.alpha > 0)
+        a = self.alpha[ys, xs]
+        rgb = self.rgb[ys, xs] / a[:, None]
+        out[ys, xs] = np.clip(np.rint(np.concatenate([rgb, a[:, None]], axis=1) * 255.0), 0, 255)
+        return out
 
 
 def _width(value: float, shape: tuple[int, int]) -> int:
@@ -396,7 +396,7 @@ def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, place: P
     if config.fill_opacity > 0:
         facing = np.abs((normals @ pose.rotation.T)[:, 2])
         shade = (1.0 - _LIGHT) + _LIGHT * facing
-        light = shade[np.maximum(ids, 0)][:, :, None] * np.asarray(colour, np.float32)[None, None, :]
+        light = shade[ids[seen]][:, None] * np.asarray(colour, np.float32)[None, :]
         canvas.paint(seen, light, config.fill_opacity)
     if config.edge_width > 0:
         edges = _edges(ids, normals, _planes(proj.uv[faces], proj.depth[faces]), _corners(geometry), config)

@@ -11,6 +11,7 @@ const state = {
   catalogueLoaded: false,
   retry: null, // what to do again once a token is given
   turntable: null,
+  selected: null, // the result whose overlay is shown
 };
 
 const $ = (id) => document.getElementById(id);
@@ -234,15 +235,32 @@ function select(answer, index) {
   const items = $("ranking").children;
   for (let i = 0; i < items.length; i++) items[i].setAttribute("aria-selected", String(i === index));
   const overlay = $("overlay-img");
-  if (result.overlay) {
-    overlay.hidden = false;
-    overlay.src = result.overlay;
-    $("caption").textContent = `${result.rank}. ${result.object} drawn in its pose`;
-  } else {
+  state.selected = result;
+  if (!result.pose) {
     overlay.hidden = true;
     overlay.removeAttribute("src");
     $("caption").textContent = `${result.rank}. ${result.object}: no pose`;
+    return;
   }
+  $("caption").textContent = `${result.rank}. ${result.object} drawn in its pose`;
+  if (result.overlay) {
+    overlay.hidden = false;
+    overlay.src = result.overlay;
+    return;
+  }
+  // only the best result's overlay comes with the answer; the server draws the others on request
+  overlay.hidden = true;
+  $("caption").textContent = `Drawing ${result.object}…`;
+  const body = JSON.stringify({ result, width: answer.photo.source_width, height: answer.photo.source_height });
+  api("overlay", { method: "POST", body, headers: { "Content-Type": "application/json" } })
+    .then((response) => response.blob())
+    .then((blob) => {
+      result.overlay = URL.createObjectURL(blob);
+      if (state.selected === result) select(answer, index);
+    })
+    .catch((error) => {
+      if (!(error instanceof NeedsToken)) $("caption").textContent = `${result.object} could not be drawn: ${error.message}`;
+    });
 }
 
 const STAGES = [["segment", "segment"], ["client", "client half"], ["server", "server half"],
