@@ -66,6 +66,17 @@ def edge_distance(mask: np.ndarray) -> np.ndarray:
     return cv2.distanceTransform((edge == 0).astype(np.uint8), cv2.DIST_L2, 5)
 
 
+def assert_same_silhouette(truth: np.ndarray, mine: np.ndarray) -> None:
+    """Equal to a GPU's rasterisation to within its precision: the masks differ only on
+    the edge (a pixel centre a hair from it lands on either side), and there on few pixels
+    (a half-pixel error of convention would flip most of an edge)."""
+    assert truth.any()
+    wrong = truth ^ mine
+    edge = edge_distance(truth) == 0
+    assert edge_distance(truth)[wrong].max(initial=0) <= 1.0, "differs away from the edge"
+    assert wrong.sum() <= max(4, 0.1 * edge.sum()), f"{wrong.sum()} of {edge.sum()} edge pixels differ"
+
+
 def drawn(image: np.ndarray) -> np.ndarray:
     """Pixels an overlay on a black photo drew on (half covered or more)."""
     return image.max(axis=2) >= 128
@@ -78,8 +89,7 @@ def test_silhouette_equals_the_orthographic_render(db, name, h, v):
     size = 128
     truth = get_renderer(RenderConfig(image_size=size)).render(db.mesh(name), h, v).mask
     mine = project_silhouette(ortho(name, h, v), db.mesh(name), (size, size))
-    assert truth.any()
-    assert (truth ^ mine).sum() <= 4, f"{(truth ^ mine).sum()} pixels differ"
+    assert_same_silhouette(truth, mine)
 
 
 @settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -108,7 +118,7 @@ def test_pinhole_silhouette_equals_the_pinhole_render_in_both_units(db, name, h,
     r, t = GL_TO_CV @ view_rotation(h, v, turn), np.array([tx, ty, depth])
     truth, _ = get_pinhole_renderer().render(mesh, r, t, k, size)
     mine = project_silhouette(OverlayPose(name, r, t, frame="opencv"), mesh, (size, size), k)
-    assert (truth ^ mine).sum() <= 4, f"{(truth ^ mine).sum()} pixels differ"
+    assert_same_silhouette(truth, mine)
     # the same pose in the mesh file's own units draws the same
     info = db.object(name)
     in_mesh = OverlayPose(name, r, to_mesh_units(r, t, info.centre, info.scale), frame="opencv", units="mesh")

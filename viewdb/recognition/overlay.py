@@ -220,35 +220,36 @@ def _face_ids(proj: _Projection, faces: NDArray[np.int64], shape: tuple[int, int
     ok &= (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= w - 1) & (lo[:, 1] <= h - 1)
     index = np.flatnonzero(ok)
     tri, depth = tri[index], proj.key[faces[index]]
-    # the rows of pixel centres each face crosses, and where each row enters and leaves it
+    # the rows of pixel centres each face crosses, and where each row enters and leaves it;
+    # a centre on the face's right or bottom edge is left to its neighbour (a GPU's rule)
     y0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)), 0, h).astype(np.int64)
-    y1 = np.clip(np.floor(tri[:, :, 1].max(axis=1)), -1, h - 1).astype(np.int64)
+    y1 = np.clip(np.ceil(tri[:, :, 1].max(axis=1)) - 1, -1, h - 1).astype(np.int64)
     rows = np.maximum(y1 - y0 + 1, 0)
     piece = np.repeat(np.arange(len(tri)), rows)  # the face of each row
     y = (y0[piece] + np.arange(len(piece)) - np.repeat(np.cumsum(rows) - rows, rows)).astype(np.float64)
     left, right = _span(tri[piece], y)
     x0 = np.clip(np.ceil(left), 0, w).astype(np.int64)
-    x1 = np.clip(np.floor(right), -1, w - 1).astype(np.int64)
+    x1 = np.clip(np.ceil(right) - 1, -1, w - 1).astype(np.int64)
     runs = np.maximum(x1 - x0 + 1, 0)
-    plane = _planes(tri, depth)
+    plane = _planes(tri, depth)[piece]
+    # per run: its first pixel, the depth there and the depth's step along the row
+    start = y.astype(np.int64) * w + x0
+    z0 = plane[:, 0] * x0 + plane[:, 1] * y + plane[:, 2]
+    step, face = plane[:, 0], index[piece].astype(np.int32)
     zbuf = np.full(h * w, np.inf)
-    # each run's pixels, a bounded number at a time: depth test twice (nearest depth, then
-    # the face that has it)
+    # the runs' pixels, a bounded number at a time: the nearest depth at each pixel, then
+    # the face that has it
     ends = np.cumsum(runs)
     first = 0
     while first < len(runs):
         last = max(int(np.searchsorted(ends, ends[first] - runs[first] + _CHUNK, side="right")), first + 1)
-        part = slice(first, last)
-        r = runs[part]
-        run = np.repeat(np.arange(first, last), r)
-        px = x0[run] + np.arange(len(run)) - np.repeat(np.cumsum(r) - r, r)
-        py = y[run]
-        owner = piece[run]
-        z = plane[owner, 0] * px + plane[owner, 1] * py + plane[owner, 2]
-        pix = py.astype(np.int64) * w + px
+        r = runs[first:last]
+        offset = np.arange(int(r.sum())) - np.repeat(np.cumsum(r) - r, r)
+        pix = np.repeat(start[first:last], r) + offset
+        z = np.repeat(z0[first:last], r) + np.repeat(step[first:last], r) * offset
         np.minimum.at(zbuf, pix, z)
         won = z <= zbuf[pix]
-        ids[pix[won]] = index[owner[won]].astype(np.int32)
+        ids[pix[won]] = np.repeat(face[first:last], r)[won]
         first = last
     return ids.reshape(h, w)
 
