@@ -49,7 +49,8 @@ from ..api import ViewDB
 from ..camera import normalise_angle
 from ..config import OverlayConfig, WebConfig
 from ..errors import ImageError, ViewDBError
-from ..recognition.image import MAX_PIXELS, load_image
+from ..recognition.image import DEFAULTS as IMAGE_LIMITS
+from ..recognition.image import load_image
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.verify import physical_view
 from ..search.plans import Candidate
@@ -221,7 +222,7 @@ def _overlay_request(data: Any) -> tuple[dict[str, Any], tuple[int, int]]:
             raise HTTPException(422, f"{key} must be the photo's {key} in pixels (16 to 100000), "
                                      f"got {value!r}")
         size.append(value)
-    if size[0] * size[1] > MAX_PIXELS:
+    if size[0] * size[1] > IMAGE_LIMITS.max_pixels:
         raise HTTPException(422, f"a photo of {size[1]}x{size[0]} pixels is larger than any query accepts")
     result = data["result"]
     if not isinstance(result.get("object"), str) or not isinstance(result.get("pose"), dict):
