@@ -218,7 +218,7 @@ def _fit_body(image):
     ("/pose", _pose_body(_png(np.zeros((4, 4, 4), np.uint8))), 422, "too small"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "matches": []}, 422, "must not be empty"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [1, 2, 3]}, 422, "intrinsics"),
-    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "positive"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "fx must be a finite number"),
     ("/fits", {"views": []}, 422, "lacks 'image'"),
     ("/fits", _fit_body("!!!not base64!!!"), 422, "not valid base64"),
     ("/fits", _fit_body(_png(np.zeros((32, 32, 3), np.uint8))), 422, "must be RGBA"),

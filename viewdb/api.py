@@ -22,7 +22,7 @@ from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition,
 from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh, mesh_from_glb
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
-from .config import BuildConfig, RenderConfig
+from .config import LIMITS, BuildConfig, RenderConfig, finite, integer
 from .errors import FeatureError, NotFound, PoseError, QueryError, RenderError, StorageError, ViewDBError
 from .pose.estimate import CandidateView, PoseEstimate, QueryView, shape_fit
 from .recognition.colour import carries_colour, colour_signature
@@ -301,6 +301,7 @@ class ViewDB:
 
         try:
             options = LoadOptions(max_faces, allow_missing_textures)
+            integer(jobs, "jobs", 1, LIMITS.max_jobs)
         except ValueError as exc:
             raise ViewDBError(str(exc)) from exc
         return run_ingest(
@@ -754,6 +755,7 @@ class ViewDB:
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone (the last
         :data:`RENDER_CACHE_SIZE` are kept; their arrays are read-only)."""
+        azimuth, elevation = _view_angles(azimuth, elevation, self.path)
         key = (name, normalise_angle(azimuth), normalise_angle(elevation))
 
         def make() -> RenderedView:
@@ -840,7 +842,11 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         raise ViewDBError(str(exc), path) from exc
     store = Store(path, create=create, initial=(wanted, "full"), read_only=read_only)
     try:
-        stored = store.build_config()
+        try:
+            stored = store.build_config()
+        except (ValueError, KeyError, TypeError) as exc:  # written by hand, or by a viewdb
+            # that accepted settings now known to be unusable (a perspective distance of 1e308)
+            raise StorageError(f"has unusable build settings ({exc}); rebuild it", path) from exc
         if stored is None:  # a file whose creation by an older viewdb was cut short
             if not create or read_only:
                 raise StorageError("is an unfinished database (its creation was interrupted); "
@@ -881,8 +887,21 @@ def render_model(
     path: str | Path, azimuth: float, elevation: float, *, image_size: int = 256
 ) -> RenderedView:
     """Render one view of a mesh file (normalised as ingest would) without a database."""
+    azimuth, elevation = _view_angles(azimuth, elevation, path)
+    try:
+        config = RenderConfig(image_size=image_size)
+    except ValueError as exc:
+        raise ViewDBError(str(exc), path) from exc
     mesh = load_mesh(path)
-    return get_renderer(RenderConfig(image_size=image_size)).render(mesh, azimuth, elevation)
+    return get_renderer(config).render(mesh, azimuth, elevation)
+
+
+def _view_angles(azimuth: float, elevation: float, path: str | Path) -> tuple[float, float]:
+    """The angles of a view as floats, refused (naming ``path``) unless finite."""
+    try:
+        return finite(azimuth, "azimuth"), finite(elevation, "elevation")
+    except ValueError as exc:
+        raise ViewDBError(str(exc), path) from exc
 
 
 def describe_paths(paths: Sequence[str | Path]) -> list[Path]:

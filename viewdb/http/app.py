@@ -11,13 +11,16 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
                   re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
-``GET /health``   liveness (no database access, no token)
-``GET /openapi.json``  the schema
+``GET /health``   liveness (no database access, no token; the worker's pid only with it)
+``GET /openapi.json``, ``/docs``, ``/redoc``  the schema and its pages: public even with a
+                  token (they describe the API and hold no data)
 
 Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
 not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
-limit 413 (refused from its Content-Length before it is read), a missing or wrong bearer
-token 401; every error body is ``{"error": "<one line>", "status": <code>}``.
+limit 413 (refused from its Content-Length before it is read), a body that takes longer
+than ``body_timeout`` to arrive 408, a missing or wrong bearer token 401; every error body
+is ``{"error": "<one line>", "status": <code>}``. A connection must deliver each request's
+header within ``header_timeout`` seconds (:mod:`viewdb.http.protocol`).
 
 Each worker process opens the database read-only once and answers on one thread of its
 own (the renderer's GL context is per thread): requests to one worker are served one
@@ -50,6 +53,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
+from ..config import HttpConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..recognition.pipeline import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
@@ -76,6 +80,7 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
+ENV_BODY_TIMEOUT = "VIEWDB_BODY_TIMEOUT"
 
 T = TypeVar("T")
 
@@ -90,9 +95,12 @@ def _error(status: int, message: str, headers: dict[str, str] | None = None) -> 
 DRAIN_BYTES = 16 * 1024 * 1024
 
 
-async def _drain(receive: Receive, seen: int) -> None:
+async def _drain(receive: Receive, seen: int, deadline: float) -> None:
     while seen <= DRAIN_BYTES:
-        message = await receive()
+        try:
+            message = await asyncio.wait_for(receive(), max(deadline - time.monotonic(), 0.0))
+        except TimeoutError:
+            return
         if message["type"] != "http.request":
             return
         seen += len(message.get("body", b""))
@@ -102,15 +110,18 @@ async def _drain(receive: Receive, seen: int) -> None:
 
 class BodyLimit:
     """ASGI middleware: 413 for a body over the path's limit, from its Content-Length
-    before reading, or while reading a body sent without one (chunked)."""
+    before reading, or while reading a body sent without one (chunked); 408 for a body
+    that has not arrived whole ``timeout`` seconds after the request's header."""
 
-    def __init__(self, app: ASGIApp, limits: dict[str, int], default: int) -> None:
-        self.app, self.limits, self.default = app, limits, default
+    def __init__(self, app: ASGIApp, limits: dict[str, int], default: int,
+                 timeout: float = HttpConfig().body_timeout) -> None:
+        self.app, self.limits, self.default, self.timeout = app, limits, default, timeout
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        deadline = time.monotonic() + self.timeout
         limit = self.limits.get(scope["path"], self.default)
         declared = dict(scope["headers"]).get(b"content-length")
         close = {"Connection": "close"}
@@ -120,22 +131,30 @@ class BodyLimit:
                 return
             if int(declared) > limit:
                 if int(declared) <= DRAIN_BYTES:
-                    await _drain(receive, 0)
+                    await _drain(receive, 0, deadline)
                 await _error(413, f"body of {int(declared):,} bytes is over this endpoint's "
                                   f"limit of {limit:,}", close)(scope, receive, send)
                 return
         seen = 0
+        complete = False
 
         async def limited() -> Message:
-            nonlocal seen
-            message = await receive()
+            nonlocal seen, complete
+            if complete:  # after the body only a disconnect can come: no deadline
+                return await receive()
+            try:
+                message = await asyncio.wait_for(receive(), max(deadline - time.monotonic(), 0.0))
+            except TimeoutError:
+                raise HTTPException(408, f"the body did not arrive within {self.timeout:g} s",
+                                    headers=close) from None
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
+                complete = not message.get("more_body", False)
                 if seen > limit:
                     if message.get("more_body", False):
-                        await _drain(receive, seen)
+                        await _drain(receive, seen, deadline)
                     raise HTTPException(413, f"body is over this endpoint's limit of {limit:,} bytes",
-                                    headers=close)
+                                        headers=close)
             return message
 
         await self.app(scope, limited, send)
@@ -180,7 +199,8 @@ def _body(model: type[Any]) -> dict[str, Any]:
 _ERRORS: dict[int | str, dict[str, Any]] = {
     code: {"model": models.ErrorModel, "description": what} for code, what in (
         (400, "the body is not JSON"), (401, "missing or wrong bearer token"),
-        (413, "the body is over the limit"), (422, "the JSON is not a valid message"),
+        (408, "the body did not arrive in time"), (413, "the body is over the limit"),
+        (422, "the JSON is not a valid message"),
     )
 }
 
@@ -191,11 +211,15 @@ def create_app(
     token: str | None = None,
     max_body: int = DEFAULT_MAX_BODY,
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+    body_timeout: float = HttpConfig().body_timeout,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
-    ``token``: when given, every endpoint but ``/health`` and the schema needs the header
-    ``Authorization: Bearer <token>``.
+    ``token``: when given, every endpoint but ``/health`` and the schema (``/openapi.json``,
+    ``/docs``, ``/redoc``: public on purpose, they describe the API and hold no data) needs
+    the header ``Authorization: Bearer <token>``; ``/health`` then shows the worker's pid
+    only to a caller with the token. ``body_timeout``: seconds a request's body may take to
+    arrive (then 408).
     """
     db_path = Path(db_path)
     holder: dict[str, _State] = {}
@@ -273,9 +297,15 @@ def create_app(
         out["stats"]["server_ms"] = ms
         return out
 
-    @app.get("/health", summary="Liveness: the worker is up and its database open")
-    async def health() -> dict[str, Any]:
-        return {"status": "ok", "pid": os.getpid(), "objects": state().objects}
+    @app.get("/health", summary="Liveness: the worker is up and its database open (no token "
+                                 "needed; the worker's pid only with the token)")
+    async def health(request: Request) -> dict[str, Any]:
+        out: dict[str, Any] = {"status": "ok", "objects": state().objects}
+        try:
+            authorised(request)
+        except HTTPException:
+            return out  # a caller without the token learns nothing about the process
+        return {**out, "pid": os.getpid()}
 
     @app.get("/info", dependencies=guarded, responses=_ERRORS,
              summary="What the database holds, its build settings and this server's limits")
@@ -351,7 +381,7 @@ def create_app(
 
     app.openapi = openapi  # type: ignore[method-assign]
     app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body},
-                       default=max_body)
+                       default=max_body, timeout=body_timeout)
     return app
 
 
@@ -372,8 +402,8 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``): the factory each worker of
-    ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_BODY_TIMEOUT``): the factory
+    each worker of ``viewdb serve`` calls."""
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -381,4 +411,5 @@ def app_from_env() -> FastAPI:
         path, token=os.environ.get(ENV_TOKEN) or None,
         max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
+        body_timeout=float(os.environ.get(ENV_BODY_TIMEOUT, HttpConfig().body_timeout)),
     )

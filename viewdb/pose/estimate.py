@@ -68,7 +68,8 @@ from scipy.optimize import least_squares
 from ..camera import normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
 from ..catalogue.features import largest_contour
 from ..catalogue.sift import extract_sift
-from ..errors import FeatureError, PoseError
+from ..errors import FeatureError, PoseError, QueryError
+from .intrinsics import check_intrinsics
 
 __all__ = [
     "CandidateView",
@@ -348,11 +349,13 @@ def _threshold(config: PoseConfig, fraction: float, extent: float) -> float:
 
 def _check_intrinsics(intrinsics: Sequence[float]) -> NDArray[np.float64]:
     try:
-        fx, fy, cx, cy = (float(x) for x in intrinsics)
-    except (TypeError, ValueError) as exc:
-        raise PoseError(f"intrinsics must be four numbers (fx, fy, cx, cy), got {intrinsics!r}") from exc
-    if not (fx > 0 and fy > 0 and math.isfinite(cx) and math.isfinite(cy)):
-        raise PoseError(f"intrinsics need fx, fy > 0 and finite cx, cy, got {intrinsics!r}")
+        values = tuple(intrinsics)
+    except TypeError:
+        values = ()
+    try:
+        fx, fy, cx, cy = check_intrinsics(values)
+    except QueryError as exc:
+        raise PoseError(exc.message) from exc
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
