@@ -14,6 +14,10 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``GET /health``   liveness (no database access, no token; the worker's pid only with it)
 ``GET /openapi.json``, ``/docs``, ``/redoc``  the schema and its pages: public even with a
                   token (they describe the API and hold no data)
+``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
+                  the web page's endpoints: the whole query on the server, with pictures
+                  (:mod:`viewdb.http.web`)
+``GET /``         the web page (no token; not with ``ui=False``, ``viewdb serve --no-ui``)
 
 Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
 not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
@@ -53,11 +57,10 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
-from ..config import HttpConfig
+from ..config import HttpConfig, WebConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
-from ..recognition.pipeline import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
-from . import models
+from . import models, web
 from .wire import (
     ColourReply,
     ColourRequest,
@@ -81,6 +84,8 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
 ENV_BODY_TIMEOUT = "VIEWDB_BODY_TIMEOUT"
+#: "0": no web page (``viewdb serve --no-ui``).
+ENV_UI = "VIEWDB_UI"
 
 T = TypeVar("T")
 
@@ -211,15 +216,18 @@ def create_app(
     token: str | None = None,
     max_body: int = DEFAULT_MAX_BODY,
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+    ui: bool = True,
+    web_config: WebConfig | None = None,
     body_timeout: float = HttpConfig().body_timeout,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
-    ``token``: when given, every endpoint but ``/health`` and the schema (``/openapi.json``,
-    ``/docs``, ``/redoc``: public on purpose, they describe the API and hold no data) needs
-    the header ``Authorization: Bearer <token>``; ``/health`` then shows the worker's pid
-    only to a caller with the token. ``body_timeout``: seconds a request's body may take to
-    arrive (then 408).
+    ``token``: when given, every endpoint but ``/health``, the schema (``/openapi.json``,
+    ``/docs``, ``/redoc``) and the web page needs the header ``Authorization: Bearer
+    <token>`` (those are public on purpose: they describe the API and hold no data);
+    ``/health`` then shows the worker's pid only to a caller with the token. ``ui``:
+    serve the web page at ``/`` (its endpoints are served either way). ``body_timeout``:
+    seconds a request's body may take to arrive (then 408).
     """
     db_path = Path(db_path)
     holder: dict[str, _State] = {}
@@ -324,7 +332,7 @@ def create_app(
     async def refine(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
-        found, ms = await run(lambda db: db.refine(req))
+        found, ms = await run(lambda db: db.server_tier().refine(req)[0])
         return reply(found, ms)
 
     @app.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
@@ -333,7 +341,7 @@ def create_app(
     async def walk(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))
-        found, ms = await run(lambda db: db.walk(req))
+        found, ms = await run(lambda db: db.server_tier().walk(req)[0])
         return reply(found, ms)
 
     @app.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
@@ -343,8 +351,8 @@ def create_app(
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
         query = _parse(lambda: decode_query(req.image))
-        poses, ms = await run(lambda db: pose_matches(db, query, req.matches, req.intrinsics,
-                                                          curves=req.curves))
+        poses, ms = await run(lambda db: db.server_tier().poses(
+            query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
 
     @app.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
@@ -353,7 +361,7 @@ def create_app(
     async def colours(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: ColourRequest.from_dict(data))
-        signatures, ms = await run(lambda db: db.view_colours(req.views))
+        signatures, ms = await run(lambda db: db.server_tier().colours(req.views)[0])
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
     @app.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
@@ -363,8 +371,12 @@ def create_app(
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
         query = _parse(lambda: decode_query(req.image))
-        found, ms = await run(lambda db: db.view_fits(query, req.views))
+        found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
+
+    app.include_router(web.web_router(run, guarded, web_config))
+    if ui:
+        web.add_page(app)
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
@@ -372,7 +384,8 @@ def create_app(
                                  routes=app.routes)
             components = schema.setdefault("components", {}).setdefault("schemas", {})
             for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel, models.FitRequestModel):
+                          models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
+                          models.OverlayRequestModel):
                 doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
                 components.update(doc.pop("$defs", {}))
                 components[model.__name__] = doc
@@ -380,8 +393,8 @@ def create_app(
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
-    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body},
-                       default=max_body, timeout=body_timeout)
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
+                                          "/query": max_image_body}, default=max_body, timeout=body_timeout)
     return app
 
 
@@ -402,8 +415,8 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_BODY_TIMEOUT``): the factory
-    each worker of ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``, ``VIEWDB_BODY_TIMEOUT``):
+    the factory each worker of ``viewdb serve`` calls."""
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -411,5 +424,6 @@ def app_from_env() -> FastAPI:
         path, token=os.environ.get(ENV_TOKEN) or None,
         max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
+        ui=os.environ.get(ENV_UI, "1") != "0",
         body_timeout=float(os.environ.get(ENV_BODY_TIMEOUT, HttpConfig().body_timeout)),
     )

@@ -26,6 +26,7 @@ from .app import (
     ENV_MAX_BODY,
     ENV_MAX_IMAGE_BODY,
     ENV_TOKEN,
+    ENV_UI,
 )
 from .protocol import ENV_HEADER_TIMEOUT
 
@@ -62,11 +63,13 @@ def run_server(
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
     log_level: str = "warning",
     ready: Callable[[str, int], None] | None = None,
+    ui: bool = True,
     http: HttpConfig | None = None,
 ) -> None:
     """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
-    once the socket listens (before the workers start answering). ``http`` sets the
-    header and body timeouts (:class:`~viewdb.config.HttpConfig`)."""
+    once the socket listens (before the workers start answering). ``ui``: serve the web
+    page at ``/``. ``http`` sets the header and body timeouts
+    (:class:`~viewdb.config.HttpConfig`)."""
     import uvicorn
     from uvicorn.supervisors import Multiprocess
 
@@ -82,6 +85,7 @@ def run_server(
     os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
     os.environ[ENV_HEADER_TIMEOUT] = repr(float(http.header_timeout))
     os.environ[ENV_BODY_TIMEOUT] = repr(float(http.body_timeout))
+    os.environ[ENV_UI] = "1" if ui else "0"
     if token:
         os.environ[ENV_TOKEN] = token
     else:
