@@ -499,6 +499,9 @@ def serve(
     body_timeout: Annotated[float, typer.Option(
         help="Seconds a request's body may take to arrive (then 408).",
         callback=_number(0.001, 86400))] = viewdb_config.HttpConfig().body_timeout,
+    max_pixels: Annotated[int, typer.Option(
+        help="Largest image decoded (/pose, /fits, /query), in pixels; larger ones are refused "
+             "from their header.", min=256, max=LIMITS.max_pixels)] = viewdb_config.HttpConfig().max_pixels,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
     ] = "warning",
@@ -524,7 +527,8 @@ def serve(
 
     run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
                max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui,
-               http=viewdb_config.HttpConfig(header_timeout=header_timeout, body_timeout=body_timeout))
+               http=viewdb_config.HttpConfig(header_timeout=header_timeout, body_timeout=body_timeout,
+                                             max_pixels=max_pixels))
 
 
 @app.command()

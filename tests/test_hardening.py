@@ -152,6 +152,36 @@ def test_intrinsics_out_of_range_get_one_line_not_a_traceback(small_db, tmp_path
         viewdb.parse_intrinsics(intrinsics)
 
 
+def _bomb_png(path, width, height):
+    """A PNG whose header claims ``width`` x ``height`` pixels (its data is a stub)."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+                     + chunk(b"IDAT", zlib.compress(b"\x00" * 1000)) + chunk(b"IEND", b""))
+    return path
+
+
+def test_a_label_map_bomb_is_one_line_like_the_photo(small_db, tmp_path, capsys):
+    img = photo_of(small_db, "car", 37, 22, tmp_path / "q.png")
+    bomb = _bomb_png(tmp_path / "labels.png", 30000, 30000)
+    code, _, err = run(capsys, "query", img, "--db", small_db, "--label-map", bomb, "--label", 1)
+    assert code == 1 and "too large" in one_line_error(err) and str(bomb) in err
+    code, _, err = run(capsys, "query", bomb, "--db", small_db)  # the photo path, as before
+    assert code == 1 and "too large" in one_line_error(err)
+
+
+def test_a_label_beyond_the_maps_integer_type_is_not_in_it(small_db, tmp_path, capsys):
+    img = photo_of(small_db, "car", 37, 22, tmp_path / "q.png")
+    labels = tmp_path / "labels.png"
+    cv2.imwrite(str(labels), (cv2.imread(str(img), cv2.IMREAD_GRAYSCALE) < 150).astype(np.uint8) * 3)
+    code, _, err = run(capsys, "query", img, "--db", small_db, "--label-map", labels, "--label", 10**30)
+    assert code == 1 and "is not in the label map (labels present: 3)" in one_line_error(err)
+
+
 # ----------------------------------------------------------------------------- files
 def _obj_with_texture(folder, texture="tex.png"):
     (folder / "s.obj").write_text("mtllib s.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\n"
@@ -180,6 +210,16 @@ def test_files_that_are_not_regular_files_are_named_as_such(tmp_path, capsys):
                          "--gap", 90)
     assert code == 1 and "2 failed" in out
     assert "pipe.obj: is a FIFO" in err and "/dev/zero: is a device" in err
+
+
+def test_an_intrinsics_file_must_be_a_small_regular_file(tmp_path):
+    os.mkfifo(tmp_path / "k.json")
+    with pytest.raises(viewdb.QueryError, match="is a FIFO"):
+        viewdb.parse_intrinsics(tmp_path / "k.json")
+    big = tmp_path / "big.json"
+    big.write_text('{"fx": 500, "fy": 500, "cx": 1, "cy": 1, "pad": "' + "x" * (2 << 20) + '"}')
+    with pytest.raises(viewdb.QueryError, match="not an intrinsics file"):
+        viewdb.parse_intrinsics(big)
 
 
 def test_every_failed_file_says_why_duplicates_and_missing_ones_too(tmp_path, capsys):

@@ -22,7 +22,7 @@ from PIL import Image
 
 import viewdb
 from tests.conftest import mixed_query_curves
-from tests.serving import ServerProcess, request
+from tests.serving import ServerProcess, multipart, request
 from viewdb.http import models
 from viewdb.http.wire import ColourReply, FitReply, PoseReply, PoseRequest, decode_query, encode_query
 from viewdb.pose.estimate import QueryView
@@ -339,6 +339,23 @@ def test_an_image_too_large_is_refused_from_its_header(server):
     assert got == 422 and "too large" in reply["error"]
 
 
+def test_the_server_caps_decoded_pixels_below_the_library(server):
+    """A 20-megapixel PNG is refused from its header (the server's cap is 16 million, the
+    library's for local files 40 million): a 170 KB file of 40 million pixels took a
+    worker from 439 to 1,093 MB."""
+    header = struct.pack(">IIBBBBB", 5000, 4000, 8, 6, 0, 0, 0)
+    png = (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
+           + _chunk(b"IDAT", zlib.compress(b"\x00" * 1000)) + _chunk(b"IEND", b""))
+    body = _pose_body(base64.b64encode(png).decode())
+    for path, payload in (("/pose", body), ("/fits", {**_fit_body(body["image"])})):
+        got, reply = request(server.url, "POST", path, payload, token=TOKEN)
+        assert got == 422 and "image too large: 5000x4000, more than 16,000,000 pixels" in reply["error"]
+    form, headers = multipart({}, {"photo": ("big.png", png, "image/png")})
+    got, reply = request(server.url, "POST", "/query", form, headers=headers, token=TOKEN)
+    assert got == 422 and "too large" in reply["error"] and "big.png" in reply["error"]
+    assert request(server.url, "GET", "/info", token=TOKEN)[1]["limits"]["max_pixels"] == 16_000_000
+
+
 @pytest.mark.parametrize("chunked", [False, True])
 def test_huge_payloads_get_413(server, chunked):
     huge = json.dumps({**_valid(), "curve": [1.0] * 600_000}).encode()  # ~3.6 MB
@@ -578,10 +595,59 @@ BODY_MODELS = {
         {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
          "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=3)}),
 }
+
+
+@st.composite
+def _overlay_body(draw):
+    pose = {"rotation": draw(st.one_of(st.just(np.eye(3).tolist()), st.lists(
+                st.lists(_plausible_or(st.floats(-1, 1)), min_size=3, max_size=3), min_size=3, max_size=3),
+                st.lists(NASTY_FLOATS, max_size=4))),
+            "translation": draw(st.lists(_plausible_or(st.floats(-5, 5)), min_size=3, max_size=3)
+                                | st.lists(NASTY_FLOATS, max_size=4)),
+            "scale": draw(_plausible_or(st.floats(0.01, 10)) | st.none()),
+            "frame": draw(st.sampled_from(["viewdb", "viewdb", "opencv", "nope"])),
+            "units": draw(st.sampled_from(["normalised", "normalised", "mesh", "feet"]))}
+    result = {"object": draw(_plausible_or(st.sampled_from(OBJECTS), NAMES)), "pose": pose,
+              "rank": draw(_plausible_or(st.integers(1, 10)) | st.none()),
+              "score": draw(_plausible_or(st.floats(0, 10)) | st.none())}
+    return {"result": result, "width": draw(_plausible_or(st.integers(16, 2000), st.integers(-5, 200_000))),
+            "height": draw(_plausible_or(st.integers(16, 2000), st.integers(-5, 200_000)))}
+
+
+@st.composite
+def _query_form(draw):
+    """A multipart ``POST /query`` body: a photo (a real one of an object, noise, or bytes
+    that are no image) and the options, some of them nonsense."""
+    kind = draw(st.sampled_from(["photo", "photo", "noise", "bytes"]))
+    if kind == "bytes":
+        data = draw(st.binary(min_size=1, max_size=300))
+    else:
+        h, w = draw(st.integers(16, 96)), draw(st.integers(16, 96))
+        rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+        image = (rng.integers(0, 256, (h, w, 3), dtype=np.uint8) if kind == "noise"
+                 else np.full((h, w, 3), 200, np.uint8))
+        if kind == "photo":
+            cv2.ellipse(image, (w // 2, h // 2), (max(3, w // 3), max(3, h // 4)), draw(st.floats(0, 180)),
+                        0, 360, (30, 60, 90), -1)
+        data = cv2.imencode(draw(st.sampled_from([".png", ".jpg", ".webp", ".bmp"])), image)[1].tobytes()
+    fields = {}
+    if draw(st.booleans()):
+        fields["plan"] = draw(_plausible_or(st.sampled_from(["server", "cs1", "cs2"]), st.text(max_size=20)))
+    if draw(st.booleans()):
+        fields["k"] = draw(_plausible_or(st.integers(1, 10).map(str),
+                                         st.integers(-10**30, 10**30).map(str) | st.text(max_size=12)))
+    name = draw(st.sampled_from(["photo.png", "p.jpg", "x", "é\x1b[2J.png", "../../etc/passwd"]))
+    return {"fields": fields, "photo": (name, data)}
+
+
+BODY_MODELS["/overlay"] = _overlay_body()
+BODY_MODELS["/query"] = _query_form()
+
 #: The documented model of each endpoint's body: every one is fuzzed.
 DOCUMENTED = {"/refine": models.RefineRequestModel, "/walk": models.WalkRequestModel,
               "/pose": models.PoseRequestModel, "/colours": models.ColourRequestModel,
-              "/fits": models.FitRequestModel}
+              "/fits": models.FitRequestModel, "/overlay": models.OverlayRequestModel,
+              "/query": models.WebQueryFormModel}
 
 
 def test_every_body_model_is_fuzzed(server):
@@ -605,16 +671,23 @@ MODEL_FUZZ = settings(max_examples=30, suppress_health_check=[
 @pytest.mark.parametrize("path", sorted(BODY_MODELS))
 def test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500(server, path, data):
     body = data.draw(BODY_MODELS[path])
-    got, reply = request(server.url, "POST", path, _body_json(body), token=TOKEN)
+    if path == "/query":
+        form, headers = multipart(body["fields"], {"photo": (*body["photo"], "application/octet-stream")})
+        got, reply = request(server.url, "POST", path, form, headers=headers, token=TOKEN)
+    else:
+        got, reply = request(server.url, "POST", path, _body_json(body), token=TOKEN)
     event(f"status {got}")
     assert got < 500, (got, reply)
+    if path == "/overlay" and got == 200:
+        assert isinstance(reply, bytes) and reply.startswith(b"\x89PNG")
+        return
     assert isinstance(reply, dict), reply
     if got != 200:
         assert 400 <= got < 500 and reply["status"] == got
         assert isinstance(reply["error"], str) and "\n" not in reply["error"] and reply["error"]
         return
     if path in ("/refine", "/walk"):
-        parsed = viewdb.ServerReply.from_dict(reply)
+        parsed = viewdb.http.ServerReply.from_dict(reply)
         names = [c.object for c in parsed.results]
         assert len(names) == len(set(names)) and len(names) <= body["k"]
         assert all(c.distance >= 0 for c in parsed.results)
@@ -622,6 +695,8 @@ def test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500(server, path, d
         assert len(PoseReply.from_dict(reply).poses) == len(body["matches"])
     elif path == "/colours":
         assert len(ColourReply.from_dict(reply).signatures) == len(body["views"])
+    elif path == "/query":
+        assert 1 <= len(reply["results"]) and reply["image"] and "\x1b" not in reply["image"]
     else:
         assert len(FitReply.from_dict(reply).fits) == len(body["views"])
 

@@ -17,7 +17,7 @@ import viewdb
 from viewdb.config import HttpConfig
 from viewdb.http.client import json_depth
 
-REQUEST = viewdb.RefineRequest(np.ones(128), 6, 3, [])
+REQUEST = viewdb.http.RefineRequest(np.ones(128), 6, 3, [])
 OK_BODY = json.dumps({"results": [], "stats": {"server_ms": 1.0}}).encode()
 
 

@@ -40,6 +40,9 @@ class InputLimits:
     max_principal: float = 1e7
     #: Most worker processes of an ingest (each holds a renderer, about 300 MB).
     max_jobs: int = 64
+    #: Most pixels of any image decoded from a file (photo, mask, label map), checked from
+    #: its header before decoding (:data:`viewdb.recognition.image.MAX_PIXELS`).
+    max_pixels: int = 40_000_000
     #: Side of a rendered view, pixels.
     min_image_size: int = 16
     max_image_size: int = 4096
@@ -73,6 +76,11 @@ class HttpConfig:
     #: Client and server: deepest nesting of arrays and objects in a JSON body (real
     #: messages nest 4 deep).
     max_json_depth: int = 32
+    #: Server: most pixels of an image it decodes (the query image of /pose and /fits, the
+    #: photo of /query), checked from the header before any pixel is decoded. Decoding and
+    #: posing take about 16 bytes a pixel: 16 million (a 12-megapixel phone photo fits) is
+    #: about 260 MB; the library's own limit for local files is 40 million.
+    max_pixels: int = 16_000_000
 
     def __post_init__(self) -> None:
         for name in ("header_timeout", "body_timeout", "connect_timeout", "read_timeout",
@@ -80,6 +88,7 @@ class HttpConfig:
             finite(getattr(self, name), name, 1e-3, 86400.0)
         integer(self.max_reply_bytes, "max_reply_bytes", 1024)
         integer(self.max_json_depth, "max_json_depth", 4, 1000)
+        integer(self.max_pixels, "max_pixels", 256)
 
 
 def finite(value: object, what: str, low: float = -math.inf, high: float = math.inf) -> float:

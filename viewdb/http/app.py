@@ -83,7 +83,7 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
-ENV_BODY_TIMEOUT = "VIEWDB_BODY_TIMEOUT"
+ENV_BODY_TIMEOUT, ENV_MAX_PIXELS = "VIEWDB_BODY_TIMEOUT", "VIEWDB_MAX_PIXELS"
 #: "0": no web page (``viewdb serve --no-ui``).
 ENV_UI = "VIEWDB_UI"
 
@@ -219,6 +219,7 @@ def create_app(
     ui: bool = True,
     web_config: WebConfig | None = None,
     body_timeout: float = HttpConfig().body_timeout,
+    max_pixels: int = HttpConfig().max_pixels,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
@@ -227,7 +228,8 @@ def create_app(
     <token>`` (those are public on purpose: they describe the API and hold no data);
     ``/health`` then shows the worker's pid only to a caller with the token. ``ui``:
     serve the web page at ``/`` (its endpoints are served either way). ``body_timeout``:
-    seconds a request's body may take to arrive (then 408).
+    seconds a request's body may take to arrive (then 408); ``max_pixels``: the largest
+    image decoded (/pose, /fits, /query; larger ones are refused from their header).
     """
     db_path = Path(db_path)
     holder: dict[str, _State] = {}
@@ -322,6 +324,7 @@ def create_app(
         data.pop("path", None)
         return {**data, "viewdb": __version__, "role": "full", "read_only": True,
                 "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": max_body,
+                           "max_pixels": max_pixels,
                            "max_image_body": max_image_body,
                            "curve_samples": state().curve_samples},
                 "auth": token is not None}
@@ -350,7 +353,7 @@ def create_app(
     async def pose(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
-        query = _parse(lambda: decode_query(req.image))
+        query = _parse(lambda: decode_query(req.image, max_pixels))
         poses, ms = await run(lambda db: db.server_tier().poses(
             query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
@@ -370,11 +373,11 @@ def create_app(
     async def fits(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
-        query = _parse(lambda: decode_query(req.image))
+        query = _parse(lambda: decode_query(req.image, max_pixels))
         found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
-    app.include_router(web.web_router(run, guarded, web_config))
+    app.include_router(web.web_router(run, guarded, web_config, max_pixels=max_pixels))
     if ui:
         web.add_page(app)
 
@@ -415,8 +418,8 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``, ``VIEWDB_BODY_TIMEOUT``):
-    the factory each worker of ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``, ``VIEWDB_BODY_TIMEOUT``,
+    ``VIEWDB_MAX_PIXELS``): the factory each worker of ``viewdb serve`` calls."""
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -426,4 +429,5 @@ def app_from_env() -> FastAPI:
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
         ui=os.environ.get(ENV_UI, "1") != "0",
         body_timeout=float(os.environ.get(ENV_BODY_TIMEOUT, HttpConfig().body_timeout)),
+        max_pixels=int(os.environ.get(ENV_MAX_PIXELS, HttpConfig().max_pixels)),
     )

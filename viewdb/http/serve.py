@@ -25,6 +25,7 @@ from .app import (
     ENV_DB,
     ENV_MAX_BODY,
     ENV_MAX_IMAGE_BODY,
+    ENV_MAX_PIXELS,
     ENV_TOKEN,
     ENV_UI,
 )
@@ -68,8 +69,8 @@ def run_server(
 ) -> None:
     """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
     once the socket listens (before the workers start answering). ``ui``: serve the web
-    page at ``/``. ``http`` sets the header and body timeouts
-    (:class:`~viewdb.config.HttpConfig`)."""
+    page at ``/``. ``http`` sets the header and body timeouts and the largest image
+    decoded (:class:`~viewdb.config.HttpConfig`)."""
     import uvicorn
     from uvicorn.supervisors import Multiprocess
 
@@ -85,6 +86,7 @@ def run_server(
     os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
     os.environ[ENV_HEADER_TIMEOUT] = repr(float(http.header_timeout))
     os.environ[ENV_BODY_TIMEOUT] = repr(float(http.body_timeout))
+    os.environ[ENV_MAX_PIXELS] = str(int(http.max_pixels))
     os.environ[ENV_UI] = "1" if ui else "0"
     if token:
         os.environ[ENV_TOKEN] = token

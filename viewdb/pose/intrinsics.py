@@ -20,6 +20,7 @@ import numpy as np
 
 from ..config import LIMITS, finite
 from ..errors import QueryError
+from ..paths import not_regular, open_regular
 
 __all__ = ["Intrinsics", "check_intrinsics", "parse_intrinsics"]
 
@@ -64,11 +65,20 @@ def _looks_numeric(text: str) -> bool:
     return all(c in "0123456789.,+-eE \t" for c in text) and "," in text
 
 
+#: An intrinsics file is a few numbers; a larger file is not one.
+MAX_FILE_BYTES = 1 << 20
+
+
 def _from_file(path: Path) -> Intrinsics:
-    if not path.is_file():
-        raise QueryError("intrinsics file not found", path)
+    why = not_regular(path)
+    if why is not None:
+        raise QueryError("intrinsics file not found" if why == "does not exist" else why, path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with open_regular(path) as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            raise QueryError(f"is over {MAX_FILE_BYTES:,} bytes: not an intrinsics file", path)
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise QueryError(f"cannot read the intrinsics file: {exc}", path) from exc
     if path.suffix.lower() in (".yaml", ".yml"):

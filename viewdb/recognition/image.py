@@ -103,7 +103,9 @@ from numpy.typing import NDArray
 from PIL import Image, UnidentifiedImageError
 
 from ..catalogue.features import distance_curve
+from ..config import LIMITS
 from ..errors import FeatureError, ImageError
+from ..paths import open_regular
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -117,7 +119,7 @@ __all__ = [
 ]
 
 #: Default ``max_pixels`` of :func:`load_image`: larger images are refused undecoded.
-MAX_PIXELS = 40_000_000
+MAX_PIXELS = LIMITS.max_pixels
 #: Smallest accepted width and height, in pixels.
 MIN_SIDE = 16
 #: A kept object must cover at least this share of the image ...
@@ -293,7 +295,7 @@ def _from_file(path: Path, max_pixels: int) -> tuple[NDArray[np.uint8], NDArray[
             raise ImageError("no such file", name)
         if not path.is_file():
             raise ImageError("not a regular file", name)
-        with open(path, "rb") as f:
+        with open_regular(path) as f:
             width, height, orientation = _read_header(f, name)
             _check_size(width, height, max_pixels, name)
             f.seek(0)
@@ -553,9 +555,14 @@ def label_mask(
         if not path.is_file():
             raise ImageError("label map not found", path)
         try:
-            with Image.open(path) as im:
-                _check_size(im.width, im.height, MAX_PIXELS, str(path))
-                arr = np.asarray(im)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # DecompressionBombWarning: the size is checked here
+                with open_regular(path) as f, Image.open(f) as im:
+                    _check_size(im.width, im.height, MAX_PIXELS, str(path))
+                    arr = np.asarray(im)
+        except Image.DecompressionBombError as exc:
+            raise ImageError(f"label map too large ({_describe(exc)}; refused as a possible "
+                             "decompression bomb)", path) from exc
         except (OSError, UnidentifiedImageError, ValueError) as exc:
             raise ImageError(f"cannot read the label map: {_describe(exc)}", path) from exc
     else:
@@ -570,7 +577,9 @@ def label_mask(
                          f"{image.width}x{image.height}", where)
     if int(label) <= 0:
         raise ImageError(f"label must be a positive integer (0 is background), got {label}", where)
-    chosen = arr == int(label)
+    top = 1 if arr.dtype == np.bool_ else int(np.iinfo(arr.dtype).max)
+    # a label beyond the map's integer type is in no pixel (and numpy refuses to compare it)
+    chosen = arr == int(label) if int(label) <= top else np.zeros(arr.shape, bool)
     if not chosen.any():
         present = [int(v) for v in np.unique(arr) if v != 0]
         listed = ", ".join(str(v) for v in present[:20]) or "none"
