@@ -223,8 +223,16 @@ def ingest(
 
 def _open_read(db: Path) -> viewdb.ViewDB:
     """Open a database for a command that only reads it: read-only, so a file on read-only
-    storage (a prebuilt file shipped to a device) works, and nothing is ever written."""
-    return viewdb.open(db, read_only=True)
+    storage (a prebuilt file shipped to a device) works and nothing is written; only a
+    file whose schema is too old to read as it is gets opened normally, which upgrades it
+    in place (as any open did before), when its storage allows."""
+    try:
+        return viewdb.open(db, read_only=True)
+    except viewdb.UpgradeNeeded as too_old:
+        try:
+            return viewdb.open(db, create=False)
+        except viewdb.StorageError:
+            raise too_old from None
 
 
 @app.command()

@@ -308,3 +308,119 @@ def test_a_terminal_table_never_cuts_a_value(tmp_path):
         assert not db.ingest([mesh]).failed
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert long_name in done.stdout and "…" not in done.stdout, done.stdout
+
+
+# ----------------------------------------------------------------------------- database files
+def _cli_script(commands: list[list[str]]) -> str:
+    """A child's script running each command through the CLI, printing their exit codes
+    and stderr as JSON."""
+    return textwrap.dedent(f"""
+        import contextlib, io, json
+        from viewdb_cli.main import main
+        out = []
+        for argv in {commands!r}:
+            err = io.StringIO()
+            with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+                code = main(argv)
+            out.append([code, err.getvalue()])
+        print(json.dumps(out))
+    """)
+
+
+def _snapshot(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_the_cli_uses_a_file_on_read_only_storage(small_db, tmp_path):
+    """A prebuilt file shipped to a device, on a read-only mount: every command that only
+    reads it works from the CLI (they failed with "unable to open database file")."""
+    if os.geteuid() != 0 or shutil.which("unshare") is None:
+        pytest.skip("a read-only bind mount needs root and unshare")
+    folder, mount, out = tmp_path / "shipped", tmp_path / "mnt", tmp_path / "out"
+    for d in (folder, mount, out):
+        d.mkdir()
+    shutil.copy(small_db, folder / "full.db")
+    with viewdb.open(small_db, read_only=True) as db:
+        db.export_client(folder / "client.db")
+    img = photo_of(small_db, "car", 37, 22, out / "q.png")
+    before = _snapshot(folder)
+    full, client = str(mount / "full.db"), str(mount / "client.db")
+    commands = [["info", "--db", full], ["check", "--db", full], ["info", "--db", client],
+                ["query", str(img), "--db", full, "-k", "1", "--pose-top", "1"],
+                ["query", str(img), "--db", full, "--client", client, "--plan", "cs1", "-k", "1", "--no-pose"],
+                ["export-client", "--db", full, "--out", str(out / "c.db")],
+                ["render", "mug", "--db", full, "--azimuth", "30", "--elevation", "20", "--out", str(out / "m.png")]]
+    shell = f"mount --bind {folder} {mount} && mount -o remount,bind,ro {mount} && exec \"$@\""
+    probe = subprocess.run(["unshare", "-m", "sh", "-c", shell, "sh", "true"], capture_output=True)
+    if probe.returncode != 0:
+        pytest.skip(f"cannot make a read-only mount here: {probe.stderr.decode()[:200]}")
+    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, "sh", sys.executable, "-c", _cli_script(commands)],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-3000:]
+    results = json.loads(done.stdout)
+    assert [code for code, _ in results] == [0] * len(commands), results
+    assert _snapshot(folder) == before  # not a byte written, no -wal or -shm left
+    assert (out / "c.db").exists() and (out / "m.png").exists()
+
+
+def test_an_old_file_is_still_upgraded_by_a_reading_command(tmp_path, capsys):
+    """A file from schema 0001 cannot be read as it is: ``info`` opens it normally once,
+    upgrading it in place, as before."""
+    path = tmp_path / "old.db"
+    shutil.copy(ROOT / "tests" / "data" / "schema_0001.db", path)
+    with pytest.raises(viewdb.UpgradeNeeded):
+        viewdb.open(path, read_only=True)
+    code, out, err = run(capsys, "info", "--db", path)
+    assert code == 0 and "2 objects" in out, err
+    with viewdb.open(path, read_only=True) as db:
+        assert len(db.objects()) == 2
+
+
+def _foreign(path):
+    conn = sqlite3.connect(path)
+    conn.execute("CREATE TABLE contacts (name TEXT, phone TEXT)")
+    conn.execute("INSERT INTO contacts VALUES ('ada', '555')")
+    conn.commit()
+    conn.close()
+    return path
+
+
+@pytest.mark.parametrize("command", ["info", "check", "query", "ingest", "export-client", "render"])
+def test_another_programs_database_is_refused_untouched(tmp_path, capsys, command):
+    path = _foreign(tmp_path / "contacts.db")
+    before = _snapshot(tmp_path)
+    img = tmp_path.parent / f"{tmp_path.name}-q.png"
+    cv2.imwrite(str(img), np.full((32, 32, 3), 200, np.uint8))
+    argv = {"info": ["info", "--db", path], "check": ["check", "--db", path],
+            "query": ["query", img, "--db", path], "ingest": ["ingest", sample("cone"), "--db", path],
+            "export-client": ["export-client", "--db", path, "--out", tmp_path.parent / f"{tmp_path.name}-c.db"],
+            "render": ["render", "cone", "--db", path, "--azimuth", 0, "--elevation", 0,
+                       "--out", tmp_path.parent / f"{tmp_path.name}-r.png"]}[command]
+    code, _, err = run(capsys, *argv)
+    assert code == 1 and "not a viewdb database" in one_line_error(err)
+    assert _snapshot(tmp_path) == before  # header bytes 19, 20, 28, 96 and all: unchanged
+
+
+@pytest.mark.parametrize("table", ["rtree_pages", "index_groups", "perspective_views", "curves",
+                                   "sift_features", "views"])
+def test_a_file_with_a_table_dropped_is_refused_in_one_line_by_every_command(small_db, tmp_path, capsys, table):
+    path = tmp_path / "damaged.db"
+    shutil.copy(small_db, path)
+    with sqlite3.connect(path) as conn:
+        conn.execute(f"DROP TABLE {table}")
+    img = photo_of(small_db, "car", 37, 22, tmp_path / "q.png")
+    for argv in (["info", "--db", path], ["check", "--db", path], ["query", img, "--db", path, "--no-pose"],
+                 ["ingest", sample("cone"), "--db", path], ["export-client", "--db", path, "--out", tmp_path / "c.db"]):
+        code, _, err = run(capsys, *argv)
+        assert code == 1 and f"is damaged: it lacks table {table}" in one_line_error(err), (argv, err)
+    done = cli("serve", "--db", path, "--port", "0", timeout=120)
+    assert done.returncode == 1 and f"lacks table {table}" in one_line_error(done.stderr)
+
+
+def test_a_fifo_named_as_the_database_is_refused_not_waited_on(tmp_path):
+    os.mkfifo(tmp_path / "fifo.db")
+    try:
+        done = cli("ingest", sample("cone"), "--db", tmp_path / "fifo.db", "--gap", 90, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the ingest waited on a FIFO named as its database")
+    assert done.returncode == 1 and "is a FIFO" in one_line_error(done.stderr)

@@ -38,6 +38,7 @@ from .errors import (
     SchemaMismatch,
     ServerError,
     StorageError,
+    UpgradeNeeded,
     ViewDBError,
 )
 from .http.client import RemoteServer
@@ -103,6 +104,7 @@ __all__ = [
     "StoredView",
     "SymmetryType",
     "TierArrays",
+    "UpgradeNeeded",
     "ViewClasses",
     "ViewDB",
     "ViewDBError",

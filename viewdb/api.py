@@ -38,7 +38,7 @@ from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
 from .storage.catalogue import SearchHit, StoredCatalogue
 from .storage.export import export_client
-from .storage.integrity import CheckReport, check_store
+from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import Store
 from .storage.tiers import TIERS
@@ -427,6 +427,11 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         raise ViewDBError(str(exc), path) from exc
     store = Store(path, create=create, initial=(wanted, "full"), read_only=read_only)
     try:
+        damage = missing_schema(store)
+        if damage:
+            raise StorageError(f"is damaged: it lacks {', '.join(damage[:4])}"
+                               + (f" and {len(damage) - 4} more" if len(damage) > 4 else "")
+                               + "; restore it from a copy, or ingest its meshes into a new file", path)
         try:
             stored = store.build_config()
         except (ValueError, KeyError, TypeError) as exc:  # written by hand, or by a viewdb
