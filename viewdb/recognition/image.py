@@ -577,9 +577,7 @@ def label_mask(
                          f"{image.width}x{image.height}", where)
     if int(label) <= 0:
         raise ImageError(f"label must be a positive integer (0 is background), got {label}", where)
-    top = 1 if arr.dtype == np.bool_ else int(np.iinfo(arr.dtype).max)
-    # a label beyond the map's integer type is in no pixel (and numpy refuses to compare it)
-    chosen = arr == int(label) if int(label) <= top else np.zeros(arr.shape, bool)
+    chosen = arr == int(label)
     if not chosen.any():
         present = [int(v) for v in np.unique(arr) if v != 0]
         listed = ", ".join(str(v) for v in present[:20]) or "none"
