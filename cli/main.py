@@ -32,6 +32,7 @@ from rich.text import Text
 import viewdb
 import viewdb.bench as viewdb_bench
 import viewdb.config as viewdb_config
+from viewdb.typed import Intrinsics
 
 LIMITS = viewdb_config.LIMITS
 
@@ -318,7 +319,7 @@ def render(
     _say(f"wrote {out_path}")
 
 
-def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
+def _intrinsics(text: str | None) -> Intrinsics | None:
     if text is None:
         return None
     if Path(text).suffix.lower() in (".json", ".yaml", ".yml") or Path(text).is_file():
@@ -509,7 +510,8 @@ def serve(
         callback=_number(0.001, 86400))] = viewdb_config.HttpConfig().body_timeout,
     max_pixels: Annotated[int, typer.Option(
         help="Largest image decoded (/pose, /fits, /query), in pixels; larger ones are refused "
-             "from their header.", min=256, max=LIMITS.max_pixels)] = viewdb_config.HttpConfig().max_pixels,
+             "from their header.", min=256, max=viewdb_config.ImageConfig().max_pixels)
+    ] = viewdb_config.HttpConfig().max_pixels,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
     ] = "warning",
@@ -574,17 +576,12 @@ def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:
     """A synthetic photo: the object at an off-grid view, turned 20° in the image plane,
     scaled 0.8 and off-centre, on a light grey background."""
     import cv2
-    import numpy as np
+
+    from viewdb.bench.photos import composite_photo
 
     with viewdb.open(db_path, create=False) as vdb:
         view = vdb.render(name, 37.0, 22.0)
-    size = view.mask.shape[0]
-    m = cv2.getRotationMatrix2D((size / 2, size / 2), 20.0, 0.8)
-    m[:, 2] += (12, -8)
-    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
-    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
-    photo = np.full((size, size, 3), 200, np.uint8)
-    photo[mask] = color[mask]
+    photo, _ = composite_photo(view, turn=20.0, scale=0.8, shift=(12, -8), background=200)
     if not cv2.imwrite(str(out_path), cv2.cvtColor(photo, cv2.COLOR_RGB2BGR)):
         raise viewdb.ViewDBError("cannot write the image", out_path)
 

@@ -49,7 +49,8 @@ from ..api import ViewDB
 from ..camera import normalise_angle
 from ..config import OverlayConfig, WebConfig
 from ..errors import ImageError, ViewDBError
-from ..recognition.image import MAX_PIXELS, load_image
+from ..recognition.image import DEFAULTS as IMAGE_LIMITS
+from ..recognition.image import load_image
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.verify import physical_view
 from ..search.plans import Candidate
@@ -148,7 +149,7 @@ def _int_field(form: Any, name: str, default: int, low: int, high: int) -> int:
 
 
 # ------------------------------------------------------------------ the query
-def _decode(data: bytes, name: str, max_pixels: int = MAX_PIXELS
+def _decode(data: bytes, name: str, max_pixels: int = IMAGE_LIMITS.max_pixels
             ) -> tuple[NDArray[np.uint8], NDArray[np.uint8] | None]:
     """The uploaded photo as RGB (+ alpha), upright (its EXIF orientation applied); an
     :class:`ImageError` names the upload, not a temporary file."""
@@ -182,7 +183,7 @@ def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], confi
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
-                 max_pixels: int = MAX_PIXELS) -> dict[str, Any]:
+                 max_pixels: int = IMAGE_LIMITS.max_pixels) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread.
     A photo of more than ``max_pixels`` pixels is refused from its header."""
     rgb, alpha = _decode(data, name, max_pixels)
@@ -216,7 +217,8 @@ def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: 
     return _finite(result)
 
 
-def _overlay_request(data: Any, max_pixels: int = MAX_PIXELS) -> tuple[dict[str, Any], tuple[int, int]]:
+def _overlay_request(data: Any, max_pixels: int = IMAGE_LIMITS.max_pixels
+                     ) -> tuple[dict[str, Any], tuple[int, int]]:
     """The result and photo size of a ``POST /overlay`` body, checked."""
     if not isinstance(data, dict) or not isinstance(data.get("result"), dict):
         raise HTTPException(422, "expected {\"result\": <one result of POST /query>, \"width\": int, "
@@ -243,17 +245,24 @@ def _overlay_request(data: Any, max_pixels: int = MAX_PIXELS) -> tuple[dict[str,
 
 # ------------------------------------------------------------------ the router
 def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = None, *,
-               max_pixels: int = MAX_PIXELS) -> APIRouter:
+               max_pixels: int = IMAGE_LIMITS.max_pixels) -> APIRouter:
     """The endpoints of the page (see the module doc), behind ``guarded`` (the token);
     photos of more than ``max_pixels`` pixels are refused from their header."""
     config = config or WebConfig()
     router = APIRouter(dependencies=guarded)
-    pictures: OrderedDict[tuple[str, str, float, float], bytes] = OrderedDict()
     errors = {code: {"model": models.ErrorModel, "description": what} for code, what in (
         (400, "the body is not JSON"), (401, "missing or wrong bearer token"), (404, "no such object"),
         (413, "the photo is over the server's limit"),
         (422, "the photo is not an image, shows no object, or an option is out of range"),
     )}
+    _photo_routes(router, run, config, errors, max_pixels)
+    _object_routes(router, run, config, errors)
+    return router
+
+
+def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any],
+                  max_pixels: int) -> None:
+    """``POST /query`` and ``POST /overlay``: a photo's answer and one result's overlay."""
 
     @router.post("/query", responses={200: {"model": models.WebQueryReplyModel}, **errors},
                  openapi_extra=models.multipart_body(models.WebQueryFormModel),
@@ -292,6 +301,11 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         result, shape = _overlay_request(data, max_pixels)
         png, _ = await run(lambda db: draw_layer(db, result, shape, config))
         return Response(png, media_type="image/png")
+
+
+def _object_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any]) -> None:
+    """``GET /objects``, an object's stored views, and a view's picture (cached)."""
+    pictures: OrderedDict[tuple[str, str, float, float], bytes] = OrderedDict()
 
     @router.get("/objects", responses={200: {"model": models.ObjectsReplyModel}, **errors},
                 summary="Every object, with its symmetry, views stored and a picture")
@@ -348,5 +362,3 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         if request.headers.get("if-none-match") == tag:
             return Response(status_code=304, headers=headers)
         return Response(png, media_type="image/png", headers=headers)
-
-    return router

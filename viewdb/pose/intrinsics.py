@@ -21,10 +21,9 @@ import numpy as np
 from ..config import LIMITS, finite
 from ..errors import QueryError
 from ..paths import not_regular, open_regular
+from ..typed import Intrinsics
 
 __all__ = ["Intrinsics", "check_intrinsics", "parse_intrinsics"]
-
-Intrinsics = tuple[float, float, float, float]
 
 #: Keys a camera matrix may be stored under.
 MATRIX_KEYS = ("K", "k", "camera_matrix", "cameraMatrix", "intrinsics", "intrinsic_matrix")
