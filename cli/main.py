@@ -556,7 +556,10 @@ def demo(
         raise viewdb.ViewDBError("no sample models found; run python sample_models/make_samples.py",
                                  SAMPLE_MODELS)
     folder = out_dir or Path(tempfile.mkdtemp(prefix="viewdb-demo-"))
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise viewdb.ViewDBError(f"cannot be made a folder: {exc.strerror or exc}", folder) from exc
     db_path = folder / "demo.db"
     _say(f"viewdb demo: ingesting {len(models)} sample models into {db_path} (gap {gap:g}°)")
     ingest(models, db_path, gap=gap, image_size=None, jobs=jobs, no_skim=False, as_json=False)

@@ -416,3 +416,35 @@ def test_a_fifo_named_as_the_database_is_refused_not_waited_on(tmp_path):
     except subprocess.TimeoutExpired:
         pytest.fail("the ingest waited on a FIFO named as its database")
     assert done.returncode == 1 and "is a FIFO" in one_line_error(done.stderr)
+
+
+# ----------------------------------------------------------------------------- odd arguments
+@pytest.mark.parametrize("url, token, problem", [
+    ("http://[::1", None, "is not a server URL"),
+    ("http://127.0.0.1:8765", "é", "printable ASCII"),
+    ("http://127.0.0.1:8765", "a\nb", "printable ASCII"),
+    ("http://127.0.0.1:8765", "two words", "printable ASCII"),
+])
+def test_a_bad_server_url_or_token_is_one_line(small_db, tmp_path, capsys, url, token, problem):
+    with viewdb.open(small_db, read_only=True) as db:
+        db.export_client(tmp_path / "c.db")
+    img = photo_of(small_db, "car", 37, 22, tmp_path / "q.png")
+    code, _, err = run(capsys, "query", img, "--client", tmp_path / "c.db", "--server", url,
+                       *(["--token", token] if token else []))
+    assert code == 1 and problem in one_line_error(err)
+
+
+def test_serve_refuses_a_token_no_client_could_send(small_db):
+    try:
+        done = cli("serve", "--db", small_db, "--port", 0, "--token", "pässword", timeout=90)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the server started with a token no client can send")
+    assert done.returncode == 1 and "printable ASCII" in one_line_error(done.stderr)
+
+
+def test_demo_and_export_name_an_output_they_cannot_use(small_db, tmp_path, capsys):
+    (tmp_path / "taken").write_text("a file, not a folder")
+    code, _, err = run(capsys, "demo", "--out", tmp_path / "taken")
+    assert code == 1 and "cannot be made a folder" in one_line_error(err)
+    code, _, err = run(capsys, "export-client", "--db", small_db, "--out", tmp_path / "nowhere" / "c.db")
+    assert code == 1 and one_line_error(err).endswith("nowhere/c.db: its folder does not exist")

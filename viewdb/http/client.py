@@ -39,7 +39,7 @@ from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from ..typed import Intrinsics
 from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 
-__all__ = ["RemoteServer", "json_depth"]
+__all__ = ["RemoteServer", "is_token", "json_depth"]
 
 
 class RemoteServer:
@@ -56,9 +56,14 @@ class RemoteServer:
 
     def __init__(self, url: str, *, token: str | None = None, timeout: float | None = None,
                  config: HttpConfig | None = None) -> None:
-        parts = urllib.parse.urlsplit(url)
+        try:
+            parts = urllib.parse.urlsplit(url)
+        except ValueError as exc:  # "http://[::1": an unclosed IPv6 address
+            raise ServerError(f"is not a server URL ({exc})", url) from exc
         if parts.scheme not in ("http", "https") or not parts.hostname:
             raise ServerError("is not a server URL (expected http://host:port)", url)
+        if token and not is_token(token):
+            raise ServerError("the bearer token must be printable ASCII without spaces", url)
         try:
             parts.port  # noqa: B018 - raises for a bad port
         except ValueError as exc:
@@ -280,6 +285,12 @@ class RemoteServer:
 
 
 _TOO_DEEP = object()
+
+
+def is_token(token: str) -> bool:
+    """Whether ``token`` can travel in an ``Authorization: Bearer`` header: printable
+    ASCII without spaces (anything else cannot be sent, or would split the header)."""
+    return bool(token) and all(33 <= ord(c) <= 126 for c in token)
 
 
 def json_depth(value: Any) -> int:

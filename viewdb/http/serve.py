@@ -29,6 +29,7 @@ from .app import (
     ENV_TOKEN,
     ENV_UI,
 )
+from .client import is_token
 from .protocol import ENV_HEADER_TIMEOUT
 
 __all__ = ["bind", "run_server"]
@@ -76,6 +77,9 @@ def run_server(
 
     if workers < 1:
         raise ViewDBError(f"workers must be at least 1, got {workers}")
+    if token and not is_token(token):
+        raise ViewDBError("the bearer token must be printable ASCII without spaces (a client could "
+                          "not send it)")
     http = http or HttpConfig()
     with open_db(db, read_only=True) as vdb:  # refuse a bad file before binding anything
         if vdb.role != "full":
