@@ -16,7 +16,9 @@ timed, interleaved request by request so that drift hits both alike:
   rendered at random off-grid angles (segmentation, 12 in-plane turns, colour, shape fit
   and pose: what ``viewdb query --client --server`` does).
 
-It prints the medians and the ratio httpx / http.client of each. Stops by itself.
+It prints the medians and the ratio httpx / http.client of each, for the queries also
+paired by photo and for their network time alone (the round trips' wall time beyond the
+server's own: what the transport can change). Stops by itself.
 """
 
 from __future__ import annotations
@@ -144,6 +146,7 @@ def main() -> None:
                     remotes[label].refine(requests[i % len(requests)])
                     trips[label].append((time.perf_counter() - start) * 1e3)
             queries: dict[str, list[float]] = {k: [] for k in remotes}
+            network: dict[str, list[float]] = {k: [] for k in remotes}
             answers: dict[str, list[list[str]]] = {k: [] for k in remotes}
             for i, image in enumerate(photos):
                 try:
@@ -154,6 +157,7 @@ def main() -> None:
                     start = time.perf_counter()
                     result = client.query(image, plan="cs1", server=remotes[label])
                     queries[label].append((time.perf_counter() - start) * 1e3)
+                    network[label].append(result.timing_ms.get("network", 0.0))
                     answers[label].append([r.object for r in result.results])
     assert answers["httpx"] == answers["http.client"], "the two transports answered differently"
     print(f"round trips (/refine, {args.round_trips} each, interleaved), median ms:")
@@ -167,7 +171,14 @@ def main() -> None:
     for label, times in queries.items():
         print(f"  {label:12s} {statistics.median(times):7.1f}")
     ratio = statistics.median(queries["httpx"]) / statistics.median(queries["http.client"])
-    print(f"  ratio httpx / http.client: {ratio:.3f}")
+    paired = statistics.median(a / b for a, b in zip(queries["httpx"], queries["http.client"], strict=True))
+    print(f"  ratio httpx / http.client: {ratio:.3f} of the medians, {paired:.3f} paired by photo "
+          "(the pose's own time varies from run to run)")
+    print("  network time per query (the round trips' wall time beyond the server's own), median ms:")
+    for label, times in network.items():
+        print(f"  {label:12s} {statistics.median(times):7.1f}")
+    ratio = statistics.median(network["httpx"]) / max(statistics.median(network["http.client"]), 1e-9)
+    print(f"  ratio httpx / http.client: {ratio:.2f}")
 
 
 if __name__ == "__main__":
