@@ -49,6 +49,11 @@ class InputLimits:
 #: The limits in force.
 LIMITS = InputLimits()
 
+#: Meshes with more triangles than this are refused by default (rendering 1,296 views
+#: of a multi-million-triangle scan takes hours in software GL and the outline gains
+#: nothing at 256 px): decimate such a mesh first, or raise the cap.
+DEFAULT_MAX_FACES = 2_000_000
+
 
 @dataclass(frozen=True)
 class HttpConfig:
