@@ -40,8 +40,16 @@ be background) and starts from a model of it:
   falls back to the border-model result ("border") when it cannot run.
 
 The colour methods run on a copy scaled down to at most ``work_max_side`` pixels on
-the longer side; the mask is scaled back up.  ``method="auto"`` uses
-``default_method``, GrabCut, chosen by measurement: ``python
+the longer side; the mask is scaled back up.  ``method="auto"`` uses the border model
+on a plain background and ``default_method``, GrabCut, on any other.  A background
+is plain when the border strip's Lab colours lie within ``plain_spread`` of their median
+(99th percentile), or within twice that and vary from pixel to pixel as sensor noise
+does (their variance at most ``plain_noise_ratio`` times half the mean squared step
+between neighbouring pixels; a gradient or blobs vary smoothly).  There GrabCut refines
+nothing (mean IoU 0.997 / 0.995 with or without it on the benchmark's plain
+backgrounds, 0.986 on synthetic photos of the 212 catalogue models) and takes five
+times the time (about 35 against 7 ms of CPU for a 256 x 256 photo).  GrabCut was
+chosen by measurement: ``python
 benchmarks/segmentation.py`` scores each method by intersection over union (IoU) with
 the true silhouette, and by the RMS difference of the distance curves, on renders of all
 15 sample models (3 views each) composited over plain, gradient and cluttered
@@ -157,7 +165,7 @@ def segment(
         raw, used = image.alpha > 127, "alpha"
     else:
         used = cfg.default_method if method == "auto" else method
-        raw, used = _colour_segmentation(image.rgb, used, cfg)
+        raw, used = _colour_segmentation(image.rgb, used, cfg, plain_as_border=method == "auto")
     final = _largest_filled(raw)
     fraction = _check_object(final, used, name, cfg)
     return Segmentation(final, used, fraction, name)
@@ -298,9 +306,10 @@ def _check_object(mask: NDArray[np.bool_], method: str, name: str | None, cfg: S
 
 
 def _colour_segmentation(
-    rgb: NDArray[np.uint8], method: str, cfg: SegmentationConfig
+    rgb: NDArray[np.uint8], method: str, cfg: SegmentationConfig, plain_as_border: bool = False
 ) -> tuple[NDArray[np.bool_], str]:
-    """The object's mask by a colour method, at the image's size, and the method used."""
+    """The object's mask by a colour method, at the image's size, and the method used
+    (with ``plain_as_border``, the border model on a plain background, :func:`_plain`)."""
     h, w = rgb.shape[:2]
     scale = min(1.0, cfg.work_max_side / max(h, w))
     if scale < 1.0:
@@ -309,6 +318,8 @@ def _colour_segmentation(
     else:
         small = rgb
     lab = cv2.cvtColor(small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+    if plain_as_border and method == "grabcut" and _plain(lab, cfg):
+        method = "border"
     dist, border = _background_distance(lab, cfg)
     noise = float(np.quantile(border, cfg.border_quantile))
     if method == "otsu":
@@ -326,6 +337,28 @@ def _colour_segmentation(
         up = cv2.resize(found.astype(np.uint8) * 255, (w, h), interpolation=cv2.INTER_LINEAR)
         found = up > 127
     return found, method
+
+
+def _plain(lab: NDArray[np.float32], cfg: SegmentationConfig) -> bool:
+    """Whether the image border shows a plain background: its Lab colours within
+    ``cfg.plain_spread`` of their median (99th percentile), or within twice that and
+    spatially white (their variance at most ``cfg.plain_noise_ratio`` times half the mean
+    squared difference of neighbouring pixels along the strip, as for sensor noise)."""
+    h, w = lab.shape[:2]
+    b = max(2, round(cfg.border_strip * min(h, w)))
+    # the strips along the border, each running lengthwise: (b, length, 3)
+    strips = [lab[:b], lab[-b:], lab[:, :b].transpose(1, 0, 2), lab[:, -b:].transpose(1, 0, 2)]
+    values = np.concatenate([s.reshape(-1, 3) for s in strips]).astype(np.float64)
+    deviation = values - np.median(values, axis=0)
+    spread = float(np.quantile(np.sqrt((deviation * deviation).sum(axis=1)), 0.99))
+    if spread <= cfg.plain_spread:
+        return True
+    if spread > 2.0 * cfg.plain_spread:
+        return False
+    steps = np.concatenate([np.diff(s, axis=1).reshape(-1, 3) for s in strips]).astype(np.float64)
+    variance = float((deviation * deviation).sum(axis=1).mean())
+    noise = 0.5 * float((steps * steps).sum(axis=1).mean())
+    return variance <= cfg.plain_noise_ratio * noise
 
 
 def _half_contrast(
