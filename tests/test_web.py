@@ -151,6 +151,14 @@ def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_p
     assert np.array_equal(thumb[:, :, :3], view.color) and np.array_equal(thumb[:, :, 3] > 0, view.mask)
 
 
+def test_the_echoed_file_name_is_one_printable_line(server, demo_photo):
+    body, headers = multipart({"k": "1"}, {"photo": ("../é\x1b[2J\nmug\tphoto.png", demo_photo.read_bytes(),
+                                                     "application/octet-stream")})
+    status, answer = request(server.url, "POST", "/query", body, headers=headers, token=TOKEN)
+    assert status == 200, answer
+    assert answer["image"] == "é [2J mug photo.png"
+
+
 def test_view_pictures_are_cached_by_version(server, db):
     path = "/objects/car/views/60/30.png"
     version = db.object("car").content_hash[:12]

@@ -131,8 +131,9 @@ def view_url(name: str, azimuth: float, elevation: float, content_hash: str) -> 
 
 
 def _upload_name(upload: UploadFile) -> str:
-    name = Path(upload.filename or "photo").name.strip()
-    return " ".join(name.split())[:120] or "photo"
+    name = Path(upload.filename or "photo").name
+    printable = "".join(c if c.isprintable() else " " for c in name)
+    return " ".join(printable.split())[:120] or "photo"
 
 
 def _int_field(form: Any, name: str, default: int, low: int, high: int) -> int:
