@@ -39,6 +39,7 @@ from .errors import (
     SchemaMismatch,
     ServerError,
     StorageError,
+    UpgradeNeeded,
     ViewDBError,
 )
 from .http.client import RemoteServer
@@ -104,6 +105,7 @@ __all__ = [
     "StoredView",
     "SymmetryType",
     "TierArrays",
+    "UpgradeNeeded",
     "ViewClasses",
     "ViewDB",
     "ViewDBError",
