@@ -5,7 +5,7 @@
                                          [--shape-weights 0,4,8,12] [--cache FILE.json]
 
 Each photo of ``benchmarks/photo_accuracy.py`` (same seed, same photos) is segmented and
-searched once by outline (``server`` plan, 12 in-plane turns, no re-ranking) for its best
+searched once by outline (``server`` plan, ``--rotations`` in-plane turns, no re-ranking) for its best
 ``--shortlist`` objects; the colour distance and the shape fit of each one's matched view
 are measured once (:meth:`viewdb.recognition.local_tier.LocalServerTier.view_colours`,
 ``view_fits``: what the query's re-rankings compute). Every variant (pool × colour weight ×
@@ -52,7 +52,9 @@ def ints(text: str) -> list[int]:
     return [int(x) for x in text.split(",")]
 
 
-def measure(db: viewdb.ViewDB, seed: int, photos: int, shortlist: int) -> list[dict[str, Any]]:
+def measure(
+    db: viewdb.ViewDB, seed: int, photos: int, shortlist: int, rotations: int
+) -> list[dict[str, Any]]:
     """Each photo's object and its outline shortlist with colour distances and fits."""
     names = [o.name for o in db.objects()]
     tier = db.server_tier()
@@ -60,7 +62,8 @@ def measure(db: viewdb.ViewDB, seed: int, photos: int, shortlist: int) -> list[d
     for i, spec in enumerate(photo_series(names, seed, photos)):
         photo = decoded_photo(db.mesh(spec.object), spec)
         start = time.perf_counter()
-        found = db.query(photo, k=shortlist, pose=False, colour=False, verify=False).results
+        found = db.query(photo, k=shortlist, pose=False, colour=False, verify=False,
+                         rotations=rotations).results
         searched = time.perf_counter()
         view = segment_photo(photo)[2]
         views = [(m.object, *physical_view(m)) for m in found]  # type: ignore[arg-type]
@@ -102,19 +105,21 @@ def main() -> None:
     parser.add_argument("--seeds", default="1-6")
     parser.add_argument("--photos", type=int, default=40)
     parser.add_argument("--shortlist", type=int, default=30)
+    parser.add_argument("--rotations", type=int, default=12, help="in-plane turns searched (1: upright)")
     parser.add_argument("--pools", default="5,10,15,20")
     parser.add_argument("--colour-weights", default="0,0.5,1,2")
     parser.add_argument("--shape-weights", default="0,4,8,12")
     parser.add_argument("--cache")
     args = parser.parse_args()
     key = {"db": str(Path(args.db).resolve()), "seeds": seeds(args.seeds), "photos": args.photos,
-           "shortlist": args.shortlist}
+           "shortlist": args.shortlist, "rotations": args.rotations}
     cache = Path(args.cache) if args.cache else None
     if cache is not None and cache.exists() and json.loads(cache.read_text())["key"] == key:
         photos = json.loads(cache.read_text())["photos"]
     else:
         db = viewdb.open(args.db, read_only=True)
-        photos = [p for s in key["seeds"] for p in measure(db, s, args.photos, args.shortlist)]
+        photos = [p for s in key["seeds"]
+                  for p in measure(db, s, args.photos, args.shortlist, args.rotations)]
         if cache is not None:
             cache.write_text(json.dumps({"key": key, "photos": photos}))
     by_seed: dict[int, list[dict[str, Any]]] = {}
