@@ -21,16 +21,19 @@ from typing import Any
 from ..camera import grid_views
 from ..config import BuildConfig
 from ..errors import MeshError, ViewDBError
+from .appearance import Appearance
 from .describe import (
     ObjectDescription,
     PerspectiveView,
+    appearance_views,
+    describe_appearance,
     describe_object,
     describe_perspective,
     perspective_grid,
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
-__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "PerspectiveAddition", "run_ingest"]
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "Upgrade", "run_ingest"]
 
 
 @dataclass(frozen=True)
@@ -52,7 +55,7 @@ class FileOutcome:
     path: str
     name: str
     #: "added", "replaced", "unchanged", "upgraded" (an unchanged file whose object gained
-    #: the perspective views it lacked) or "failed".
+    #: the perspective views or the appearance records it lacked) or "failed".
     status: str
     views: int = 0
     seconds: float = 0.0
@@ -103,29 +106,38 @@ def _tick(n: int) -> None:
 
 
 @dataclass(frozen=True)
-class PerspectiveAddition:
-    """The perspective views of an object already stored without them."""
+class Upgrade:
+    """What an object stored by an older viewdb lacked: its perspective views and/or its
+    appearance records (None: it had them)."""
 
     name: str
-    views: list[PerspectiveView]
+    perspective: list[PerspectiveView] | None
+    appearance: list[Appearance] | None
     seconds: float
+
+    @property
+    def views(self) -> list[Any]:
+        return [*(self.perspective or ()), *(self.appearance or ())]
 
 
 def _describe(
     job: _Job, config: BuildConfig, skim: bool, options: LoadOptions,
     on_view: Callable[[int], None],
-) -> ObjectDescription | PerspectiveAddition:
+) -> ObjectDescription | Upgrade:
     start = time.perf_counter()
     mesh = load_mesh(job.path, job.name, job.digest, options)
-    if job.perspective_only:
-        views = describe_perspective(mesh, config, on_view=on_view)
-        return PerspectiveAddition(job.name, views, time.perf_counter() - start)
+    if job.upgrade:
+        perspective = (describe_perspective(mesh, config, on_view=on_view)
+                       if "perspective" in job.upgrade else None)
+        appearance = (describe_appearance(mesh, config, job.stored, on_view=on_view)
+                      if "appearance" in job.upgrade else None)
+        return Upgrade(job.name, perspective, appearance, time.perf_counter() - start)
     return describe_object(mesh, config, skim=skim, on_view=on_view)
 
 
 def _describe_file(
     job: _Job, config: BuildConfig, skim: bool, options: LoadOptions
-) -> ObjectDescription | PerspectiveAddition:
+) -> ObjectDescription | Upgrade:
     return _describe(job, config, skim, options, _tick)
 
 
@@ -136,12 +148,18 @@ class _Job:
     #: The file's content hash, computed once when deciding whether to ingest it.
     digest: str
     replaces: bool
-    #: The file is unchanged and its object lacks only the perspective views.
-    perspective_only: bool = False
+    #: The file is unchanged and its object lacks only these: "perspective" (views),
+    #: "appearance" (records).
+    upgrade: frozenset[str] = frozenset()
+    #: The object's stored views (for an appearance upgrade).
+    stored: list[tuple[float, float]] = field(default_factory=list)
 
     def views(self, grid: int, perspective: int) -> int:
         """Views to render for this job (the progress total)."""
-        return perspective if self.perspective_only else grid + perspective
+        if not self.upgrade:
+            return grid + perspective
+        return ((perspective if "perspective" in self.upgrade else 0)
+                + (len(appearance_views(self.stored)) if "appearance" in self.upgrade else 0))
 
 
 def run_ingest(
@@ -151,7 +169,8 @@ def run_ingest(
     write: Callable[[ObjectDescription], None],
     *,
     lacking_perspective: set[str] | frozenset[str] = frozenset(),
-    write_perspective: Callable[[PerspectiveAddition], None] | None = None,
+    lacking_appearance: dict[str, list[tuple[float, float]]] | None = None,
+    write_upgrade: Callable[[Upgrade], None] | None = None,
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
@@ -160,8 +179,9 @@ def run_ingest(
     """Describe every new or changed file and hand each result to ``write``.
 
     An unchanged file whose object is in ``lacking_perspective`` (stored by an older
-    viewdb) gets only its perspective views rendered, handed to ``write_perspective``,
-    when the configuration asks for perspective views.
+    viewdb) gets only its perspective views rendered, when the configuration asks for
+    perspective views; one in ``lacking_appearance`` (name → its stored views) only its
+    appearance records; either is handed to ``write_upgrade``.
 
     A file that fails (unreadable, no area, …) is reported as ``failed`` and the others
     still go in. ``KeyboardInterrupt`` stops the workers and propagates; objects already
@@ -171,7 +191,8 @@ def run_ingest(
     report = IngestReport()
     grid = len(grid_views(config.gap))
     perspective = len(perspective_grid(config))
-    upgrade = write_perspective is not None and config.perspective.enabled
+    add_perspective = write_upgrade is not None and config.perspective.enabled
+    lacking_appearance = lacking_appearance if write_upgrade is not None else None
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -192,8 +213,12 @@ def run_ingest(
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
             continue
         if existing_hashes.get(name) == digest:
-            if upgrade and name in lacking_perspective:
-                todo.append(_Job(str(path), name, digest, True, perspective_only=True))
+            adds = frozenset(
+                ({"perspective"} if add_perspective and name in lacking_perspective else set())
+                | ({"appearance"} if lacking_appearance and name in lacking_appearance else set()))
+            if adds:
+                todo.append(_Job(str(path), name, digest, True, adds,
+                                 list((lacking_appearance or {}).get(name, []))))
             else:
                 report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
@@ -209,7 +234,7 @@ def run_ingest(
                 done_views, total_views, len(report.outcomes), files_total, outcome
             ))
 
-    def finish(job: _Job, result: ObjectDescription | PerspectiveAddition | BaseException) -> None:
+    def finish(job: _Job, result: ObjectDescription | Upgrade | BaseException) -> None:
         if isinstance(result, ViewDBError):
             outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
         elif isinstance(result, BaseException):
@@ -219,15 +244,15 @@ def run_ingest(
             )
         else:
             try:
-                if isinstance(result, PerspectiveAddition):
-                    assert write_perspective is not None
-                    write_perspective(result)
+                if isinstance(result, Upgrade):
+                    assert write_upgrade is not None
+                    write_upgrade(result)
                 else:
                     write(result)
             except ViewDBError as exc:
                 outcome = FileOutcome(job.path, job.name, "failed", error=str(exc))
             else:
-                status = ("upgraded" if isinstance(result, PerspectiveAddition)
+                status = ("upgraded" if isinstance(result, Upgrade)
                           else "replaced" if job.replaces else "added")
                 outcome = FileOutcome(job.path, job.name, status,
                                       views=len(result.views), seconds=result.seconds)
@@ -244,7 +269,7 @@ def run_ingest(
                 notify()
 
             try:
-                result: ObjectDescription | PerspectiveAddition | BaseException = _describe(
+                result: ObjectDescription | Upgrade | BaseException = _describe(
                     job, config, skim, options, tick
                 )
             except ViewDBError as exc:
@@ -258,7 +283,7 @@ def run_ingest(
             max_workers=min(jobs, len(todo)), mp_context=ctx,
             initializer=_init_worker, initargs=(ticks,),
         )
-        futures: dict[Future[ObjectDescription | PerspectiveAddition], _Job] = {}
+        futures: dict[Future[ObjectDescription | Upgrade], _Job] = {}
         try:
             for job in todo:
                 futures[pool.submit(_describe_file, job, config, skim, options)] = job

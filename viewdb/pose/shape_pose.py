@@ -193,7 +193,8 @@ def shape_pose(
     if not hyps:
         raise PoseError("no candidate view has a silhouette to align the query with")
     hyps.sort(key=lambda x: x[0])  # stable: ties keep the candidates' order
-    use_detail = config.detail_weight > 0 and all(candidates[i].color is not None for i in views)
+    use_detail = config.detail_weight > 0 and all(
+        candidates[i].color is not None or candidates[i].appearance is not None for i in views)
     detail_key = ("detail", config.edge_thresholds, config.edge_margin, config.min_detail_edges,
                   config.detail_truncation, config.detail_orientation)
     query_detail = (query.derived(detail_key, lambda: QueryDetail(color, mask, outline.area, config))

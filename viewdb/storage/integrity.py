@@ -8,7 +8,10 @@ Fourier point is the orthonormal DFT of its stored curve; each object's mesh is 
 its view count matches its grid; and both tiers' R-trees: every R-tree entry is a group
 row and vice versa with the same box, each group's curves are its views' stored curves and
 lie in its box, the full tier holds every view (and every perspective view) once and the
-sparse tier exactly the client grid's stand-ins.
+sparse tier exactly the client grid's stand-ins; and each object's appearance records
+(revision 0005; none for an object stored before it): one per viewing direction of its
+stored views and the views opposite them, each decoding to what it promises, and a stored
+view's silhouette giving exactly its stored curve.
 """
 
 from __future__ import annotations
@@ -21,12 +24,15 @@ import numpy as np
 import sqlalchemy as sa
 
 from ..camera import grid_views
-from ..catalogue.features import fourier_point
+from ..catalogue.appearance import turned_view
+from ..catalogue.describe import appearance_views
+from ..catalogue.features import distance_curve, fourier_point
 from ..catalogue.skimming import skim_plan
 from ..catalogue.symmetry import SymmetryType
-from ..errors import NotFound, StorageError
+from ..errors import FeatureError, NotFound, StorageError
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from . import schema as s
+from .appearances import decode_appearance
 from .codecs import decode_array
 from .connection import READ_ONLY_COMPATIBLE
 from .spatial import FourierIndex
@@ -81,7 +87,68 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
         _check_objects(conn, config.gap, report, client)
         _check_views(conn, config, report, progress, client)
         _check_tiers(conn.connection.driver_connection, config, report, client)
+        _check_appearances(conn.connection.driver_connection, config, report, client)
     return report
+
+
+#: How far the curve of a stored silhouette may be from the view's stored curve (float32).
+CURVE_TOLERANCE = 1e-5
+
+
+def _check_appearances(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
+    """Appearance records: decodable, one per direction of :func:`appearance_views` (for an
+    object that has any), and a stored view's silhouette gives its stored curve."""
+    size, samples = config.render.image_size, config.features.curve_samples
+    rows: dict[int, list[tuple[float, float, tuple[bytes, ...]]]] = {}
+    for oid, az, el, *blobs in raw.execute(
+        "SELECT object_id, azimuth, elevation, mask, edges, theta, signature FROM appearances ORDER BY id"
+    ):
+        rows.setdefault(int(oid), []).append((float(az), float(el), tuple(blobs)))
+    checked = 0
+    if client and rows:
+        report.add(f"a client file holds no appearance records ({sum(map(len, rows.values()))} found)")
+        return
+    for oid, name in raw.execute("SELECT id, name FROM objects ORDER BY name").fetchall():
+        records = rows.pop(int(oid), [])
+        if not records:
+            continue  # stored before revision 0005: an ingest of its file adds them
+        stored = raw.execute(
+            "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
+            " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
+        curves = {(float(a), float(e)): blob for a, e, blob in stored}
+        expected = {frozenset((v, turned_view(*v))) for v in appearance_views(list(curves))}
+        found: set[frozenset[tuple[float, float]]] = set()
+        for az, el, blobs in records:
+            where = f"object {name!r}: appearance ({az:g}, {el:g})"
+            pair = frozenset(((az, el), turned_view(az, el)))
+            if pair not in expected:
+                report.add(f"{where}: not a stored view's direction nor the opposite of one")
+            elif pair in found:
+                report.add(f"{where}: its direction is recorded twice")
+            found.add(pair)
+            try:
+                record = decode_appearance(az, el, *blobs, size)
+            except StorageError as exc:
+                report.add(f"{where}: {exc.message}")
+                continue
+            checked += 1
+            blob = curves.get((az, el))
+            if blob is None:
+                continue
+            try:
+                curve = decode_array(blob, np.float32, (samples,))
+                own = distance_curve(record.mask, samples)
+            except (StorageError, FeatureError):
+                report.add(f"{where}: its silhouette gives no curve to compare with the view's")
+                continue
+            if not np.allclose(own, curve, rtol=0, atol=CURVE_TOLERANCE):
+                report.add(f"{where}: its silhouette is not the stored view's (the curves differ)")
+        if len(found & expected) < len(expected):
+            report.add(f"object {name!r}: {len(expected - found)} of its {len(expected)} viewing "
+                       f"directions have no appearance record")
+    for oid in rows:
+        report.add(f"appearances: records of object id {oid}, which does not exist")
+    report.checked["appearances"] = checked
 
 
 def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client: bool) -> None:

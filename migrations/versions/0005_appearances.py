@@ -1,0 +1,40 @@
+"""Stored appearance: each viewing direction's silhouette, internal edges and colour
+signature, so the re-rankings and the pose compare stored data instead of rendering.
+
+Files from before this revision have none; they still answer, rendering what they lack
+(slower), and an ingest of their unchanged source files adds the rows (only the views'
+renders are redone: :mod:`viewdb.catalogue.ingest`).
+
+Revision ID: 0005
+Revises: 0004
+"""
+
+import sqlalchemy as sa
+from alembic import op
+
+revision = "0005"
+down_revision = "0004"
+branch_labels = None
+depends_on = None
+
+
+def upgrade() -> None:
+    op.create_table(
+        "appearances",
+        sa.Column("id", sa.Integer, primary_key=True),
+        sa.Column("object_id", sa.Integer, sa.ForeignKey("objects.id", ondelete="CASCADE"),
+                  nullable=False),
+        sa.Column("azimuth", sa.Float, nullable=False),
+        sa.Column("elevation", sa.Float, nullable=False),
+        sa.Column("mask", sa.LargeBinary, nullable=False),
+        sa.Column("edges", sa.LargeBinary, nullable=False),
+        sa.Column("theta", sa.LargeBinary, nullable=False),
+        sa.Column("signature", sa.LargeBinary, nullable=True),
+        sa.UniqueConstraint("object_id", "azimuth", "elevation", name="uq_appearances_object_view"),
+    )
+    op.create_index("ix_appearances_object", "appearances", ["object_id"])
+
+
+def downgrade() -> None:
+    op.drop_index("ix_appearances_object", "appearances")
+    op.drop_table("appearances")
