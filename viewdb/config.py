@@ -12,8 +12,8 @@ from typing import Any
 
 __all__ = [
     "AppearanceConfig", "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "OverlayConfig",
-    "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig", "SegmentationConfig",
-    "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
+    "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig",
+    "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
 ]
 
 
