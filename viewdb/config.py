@@ -151,12 +151,20 @@ class AppearanceConfig:
     #: Edges closer to the silhouette than this share of the image size (at least 2
     #: pixels) are the outline's and are not kept (:attr:`PoseConfig.edge_margin`).
     edge_margin: float = 0.012
+    #: The views opposite the stored ones (what a mirrored match shows) are recorded too
+    #: when their directions add at most this share to the renders of the stored views
+    #: (:func:`viewdb.catalogue.describe.appearance_views`). An asymmetric object's add none:
+    #: its stored views see each direction twice, turned by 180°, and one render serves
+    #: both. A symmetric object's would add up to 90 % (measured), so it renders those on
+    #: demand.
+    opposite_cost: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "edge_thresholds", tuple(float(t) for t in self.edge_thresholds))
         lo, hi = self.edge_thresholds
-        if not 0 <= lo <= hi or not 0 <= self.edge_margin < 0.5:
-            raise ValueError("need 0 <= low <= high edge thresholds and 0 <= edge_margin < 0.5")
+        if not 0 <= lo <= hi or not 0 <= self.edge_margin < 0.5 or not self.opposite_cost >= 0:
+            raise ValueError("need 0 <= low <= high edge thresholds, 0 <= edge_margin < 0.5 and "
+                             "opposite_cost >= 0")
 
 
 @dataclass(frozen=True)
@@ -452,7 +460,8 @@ class PosingConfig:
     near_views: int = 4
     #: How a shape pose leaves the grid (:func:`viewdb.pose.matched.refine_shape`):
     #: "interpolate" (between the fits of the grid neighbours, from their stored
-    #: appearance: no render) or "walk" (rendering off-grid views in halving steps).
+    #: appearance: no render), "walk" (rendering off-grid views in halving steps) or
+    #: "none" (the best grid view's direction).
     shape_refine: str = "interpolate"
     #: "interpolate": moves to a better-fitting grid neighbour before interpolating, at most.
     shape_climb: int = 3
@@ -465,8 +474,9 @@ class PosingConfig:
     def __post_init__(self) -> None:
         if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0 or self.shape_climb < 0:
             raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0, shape_climb >= 0")
-        if self.shape_refine not in ("interpolate", "walk"):
-            raise ValueError(f"shape_refine must be 'interpolate' or 'walk', got {self.shape_refine!r}")
+        if self.shape_refine not in ("interpolate", "walk", "none"):
+            raise ValueError(
+                f"shape_refine must be 'interpolate', 'walk' or 'none', got {self.shape_refine!r}")
         if not self.shape_refine_step > 0:
             raise ValueError("need shape_refine_step > 0")
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import grid_views
-from ..config import BuildConfig
+from ..config import AppearanceConfig, BuildConfig
 from ..errors import FeatureError
 from .appearance import Appearance, appearance_of, carries_colour, opposite_view, turned_render, turned_view
 from .features import distance_curve, fourier_point
@@ -174,18 +174,29 @@ def describe_perspective(
     return kept
 
 
-def appearance_views(stored: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """The views whose appearance is recorded for an object with ``stored`` views: each
-    stored view and the view opposite it (:func:`~viewdb.catalogue.appearance.opposite_view`,
-    the side a mirrored match shows), one per viewing direction: a view whose turned twin
-    (:func:`~viewdb.catalogue.appearance.turned_view`) is already recorded is left out."""
-    out: list[tuple[float, float]] = []
-    seen: set[tuple[float, float]] = set()
-    for view in [*stored, *(opposite_view(h, v) for h, v in stored)]:
-        if view not in seen and turned_view(*view) not in seen:
-            seen.add(view)
-            out.append(view)
-    return out
+def appearance_views(
+    stored: list[tuple[float, float]], config: AppearanceConfig
+) -> list[tuple[float, float]]:
+    """The views whose appearance is recorded for an object with ``stored`` views, one per
+    viewing direction (a view whose turned twin,
+    :func:`~viewdb.catalogue.appearance.turned_view`, is already recorded is left out):
+    each stored view, and the view opposite each
+    (:func:`~viewdb.catalogue.appearance.opposite_view`, the side a mirrored match shows)
+    when that adds at most ``config.opposite_cost`` of the stored views' renders."""
+
+    def directions(views: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        seen: set[tuple[float, float]] = set()
+        for view in views:
+            if view not in seen and turned_view(*view) not in seen:
+                seen.add(view)
+                out.append(view)
+        return out
+
+    both = directions([*stored, *(opposite_view(h, v) for h, v in stored)])
+    if len(both) <= (1.0 + config.opposite_cost) * len(stored):
+        return both
+    return directions(stored)
 
 
 def _render_views(
@@ -218,7 +229,7 @@ def describe_appearance(
     renderer = renderer or get_renderer(config.render)
     coloured = carries_colour(mesh)
     records = []
-    for rendered in _render_views(mesh, appearance_views(stored), renderer):
+    for rendered in _render_views(mesh, appearance_views(stored, config.appearance), renderer):
         if rendered.mask.any():
             records.append(appearance_of(rendered, config.appearance, coloured))
         if on_view is not None:
@@ -234,7 +245,7 @@ def describe_object(
     on_view: Callable[[int], None] | None = None,
 ) -> ObjectDescription:
     """Classify ``mesh``, then render and describe the views to store, and record the
-    appearance of them and of the views opposite them (:func:`appearance_views`).
+    appearance of them (and of the views opposite them: :func:`appearance_views`).
 
     With ``skim`` only the views of the skim plan are described; otherwise the whole
     grid. ``on_view(n)`` is told of every ``n`` grid views dealt with (pruned views count
@@ -249,7 +260,7 @@ def describe_object(
     if on_view is not None and plan.views_grid > plan.views_stored:
         on_view(plan.views_grid - plan.views_stored)
     kept = set(views)
-    recorded = appearance_views(views)
+    recorded = appearance_views(views, config.appearance)
     to_record = set(recorded)
     coloured = carries_colour(mesh)
     described: dict[tuple[float, float], ViewDescription] = {}

@@ -153,13 +153,14 @@ class _Job:
     upgrade: frozenset[str] = frozenset()
     #: The object's stored views (for an appearance upgrade).
     stored: list[tuple[float, float]] = field(default_factory=list)
+    #: Appearance records to make (an appearance upgrade).
+    records: int = 0
 
     def views(self, grid: int, perspective: int) -> int:
         """Views to render for this job (the progress total)."""
         if not self.upgrade:
             return grid + perspective
-        return ((perspective if "perspective" in self.upgrade else 0)
-                + (len(appearance_views(self.stored)) if "appearance" in self.upgrade else 0))
+        return (perspective if "perspective" in self.upgrade else 0) + self.records
 
 
 def run_ingest(
@@ -217,8 +218,9 @@ def run_ingest(
                 ({"perspective"} if add_perspective and name in lacking_perspective else set())
                 | ({"appearance"} if lacking_appearance and name in lacking_appearance else set()))
             if adds:
-                todo.append(_Job(str(path), name, digest, True, adds,
-                                 list((lacking_appearance or {}).get(name, []))))
+                stored = list((lacking_appearance or {}).get(name, []))
+                records = len(appearance_views(stored, config.appearance)) if "appearance" in adds else 0
+                todo.append(_Job(str(path), name, digest, True, adds, stored, records))
             else:
                 report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue

@@ -214,9 +214,11 @@ def refine_shape(
     """Texture-less objects: the viewing direction off the grid, from the fits of the grid
     views around the best outline match (``posing.shape_refine``: ``"interpolate"``, from
     their appearance, :func:`interpolate_shape`; ``"walk"``, rendering off-grid views,
-    :func:`walk_shape`)."""
+    :func:`walk_shape`; ``"none"``: stay on the grid)."""
     if posing.shape_refine == "walk":
         return walk_shape(catalogue, name, query, start, estimate, config, posing)
+    if posing.shape_refine == "none":
+        return estimate
     return interpolate_shape(catalogue, name, query, start, estimate, config, posing)
 
 

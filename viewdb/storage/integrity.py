@@ -9,9 +9,9 @@ its view count matches its grid; and both tiers' R-trees: every R-tree entry is 
 row and vice versa with the same box, each group's curves are its views' stored curves and
 lie in its box, the full tier holds every view (and every perspective view) once and the
 sparse tier exactly the client grid's stand-ins; and each object's appearance records
-(revision 0005; none for an object stored before it): one per viewing direction of its
-stored views and the views opposite them, each decoding to what it promises, and a stored
-view's silhouette giving exactly its stored curve.
+(revision 0005; none for an object stored before it): one per viewing direction of
+:func:`~viewdb.catalogue.describe.appearance_views`, each decoding to what it promises, and
+a stored view's silhouette giving exactly its stored curve.
 """
 
 from __future__ import annotations
@@ -116,7 +116,8 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
             "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
             " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
         curves = {(float(a), float(e)): blob for a, e, blob in stored}
-        expected = {frozenset((v, turned_view(*v))) for v in appearance_views(list(curves))}
+        expected = {frozenset((v, turned_view(*v)))
+                    for v in appearance_views(list(curves), config.appearance)}
         found: set[frozenset[tuple[float, float]]] = set()
         for az, el, blobs in records:
             where = f"object {name!r}: appearance ({az:g}, {el:g})"
