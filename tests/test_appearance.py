@@ -18,6 +18,7 @@ from tests.conftest import sample
 from viewdb.camera import grid_views
 from viewdb.catalogue.appearance import (
     BINS,
+    THETA_LEVELS,
     Appearance,
     appearance_of,
     colour_signature,
@@ -41,7 +42,7 @@ from viewdb.pose.matched import appearance_view, grid_silhouette
 from viewdb.pose.shape_pose import shape_fit
 from viewdb.pose.views import CandidateView, QueryView
 from viewdb.recognition.colour import colour_distance
-from viewdb.storage.appearances import appearance_columns, decode_appearance
+from viewdb.storage.appearances import decode_record, encode_record
 from viewdb_cli.main import main
 
 #: How far a fit or colour distance from stored data may be from the render's: the edge
@@ -117,19 +118,17 @@ _masks = st.integers(8, 40).flatmap(lambda n: st.tuples(
 
 @settings(max_examples=60)
 @given(_masks, st.booleans())
-def test_a_record_survives_its_row(spec, coloured):
+def test_a_record_survives_its_packing(spec, coloured):
     n, bits, seed = spec
     rng = np.random.default_rng(seed)
     mask = np.array(bits, bool).reshape(n, n)
     ys, xs = np.nonzero(mask & (rng.random((n, n)) < 0.3))
     record = Appearance(
         float(rng.integers(0, 36) * 10), float(rng.integers(0, 36) * 10), mask,
-        np.stack([xs, ys], axis=1).astype(np.int32), rng.integers(0, 256, len(xs)).astype(np.uint8),
+        np.stack([xs, ys], axis=1).astype(np.int32), rng.integers(0, THETA_LEVELS, len(xs)).astype(np.uint8),
         rng.integers(0, 65536, (BINS, BINS)).astype(np.uint16) if coloured else None,
     )
-    row = appearance_columns(record)
-    back = decode_appearance(row["azimuth"], row["elevation"], row["mask"], row["edges"], row["theta"],
-                             row["signature"], n)
+    back = decode_record(encode_record(record), record.azimuth, record.elevation, n)
     assert (back.azimuth, back.elevation) == (record.azimuth, record.elevation)
     assert np.array_equal(back.mask, record.mask)
     assert np.array_equal(back.edge_points, record.edge_points)
@@ -142,25 +141,46 @@ def test_a_record_survives_its_row(spec, coloured):
     assert np.array_equal(twice.edge_theta, back.edge_theta)
 
 
-def test_a_damaged_row_is_refused():
-    mask = np.zeros((16, 16), bool)
-    mask[4:12, 4:12] = True
-    record = Appearance(0.0, 0.0, mask, np.array([[5, 6]], np.int32), np.array([7], np.uint8), None)
-    row = appearance_columns(record)
-    args = (row["mask"], row["edges"], row["theta"], None)
-    assert decode_appearance(0.0, 0.0, *args, 16).edge_points.tolist() == [[5, 6]]
-    with pytest.raises(StorageError, match="shape"):
-        decode_appearance(0.0, 0.0, *args, 32)
-    outside = appearance_columns(Appearance(0.0, 0.0, mask, np.array([[1, 1]], np.int32),
-                                            np.array([7], np.uint8), None))
-    with pytest.raises(StorageError, match="outside the silhouette"):
-        decode_appearance(0.0, 0.0, row["mask"], outside["edges"], row["theta"], None, 16)
-    two = appearance_columns(Appearance(0.0, 0.0, mask, np.array([[5, 6], [6, 6]], np.int32),
-                                        np.array([7, 8], np.uint8), None))
-    with pytest.raises(StorageError, match="shape"):
-        decode_appearance(0.0, 0.0, row["mask"], two["edges"], row["theta"], None, 16)
+def _record(points, theta, mask=None):
+    if mask is None:
+        mask = np.zeros((16, 16), bool)
+        mask[4:12, 4:12] = True
+    return Appearance(0.0, 0.0, mask, np.array(points, np.int32).reshape(-1, 2), np.array(theta, np.uint8), None)
+
+
+def test_a_damaged_record_is_refused():
+    good = encode_record(_record([[5, 6]], [7]))
+    assert decode_record(good, 0.0, 0.0, 16).edge_points.tolist() == [[5, 6]]
+    with pytest.raises(StorageError, match="not inside"):
+        decode_record(good, 0.0, 0.0, 8)
+    with pytest.raises(StorageError, match="outside the silhouette"):  # an edge pixel off the mask
+        ring = np.zeros((16, 16), bool)
+        ring[4:12, 4:12] = True
+        ring[6:10, 6:10] = False
+        decode_record(encode_record(_record([[7, 7]], [7], ring)), 0.0, 0.0, 16)
+    with pytest.raises(StorageError, match="directions"):
+        two = encode_record(_record([[5, 6], [6, 6]], [7, 8]))
+        decode_record(_swap_theta(two, [7]), 0.0, 0.0, 16)  # two edge pixels, one direction
+    with pytest.raises(StorageError, match="out of range"):
+        decode_record(encode_record(_record([[5, 6]], [THETA_LEVELS])), 0.0, 0.0, 16)
     with pytest.raises(StorageError):
-        decode_appearance(0.0, 0.0, row["mask"][:-3], row["edges"], row["theta"], None, 16)
+        decode_record(good[:-3], 0.0, 0.0, 16)
+    with pytest.raises(StorageError, match="bad header"):
+        decode_record(b"XX" + good[2:], 0.0, 0.0, 16)
+
+
+def _swap_theta(data: bytes, theta) -> bytes:
+    """A packed record whose direction stream is replaced by ``theta``."""
+    import struct
+    import zlib
+
+    head = struct.Struct("<2sBB4H3I")
+    magic, version, flags, x0, y0, x1, y1, n_mask, n_edges, n_theta = head.unpack_from(data)
+    body = data[head.size:]
+    stream = zlib.compress(np.array(theta, np.uint8).tobytes())
+    rest = body[n_mask + n_edges + n_theta:]
+    return (head.pack(magic, version, flags, x0, y0, x1, y1, n_mask, n_edges, len(stream))
+            + body[:n_mask + n_edges] + stream + rest)
 
 
 # --------------------------------------------------------------------------- a database
@@ -178,10 +198,12 @@ def appearance_db(tmp_path_factory):
 
 
 def _rows(path):
+    """``(object, azimuth, elevation, packed record)`` of every appearance record."""
     with sqlite3.connect(path) as conn:
-        return conn.execute(
-            "SELECT o.name, a.azimuth, a.elevation, a.mask, a.edges, a.theta, a.signature FROM appearances a"
-            " JOIN objects o ON o.id = a.object_id ORDER BY o.name, a.azimuth, a.elevation").fetchall()
+        return [(name, a, e, bytes(data[at:at + size])) for name, a, e, at, size, data in conn.execute(
+            "SELECT o.name, a.azimuth, a.elevation, a.offset, a.size, b.data FROM appearances a"
+            " JOIN objects o ON o.id = a.object_id JOIN appearance_blobs b ON b.object_id = a.object_id"
+            " ORDER BY o.name, a.azimuth, a.elevation")]
 
 
 def test_an_ingest_records_every_direction_of_the_stored_views_and_their_opposites(appearance_db):
@@ -200,7 +222,7 @@ def test_an_ingest_records_every_direction_of_the_stored_views_and_their_opposit
             # one record per viewing direction; the opposite views' too when they cost no renders
             assert len(recorded) == (len(both) if len(both) <= len(stored) else len(own))
             with_opposite[info.name] = len(recorded) == len(both)
-            coloured = {n for n, *_, signature in rows if signature is not None}
+            coloured = {n for n, a, e, data in rows if decode_record(data, a, e, 96).signature is not None}
         assert coloured == {"car", "cube_dice"}  # the sample meshes with colour of their own
     assert with_opposite["l_bracket"]  # asymmetric: every direction of the sphere
 
@@ -278,23 +300,27 @@ def test_a_pruned_view_silhouette_comes_from_its_stand_in(appearance_db, meshes)
                 assert iou > 0.95, (name, h, v, iou)
 
 
-def test_a_damaged_appearance_row_fails_the_check(appearance_db, tmp_path):
+def test_a_damaged_appearance_record_fails_the_check(appearance_db, tmp_path):
     path = tmp_path / "damaged.db"
     shutil.copy(appearance_db, path)
     with sqlite3.connect(path) as conn:
-        rid, = conn.execute("SELECT a.id FROM appearances a JOIN objects o ON o.id = a.object_id"
-                            " WHERE o.name = 'l_bracket' ORDER BY a.id LIMIT 1").fetchone()
-        other, = conn.execute("SELECT mask FROM appearances WHERE id != ? ORDER BY id DESC LIMIT 1",
-                              (rid,)).fetchone()
-        conn.execute("UPDATE appearances SET mask = ? WHERE id = ?", (other, rid))
+        first, second = conn.execute(
+            "SELECT a.id, a.offset, a.size FROM appearances a JOIN objects o ON o.id = a.object_id"
+            " JOIN views v ON v.object_id = a.object_id AND v.azimuth = a.azimuth AND v.elevation = a.elevation"
+            " WHERE o.name = 'l_bracket' ORDER BY a.id LIMIT 2").fetchall()
+        # the first stored view's record now points at the second's bytes: not its silhouette
+        conn.execute("UPDATE appearances SET offset = ?, size = ? WHERE id = ?", (second[1], second[2], first[0]))
         conn.execute("DELETE FROM appearances WHERE id = (SELECT max(id) FROM appearances"
                      " WHERE object_id = (SELECT id FROM objects WHERE name = 'car'))")
+        conn.execute("UPDATE appearances SET size = size + 100000 WHERE id = (SELECT min(id) FROM appearances"
+                     " WHERE object_id = (SELECT id FROM objects WHERE name = 'cube_dice'))")
     with viewdb.open(path, read_only=True) as db:
         report = db.check()
     assert not report.ok
     text = "\n".join(report.problems)
-    assert "'l_bracket': appearance" in text  # a mask that is not its view's (or edges off it)
+    assert "'l_bracket': appearance" in text and "not the stored view's" in text
     assert "object 'car': 1 of its" in text and "have no appearance record" in text
+    assert "'cube_dice': appearance" in text and "outside its object's blob" in text
 
 
 def test_replacing_an_object_replaces_its_appearance(tmp_path):
@@ -348,8 +374,8 @@ def test_an_older_file_answers_read_only_and_gains_its_appearance_by_ingesting_a
     fresh, upgraded = _rows(appearance_db), _rows(path)
     assert [r[:3] for r in upgraded] == [r[:3] for r in fresh]
     for a, b in zip(fresh, upgraded, strict=True):  # the same renders (one may be a turned one)
-        ma = decode_appearance(*a[1:], CONFIG.render.image_size).mask
-        mb = decode_appearance(*b[1:], CONFIG.render.image_size).mask
+        ma = decode_record(a[3], *a[1:3], CONFIG.render.image_size).mask
+        mb = decode_record(b[3], *b[1:3], CONFIG.render.image_size).mask
         assert np.count_nonzero(ma != mb) <= 0.01 * ma.sum()
 
 
@@ -366,5 +392,6 @@ def test_a_client_file_holds_no_appearance(appearance_db, tmp_path):
         db.export_client(client)
     with sqlite3.connect(client) as conn:
         assert conn.execute("SELECT count(*) FROM appearances").fetchone() == (0,)
+        assert conn.execute("SELECT count(*) FROM appearance_blobs").fetchone() == (0,)
     with viewdb.open(client, read_only=True) as db:
         assert db.check().ok

@@ -2,7 +2,7 @@
 signature, so the re-rankings and the pose compare stored data instead of rendering.
 
 Files from before this revision have none; they still answer, rendering what they lack
-(slower), and an ingest of their unchanged source files adds the rows (only the views'
+(slower), and an ingest of their unchanged source files adds the records (only the views'
 renders are redone: :mod:`viewdb.catalogue.ingest`).
 
 Revision ID: 0005
@@ -26,15 +26,18 @@ def upgrade() -> None:
                   nullable=False),
         sa.Column("azimuth", sa.Float, nullable=False),
         sa.Column("elevation", sa.Float, nullable=False),
-        sa.Column("mask", sa.LargeBinary, nullable=False),
-        sa.Column("edges", sa.LargeBinary, nullable=False),
-        sa.Column("theta", sa.LargeBinary, nullable=False),
-        sa.Column("signature", sa.LargeBinary, nullable=True),
+        sa.Column("offset", sa.Integer, nullable=False),
+        sa.Column("size", sa.Integer, nullable=False),
         sa.UniqueConstraint("object_id", "azimuth", "elevation", name="uq_appearances_object_view"),
     )
-    op.create_index("ix_appearances_object", "appearances", ["object_id"])
+    op.create_table(
+        "appearance_blobs",
+        sa.Column("object_id", sa.Integer, sa.ForeignKey("objects.id", ondelete="CASCADE"),
+                  primary_key=True),
+        sa.Column("data", sa.LargeBinary, nullable=False),
+    )
 
 
 def downgrade() -> None:
-    op.drop_index("ix_appearances_object", "appearances")
+    op.drop_table("appearance_blobs")
     op.drop_table("appearances")

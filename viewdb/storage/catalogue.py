@@ -33,7 +33,7 @@ from ..errors import FeatureError, NotFound, QueryError
 from ..search.knn import SearchStats, TierArrays, knn, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
 from ..search.refine import scan_all
-from .appearances import decode_appearance
+from .appearances import decode_record
 from .store import ObjectRow, Store
 from .tiers import TIERS, TierReader
 
@@ -234,12 +234,12 @@ class StoredCatalogue:
         def make() -> Appearance:
             if self.stored_appearance:
                 twin = turned_view(a, e)
-                rows = self._store.appearance_rows(name, [(a, e), twin])
+                records = self._store.appearance_records(name, [(a, e), twin])
                 size = self.config.render.image_size
-                if (a, e) in rows:
-                    return decode_appearance(a, e, *rows[(a, e)], size)
-                if twin in rows:
-                    return decode_appearance(*twin, *rows[twin], size).turned()
+                if (a, e) in records:
+                    return decode_record(records[(a, e)], a, e, size)
+                if twin in records:
+                    return decode_record(records[twin], *twin, size).turned()
             coloured = self.derived("carries_colour", (name,), lambda: carries_colour(self.mesh(name)),
                                     APPEARANCE_CACHE_VIEWS)
             return appearance_of(self.render(name, a, e), self.config.appearance, coloured)

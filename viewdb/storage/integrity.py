@@ -32,7 +32,7 @@ from ..catalogue.symmetry import SymmetryType
 from ..errors import FeatureError, NotFound, StorageError
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from . import schema as s
-from .appearances import decode_appearance
+from .appearances import decode_record
 from .codecs import decode_array
 from .connection import READ_ONLY_COMPATIBLE
 from .spatial import FourierIndex
@@ -97,21 +97,30 @@ CURVE_TOLERANCE = 1e-5
 
 def _check_appearances(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
     """Appearance records: decodable, one per direction of :func:`appearance_views` (for an
-    object that has any), and a stored view's silhouette gives its stored curve."""
+    object that has any), inside their object's blob, and a stored view's silhouette gives
+    its stored curve."""
     size, samples = config.render.image_size, config.features.curve_samples
-    rows: dict[int, list[tuple[float, float, tuple[bytes, ...]]]] = {}
-    for oid, az, el, *blobs in raw.execute(
-        "SELECT object_id, azimuth, elevation, mask, edges, theta, signature FROM appearances ORDER BY id"
+    index: dict[int, list[tuple[float, float, int, int]]] = {}
+    for oid, az, el, at, length in raw.execute(
+        "SELECT object_id, azimuth, elevation, offset, size FROM appearances ORDER BY id"
     ):
-        rows.setdefault(int(oid), []).append((float(az), float(el), tuple(blobs)))
-    checked = 0
-    if client and rows:
-        report.add(f"a client file holds no appearance records ({sum(map(len, rows.values()))} found)")
+        index.setdefault(int(oid), []).append((float(az), float(el), int(at), int(length)))
+    blobs = {int(oid): n for oid, n in raw.execute("SELECT object_id, length(data) FROM appearance_blobs")}
+    if client and (index or blobs):
+        report.add(f"a client file holds no appearance records ({sum(map(len, index.values()))} found)")
         return
+    checked = 0
     for oid, name in raw.execute("SELECT id, name FROM objects ORDER BY name").fetchall():
-        records = rows.pop(int(oid), [])
+        records = index.pop(int(oid), [])
+        total = blobs.pop(int(oid), None)
         if not records:
+            if total is not None:
+                report.add(f"object {name!r}: an appearance blob without records")
             continue  # stored before revision 0005: an ingest of its file adds them
+        if total is None:
+            report.add(f"object {name!r}: {len(records)} appearance records but no blob")
+            continue
+        data = raw.execute("SELECT data FROM appearance_blobs WHERE object_id = ?", (oid,)).fetchone()[0]
         stored = raw.execute(
             "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
             " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
@@ -119,7 +128,7 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
         expected = {frozenset((v, turned_view(*v)))
                     for v in appearance_views(list(curves), config.appearance)}
         found: set[frozenset[tuple[float, float]]] = set()
-        for az, el, blobs in records:
+        for az, el, at, length in records:
             where = f"object {name!r}: appearance ({az:g}, {el:g})"
             pair = frozenset(((az, el), turned_view(az, el)))
             if pair not in expected:
@@ -127,8 +136,11 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
             elif pair in found:
                 report.add(f"{where}: its direction is recorded twice")
             found.add(pair)
+            if at < 0 or length <= 0 or at + length > total:
+                report.add(f"{where}: bytes {at}..{at + length} are outside its object's blob ({total})")
+                continue
             try:
-                record = decode_appearance(az, el, *blobs, size)
+                record = decode_record(data[at:at + length], az, el, size)
             except StorageError as exc:
                 report.add(f"{where}: {exc.message}")
                 continue
@@ -147,7 +159,7 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
         if len(found & expected) < len(expected):
             report.add(f"object {name!r}: {len(expected - found)} of its {len(expected)} viewing "
                        f"directions have no appearance record")
-    for oid in rows:
+    for oid in sorted(set(index) | set(blobs)):
         report.add(f"appearances: records of object id {oid}, which does not exist")
     report.checked["appearances"] = checked
 

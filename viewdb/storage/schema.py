@@ -15,13 +15,12 @@ fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob
 sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
 perspective_views  perspective silhouettes (revision 0004): object, azimuth, elevation,
                 camera distance in bounding radii, the distance curve (float32 blob)
-appearances     each viewing direction's appearance (revision 0005,
+appearances     a viewing direction's appearance record (revision 0005,
                 :mod:`viewdb.catalogue.appearance`): object, the grid view it was
                 recorded at (azimuth, elevation; its turned twin is the same turned by
-                180°), the silhouette and the internal edge pixels (bit images), the
-                edges' directions (uint8) and the colour signature (uint16, NULL when
-                the mesh has no colour); for the stored views and the views opposite
-                them
+                180°) and where its packed bytes lie in the object's blob
+appearance_blobs  one per object: its appearance records, packed
+                (:mod:`viewdb.storage.appearances`) and concatenated
 index_groups    R-tree entries: a few views of one object in one tier (``full`` or
                 ``sparse``), with their MBR in the indexed Fourier coordinates, the
                 per-sample range of their curves and a copy of the curves (one read
@@ -50,6 +49,7 @@ from sqlalchemy import (
 
 __all__ = [
     "SCHEMA_REVISION",
+    "appearance_blobs",
     "appearances",
     "curves",
     "fourier_points",
@@ -162,15 +162,18 @@ appearances = Table(
     Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
     Column("azimuth", Float, nullable=False),
     Column("elevation", Float, nullable=False),
-    #: bit images (codecs.encode_bits) of the silhouette and of the internal edge pixels
-    Column("mask", LargeBinary, nullable=False),
-    Column("edges", LargeBinary, nullable=False),
-    #: uint8 (n,) directions of the edge pixels in row-major order; uint16 (B, B) or NULL
-    Column("theta", LargeBinary, nullable=False),
-    Column("signature", LargeBinary, nullable=True),
+    #: where the packed record (storage.appearances) lies in its object's appearance blob
+    Column("offset", Integer, nullable=False),
+    Column("size", Integer, nullable=False),
     UniqueConstraint("object_id", "azimuth", "elevation", name="uq_appearances_object_view"),
 )
-Index("ix_appearances_object", appearances.c.object_id)
+
+appearance_blobs = Table(
+    "appearance_blobs",
+    metadata,
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True),
+    Column("data", LargeBinary, nullable=False),
+)
 
 
 def perspective_group_id(perspective_view_id: int) -> int:

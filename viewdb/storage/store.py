@@ -8,6 +8,7 @@ job; :class:`Store` is a database with its rows. ``Store(path, read_only=True)``
 from __future__ import annotations
 
 import json
+import sqlite3
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -19,10 +20,10 @@ from numpy.typing import NDArray
 from sqlalchemy.engine import Connection
 
 from ..config import BuildConfig
-from ..errors import NotFound
+from ..errors import NotFound, StorageError
 from ..search.grouping import tier_members
 from . import schema as s
-from .appearances import appearance_columns
+from .appearances import pack_records
 from .codecs import decode_array, encode_array
 from .connection import Database
 from .tiers import delete_groups, write_groups
@@ -301,9 +302,14 @@ class Store(Database):
 
     @staticmethod
     def _insert_appearances(conn: Connection, object_id: int, records: Any) -> None:
-        if records:
-            conn.execute(sa.insert(s.appearances),
-                         [{"object_id": object_id, **appearance_columns(r)} for r in records])
+        if not records:
+            return
+        data, index = pack_records(records)
+        conn.execute(sa.insert(s.appearance_blobs).values(object_id=object_id, data=data))
+        conn.execute(sa.insert(s.appearances), [
+            {"object_id": object_id, "azimuth": a, "elevation": e, "offset": at, "size": size}
+            for a, e, at, size in index
+        ])
 
     def add_appearance(self, name: str, records: Any) -> None:
         """Give a stored object its appearance records (an older file's object) in one
@@ -311,6 +317,7 @@ class Store(Database):
         with self.transaction() as conn:
             object_id = self.object_id(conn, name)
             conn.execute(sa.delete(s.appearances).where(s.appearances.c.object_id == object_id))
+            conn.execute(sa.delete(s.appearance_blobs).where(s.appearance_blobs.c.object_id == object_id))
             self._insert_appearances(conn, object_id, records)
 
     def objects_lacking_appearance(self) -> set[str]:
@@ -322,23 +329,39 @@ class Store(Database):
         with self.read() as conn:
             return {r[0] for r in conn.execute(sa.select(o.c.name).where(has_views, ~has))}
 
-    def appearance_rows(
+    def appearance_records(
         self, name: str, views: Sequence[tuple[float, float]]
-    ) -> dict[tuple[float, float], tuple[Any, ...]]:
-        """The stored appearance rows of object ``name`` at any of ``views`` (normalised
-        angles), by view: ``(mask, edges, theta, signature)`` blobs."""
-        a = s.appearances
+    ) -> dict[tuple[float, float], bytes]:
+        """The packed appearance records (:mod:`viewdb.storage.appearances`) of object
+        ``name`` at any of ``views`` (normalised angles), by view; only their bytes are
+        read from the object's blob."""
         wanted = {(float(h), float(e)) for h, e in views}
         if not wanted:
             return {}
-        with self.read() as conn:
-            rows = conn.execute(
-                sa.select(a.c.azimuth, a.c.elevation, a.c.mask, a.c.edges, a.c.theta, a.c.signature)
-                .select_from(a.join(s.objects, s.objects.c.id == a.c.object_id))
-                .where(s.objects.c.name == name, a.c.azimuth.in_(sorted({h for h, _ in wanted})))
-            ).all()
-        return {(float(r[0]), float(r[1])): tuple(r[2:]) for r in rows
-                if (float(r[0]), float(r[1])) in wanted}
+        azimuths = sorted({h for h, _ in wanted})
+        with self._errors(), self.engine.connect() as conn:
+            raw = conn.connection.driver_connection
+            try:
+                return self._read_records(raw, name, azimuths, wanted)
+            except sqlite3.Error as exc:
+                raise StorageError(f"cannot read the appearance of {name!r}: {exc}", self.path) from exc
+
+    @staticmethod
+    def _read_records(raw: sqlite3.Connection, name: str, azimuths: list[float],
+                      wanted: set[tuple[float, float]]) -> dict[tuple[float, float], bytes]:
+        rows = raw.execute(
+                "SELECT a.azimuth, a.elevation, a.offset, a.size, a.object_id FROM appearances a"
+            " JOIN objects o ON o.id = a.object_id WHERE o.name = ?"
+            f" AND a.azimuth IN ({', '.join('?' * len(azimuths))})", (name, *azimuths),
+        ).fetchall()
+        found = [r for r in rows if (float(r[0]), float(r[1])) in wanted]
+        out: dict[tuple[float, float], bytes] = {}
+        if found:
+            with raw.blobopen("appearance_blobs", "data", int(found[0][4]), readonly=True) as blob:
+                for a, e, at, size, _ in found:
+                    blob.seek(int(at))
+                    out[(float(a), float(e))] = blob.read(int(size))
+        return out
 
     def objects_lacking_perspective(self) -> set[str]:
         """Names of the objects with no perspective views (stored before revision 0004,
