@@ -341,8 +341,15 @@ class Store(Database):
         azimuths = sorted({h for h, _ in wanted})
         with self._errors(), self.engine.connect() as conn:
             raw = conn.connection.driver_connection
+            began = not raw.in_transaction
             try:
-                return self._read_records(raw, name, azimuths, wanted)
+                if began:  # one snapshot for the offsets and the bytes (a writer may replace both)
+                    raw.execute("BEGIN")
+                try:
+                    return self._read_records(raw, name, azimuths, wanted)
+                finally:
+                    if began:
+                        raw.execute("COMMIT")
             except sqlite3.Error as exc:
                 raise StorageError(f"cannot read the appearance of {name!r}: {exc}", self.path) from exc
 
