@@ -190,10 +190,45 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    grid = len(grid_views(config.gap))
-    perspective = len(perspective_grid(config))
-    add_perspective = write_upgrade is not None and config.perspective.enabled
-    lacking_appearance = lacking_appearance if write_upgrade is not None else None
+    upgrade = write_upgrade is not None
+    lacking = _Lacking(lacking_perspective if upgrade and config.perspective.enabled else frozenset(),
+                       (lacking_appearance or {}) if upgrade else {}, config)
+    todo = _plan_jobs(paths, existing_hashes, lacking, report)
+    run = _Run(report, todo, config, write, write_upgrade, progress)
+    if jobs <= 1 or len(todo) <= 1:
+        run.serial(todo, skim, options)
+    else:
+        run.pooled(todo, jobs, skim, options)
+    report.seconds = time.perf_counter() - start
+    return report
+
+
+@dataclass(frozen=True)
+class _Lacking:
+    """What objects stored by an older viewdb lack: perspective views, appearance records
+    (name → stored views)."""
+
+    perspective: set[str] | frozenset[str]
+    appearance: dict[str, list[tuple[float, float]]]
+    config: BuildConfig
+
+    def job(self, path: Path, name: str, digest: str) -> _Job | None:
+        """The upgrade of an unchanged file's object, or None if it lacks nothing."""
+        adds = frozenset(({"perspective"} if name in self.perspective else set())
+                         | ({"appearance"} if name in self.appearance else set()))
+        if not adds:
+            return None
+        stored = list(self.appearance.get(name, []))
+        records = len(appearance_views(stored, self.config.appearance)) if "appearance" in adds else 0
+        return _Job(str(path), name, digest, True, adds, stored, records)
+
+
+def _plan_jobs(
+    paths: Sequence[str | Path], existing_hashes: dict[str, str], lacking: _Lacking,
+    report: IngestReport,
+) -> list[_Job]:
+    """The files to describe (new, changed, or unchanged but lacking what ``lacking``
+    says); the others go in ``report`` as unchanged or failed."""
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -214,29 +249,46 @@ def run_ingest(
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
             continue
         if existing_hashes.get(name) == digest:
-            adds = frozenset(
-                ({"perspective"} if add_perspective and name in lacking_perspective else set())
-                | ({"appearance"} if lacking_appearance and name in lacking_appearance else set()))
-            if adds:
-                stored = list((lacking_appearance or {}).get(name, []))
-                records = len(appearance_views(stored, config.appearance)) if "appearance" in adds else 0
-                todo.append(_Job(str(path), name, digest, True, adds, stored, records))
+            upgrade = lacking.job(path, name, digest)
+            if upgrade is not None:
+                todo.append(upgrade)
             else:
                 report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
         todo.append(_Job(str(path), name, digest, name in existing_hashes))
+    return todo
 
-    total_views = sum(job.views(grid, perspective) for job in todo)
-    done_views = 0
-    files_total = len(report.outcomes) + len(todo)
 
-    def notify(outcome: FileOutcome | None = None) -> None:
-        if progress is not None:
-            progress(IngestProgress(
-                done_views, total_views, len(report.outcomes), files_total, outcome
+class _Run:
+    """One ingest's progress and outcomes: the views done, and each finished file written
+    and reported."""
+
+    def __init__(
+        self, report: IngestReport, todo: list[_Job], config: BuildConfig,
+        write: Callable[[ObjectDescription], None],
+        write_upgrade: Callable[[Upgrade], None] | None,
+        progress: Callable[[IngestProgress], None] | None,
+    ) -> None:
+        self.report, self.config = report, config
+        self.write, self.write_upgrade, self.progress = write, write_upgrade, progress
+        self.grid = len(grid_views(config.gap))
+        self.perspective = len(perspective_grid(config))
+        self.total_views = sum(job.views(self.grid, self.perspective) for job in todo)
+        self.done_views = 0
+        self.files_total = len(report.outcomes) + len(todo)
+
+    def notify(self, outcome: FileOutcome | None = None) -> None:
+        if self.progress is not None:
+            self.progress(IngestProgress(
+                self.done_views, self.total_views, len(self.report.outcomes), self.files_total, outcome
             ))
 
-    def finish(job: _Job, result: ObjectDescription | Upgrade | BaseException) -> None:
+    def tick(self, n: int) -> None:
+        self.done_views += n
+        self.notify()
+
+    def finish(self, job: _Job, result: ObjectDescription | Upgrade | BaseException) -> None:
+        """Write a described file (or record its failure) and report it."""
         if isinstance(result, ViewDBError):
             outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
         elif isinstance(result, BaseException):
@@ -245,40 +297,38 @@ def run_ingest(
                 error=f"{job.path}: unexpected {type(result).__name__}: {result}",
             )
         else:
-            try:
-                if isinstance(result, Upgrade):
-                    assert write_upgrade is not None
-                    write_upgrade(result)
-                else:
-                    write(result)
-            except ViewDBError as exc:
-                outcome = FileOutcome(job.path, job.name, "failed", error=str(exc))
+            outcome = self._write(job, result)
+        self.report.outcomes.append(outcome)
+        self.notify(outcome)
+
+    def _write(self, job: _Job, result: ObjectDescription | Upgrade) -> FileOutcome:
+        try:
+            if isinstance(result, Upgrade):
+                assert self.write_upgrade is not None
+                self.write_upgrade(result)
             else:
-                status = ("upgraded" if isinstance(result, Upgrade)
-                          else "replaced" if job.replaces else "added")
-                outcome = FileOutcome(job.path, job.name, status,
-                                      views=len(result.views), seconds=result.seconds)
-        report.outcomes.append(outcome)
-        notify(outcome)
+                self.write(result)
+        except ViewDBError as exc:
+            return FileOutcome(job.path, job.name, "failed", error=str(exc))
+        status = ("upgraded" if isinstance(result, Upgrade)
+                  else "replaced" if job.replaces else "added")
+        return FileOutcome(job.path, job.name, status, views=len(result.views), seconds=result.seconds)
 
-    if jobs <= 1 or len(todo) <= 1:
+    def serial(self, todo: list[_Job], skim: bool, options: LoadOptions) -> None:
+        """Describe the files one after the other in this process."""
         for job in todo:
-            expected_done = done_views + job.views(grid, perspective)
-
-            def tick(n: int) -> None:
-                nonlocal done_views
-                done_views += n
-                notify()
-
+            expected_done = self.done_views + job.views(self.grid, self.perspective)
             try:
                 result: ObjectDescription | Upgrade | BaseException = _describe(
-                    job, config, skim, options, tick
+                    job, self.config, skim, options, self.tick
                 )
             except ViewDBError as exc:
                 result = exc
-            done_views = expected_done  # a failed file counts as dealt with
-            finish(job, result)
-    else:
+            self.done_views = expected_done  # a failed file counts as dealt with
+            self.finish(job, result)
+
+    def pooled(self, todo: list[_Job], jobs: int, skim: bool, options: LoadOptions) -> None:
+        """Describe the files in ``jobs`` spawned worker processes; write them here."""
         ctx = mp.get_context("spawn")
         ticks = ctx.Queue()
         pool = ProcessPoolExecutor(
@@ -288,22 +338,16 @@ def run_ingest(
         futures: dict[Future[ObjectDescription | Upgrade], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job, config, skim, options)] = job
+                futures[pool.submit(_describe_file, job, self.config, skim, options)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                drained = 0
-                while True:
-                    try:
-                        drained += ticks.get_nowait()
-                    except queue_module.Empty:
-                        break
+                drained = _drain(ticks)
                 if drained:
-                    done_views += drained
-                    notify()
+                    self.tick(drained)
                 for fut in finished:
                     exc = fut.exception()
-                    finish(futures[fut], exc if exc is not None else fut.result())
+                    self.finish(futures[fut], exc if exc is not None else fut.result())
         except BaseException:
             workers = list((getattr(pool, "_processes", None) or {}).values())
             pool.shutdown(wait=False, cancel_futures=True)
@@ -311,8 +355,16 @@ def run_ingest(
                 proc.terminate()
             raise
         pool.shutdown(wait=True)
-        if done_views != total_views:  # files that failed part-way
-            done_views = total_views
-            notify()
-    report.seconds = time.perf_counter() - start
-    return report
+        if self.done_views != self.total_views:  # files that failed part-way
+            self.done_views = self.total_views
+            self.notify()
+
+
+def _drain(ticks: Any) -> int:
+    """The views the workers reported since the last call."""
+    drained = 0
+    while True:
+        try:
+            drained += ticks.get_nowait()
+        except queue_module.Empty:
+            return drained

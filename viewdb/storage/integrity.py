@@ -99,7 +99,6 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
     """Appearance records: decodable, one per direction of :func:`appearance_views` (for an
     object that has any), inside their object's blob, and a stored view's silhouette gives
     its stored curve."""
-    size, samples = config.render.image_size, config.features.curve_samples
     index: dict[int, list[tuple[float, float, int, int]]] = {}
     for oid, az, el, at, length in raw.execute(
         "SELECT object_id, azimuth, elevation, offset, size FROM appearances ORDER BY id"
@@ -111,8 +110,7 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
         return
     checked = 0
     for oid, name in raw.execute("SELECT id, name FROM objects ORDER BY name").fetchall():
-        records = index.pop(int(oid), [])
-        total = blobs.pop(int(oid), None)
+        records, total = index.pop(int(oid), []), blobs.pop(int(oid), None)
         if not records:
             if total is not None:
                 report.add(f"object {name!r}: an appearance blob without records")
@@ -120,48 +118,64 @@ def _check_appearances(raw, config, report: CheckReport, client: bool) -> None: 
         if total is None:
             report.add(f"object {name!r}: {len(records)} appearance records but no blob")
             continue
-        data = raw.execute("SELECT data FROM appearance_blobs WHERE object_id = ?", (oid,)).fetchone()[0]
-        stored = raw.execute(
-            "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
-            " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
-        curves = {(float(a), float(e)): blob for a, e, blob in stored}
-        expected = {frozenset((v, turned_view(*v)))
-                    for v in appearance_views(list(curves), config.appearance)}
-        found: set[frozenset[tuple[float, float]]] = set()
-        for az, el, at, length in records:
-            where = f"object {name!r}: appearance ({az:g}, {el:g})"
-            pair = frozenset(((az, el), turned_view(az, el)))
-            if pair not in expected:
-                report.add(f"{where}: not a stored view's direction nor the opposite of one")
-            elif pair in found:
-                report.add(f"{where}: its direction is recorded twice")
-            found.add(pair)
-            if at < 0 or length <= 0 or at + length > total:
-                report.add(f"{where}: bytes {at}..{at + length} are outside its object's blob ({total})")
-                continue
-            try:
-                record = decode_record(data[at:at + length], az, el, size)
-            except StorageError as exc:
-                report.add(f"{where}: {exc.message}")
-                continue
-            checked += 1
-            blob = curves.get((az, el))
-            if blob is None:
-                continue
-            try:
-                curve = decode_array(blob, np.float32, (samples,))
-                own = distance_curve(record.mask, samples)
-            except (StorageError, FeatureError):
-                report.add(f"{where}: its silhouette gives no curve to compare with the view's")
-                continue
-            if not np.allclose(own, curve, rtol=0, atol=CURVE_TOLERANCE):
-                report.add(f"{where}: its silhouette is not the stored view's (the curves differ)")
-        if len(found & expected) < len(expected):
-            report.add(f"object {name!r}: {len(expected - found)} of its {len(expected)} viewing "
-                       f"directions have no appearance record")
+        checked += _check_object_appearance(raw, int(oid), name, records, config, report)
     for oid in sorted(set(index) | set(blobs)):
         report.add(f"appearances: records of object id {oid}, which does not exist")
     report.checked["appearances"] = checked
+
+
+def _check_object_appearance(  # type: ignore[no-untyped-def]
+    raw, oid: int, name: str, records: list[tuple[float, float, int, int]], config, report: CheckReport,
+) -> int:
+    """One object's records (they exist, and so does its blob); how many decode."""
+    data = raw.execute("SELECT data FROM appearance_blobs WHERE object_id = ?", (oid,)).fetchone()[0]
+    stored = raw.execute(
+        "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
+        " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
+    curves = {(float(a), float(e)): blob for a, e, blob in stored}
+    expected = {frozenset((v, turned_view(*v))) for v in appearance_views(list(curves), config.appearance)}
+    found: set[frozenset[tuple[float, float]]] = set()
+    checked = 0
+    for az, el, at, length in records:
+        where = f"object {name!r}: appearance ({az:g}, {el:g})"
+        pair = frozenset(((az, el), turned_view(az, el)))
+        if pair not in expected:
+            report.add(f"{where}: not a stored view's direction nor the opposite of one")
+        elif pair in found:
+            report.add(f"{where}: its direction is recorded twice")
+        found.add(pair)
+        if at < 0 or length <= 0 or at + length > len(data):
+            report.add(f"{where}: bytes {at}..{at + length} are outside its object's blob ({len(data)})")
+            continue
+        problem = _record_problem(data[at:at + length], az, el, curves.get((az, el)), config)
+        if problem is None:
+            checked += 1
+        else:
+            report.add(f"{where}: {problem}")
+    if len(found & expected) < len(expected):
+        report.add(f"object {name!r}: {len(expected - found)} of its {len(expected)} viewing "
+                   f"directions have no appearance record")
+    return checked
+
+
+def _record_problem(data: bytes, az: float, el: float, curve_blob: bytes | None, config) -> str | None:  # type: ignore[no-untyped-def]
+    """What is wrong with one packed record, or None: it must decode, and a stored view's
+    silhouette must give that view's stored curve."""
+    samples = config.features.curve_samples
+    try:
+        record = decode_record(data, az, el, config.render.image_size)
+    except StorageError as exc:
+        return exc.message
+    if curve_blob is None:
+        return None
+    try:
+        curve = decode_array(curve_blob, np.float32, (samples,))
+        own = distance_curve(record.mask, samples)
+    except (StorageError, FeatureError):
+        return "its silhouette gives no curve to compare with the view's"
+    if not np.allclose(own, curve, rtol=0, atol=CURVE_TOLERANCE):
+        return "its silhouette is not the stored view's (the curves differ)"
+    return None
 
 
 def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client: bool) -> None:
@@ -255,27 +269,7 @@ def _check_views(conn, config, report: CheckReport, progress, client) -> None:  
 
 
 def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
-    n = config.features.curve_samples
-    curves = {}
-    for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
-        try:
-            curves[int(vid)] = decode_array(blob, np.float32, (n,))
-        except StorageError:
-            continue  # reported with the views
-    views: dict[int, list[tuple[int, float, float]]] = {}
-    for vid, oid, az, el in raw.execute(
-        "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
-    ):
-        views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
-    # perspective views: full tier only, named by their negated id (schema.perspective_group_id)
-    perspective: dict[int, set[int]] = {}
-    for pid, oid, blob in raw.execute("SELECT id, object_id, samples FROM perspective_views"):
-        gid = s.perspective_group_id(int(pid))
-        perspective.setdefault(int(oid), set()).add(gid)
-        try:
-            curves[gid] = decode_array(blob, np.float32, (n,))
-        except StorageError as exc:
-            report.add(f"perspective view {pid}: {exc.message}")
+    stored = _StoredViews(raw, config.features.curve_samples, report)
     objects = raw.execute("SELECT id, name, skimmed, symmetry FROM objects").fetchall()
     for tier in TIERS:
         try:
@@ -292,64 +286,115 @@ def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # typ
             ids, los, his = index.intersection_boxes(-everything, everything)
             for gid, lo, hi in zip(ids.tolist(), los, his, strict=True):
                 entries[gid] = (lo, hi)
-            in_tier: dict[int, set[int]] = {}
             rows = raw.execute(
                 "SELECT id, object_id, view_ids, curves, lo, hi FROM index_groups WHERE tier = ?",
                 (tier,),
             ).fetchall()
-            for gid, oid, blob_ids, blob_curves, blob_lo, blob_hi in rows:
-                where = f"{tier} tier group {gid}"
-                try:
-                    ids_g = decode_array(blob_ids, np.int64, (None,))
-                    curves_g = decode_array(blob_curves, np.float32, (len(ids_g), n))
-                    lo = decode_array(blob_lo, np.float64, (DIMENSION,))
-                    hi = decode_array(blob_hi, np.float64, (DIMENSION,))
-                except StorageError as exc:
-                    report.add(f"{where}: {exc.message}")
-                    continue
-                entry = entries.pop(gid, None)
-                if entry is None:
-                    report.add(f"{where}: not in the R-tree")
-                elif not (np.array_equal(entry[0], lo) and np.array_equal(entry[1], hi)):
-                    report.add(f"{where}: R-tree box differs from the stored box")
-                coords = indexed_coordinates(curves_g)
-                if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
-                    report.add(f"{where}: views lie outside its box")
-                owned = {vid for vid, _, _ in views.get(int(oid), [])}
-                if tier == "full":
-                    owned |= perspective.get(int(oid), set())
-                mine = in_tier.setdefault(int(oid), set())
-                for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
-                    if vid not in owned:
-                        report.add(f"{where}: view {vid} is not a view of its object")
-                    elif vid in curves and not np.array_equal(curves[vid], curve):
-                        report.add(f"{where}: curve of view {vid} differs from the stored curve")
-                    if vid in mine:
-                        report.add(f"{where}: view {vid} is in the tier twice")
-                    mine.add(vid)
+            in_tier = _check_groups(tier, rows, entries, stored, report)
             for gid in sorted(entries):
                 report.add(f"{tier} tier: R-tree entry {gid} has no group row")
-            for oid, name, skimmed, symmetry in objects:
-                stored = views.get(int(oid), [])
-                sym = None
-                if symmetry is not None:
-                    try:
-                        sym = SymmetryType.from_dict(json.loads(symmetry))
-                    except (ValueError, KeyError, TypeError):
-                        continue  # reported with the objects
-                if client:  # the client file holds the sparse tier's views only
-                    members = range(len(stored)) if tier == "sparse" else range(0)
-                else:
-                    members = tier_members([(a, e) for _, a, e in stored], config.gap,
-                                           config.client_gap, sym, bool(skimmed))[tier]
-                expected = {stored[i][0] for i in members}
-                if tier == "full":
-                    expected |= perspective.get(int(oid), set())
-                if in_tier.get(int(oid), set()) != expected:
-                    report.add(
-                        f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "
-                        f"views, expected {len(expected)}"
-                    )
+            _check_members(tier, objects, in_tier, stored, config, client, report)
             report.checked[f"{tier}_groups"] = len(rows)
         finally:
             index.discard()
+
+
+class _StoredViews:
+    """Every stored view's curve (perspective views by their group id,
+    :func:`~viewdb.storage.schema.perspective_group_id`), each object's views, and its
+    perspective views (full tier only)."""
+
+    def __init__(self, raw, n: int, report: CheckReport) -> None:  # type: ignore[no-untyped-def]
+        self.n = n
+        self.curves: dict[int, np.ndarray] = {}
+        for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
+            try:
+                self.curves[int(vid)] = decode_array(blob, np.float32, (n,))
+            except StorageError:
+                continue  # reported with the views
+        self.views: dict[int, list[tuple[int, float, float]]] = {}
+        for vid, oid, az, el in raw.execute(
+            "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
+        ):
+            self.views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
+        self.perspective: dict[int, set[int]] = {}
+        for pid, oid, blob in raw.execute("SELECT id, object_id, samples FROM perspective_views"):
+            gid = s.perspective_group_id(int(pid))
+            self.perspective.setdefault(int(oid), set()).add(gid)
+            try:
+                self.curves[gid] = decode_array(blob, np.float32, (n,))
+            except StorageError as exc:
+                report.add(f"perspective view {pid}: {exc.message}")
+
+    def owned(self, oid: int, tier: str) -> set[int]:
+        """The ids object ``oid``'s groups in ``tier`` may name."""
+        out = {vid for vid, _, _ in self.views.get(oid, [])}
+        return out | self.perspective.get(oid, set()) if tier == "full" else out
+
+
+def _check_groups(  # type: ignore[no-untyped-def]
+    tier: str, rows, entries: dict[int, tuple[np.ndarray, np.ndarray]], stored: _StoredViews,
+    report: CheckReport,
+) -> dict[int, set[int]]:
+    """Check each group row of ``tier`` against its R-tree entry (taken out of
+    ``entries``), its box and its object's stored views; the views each object has in
+    the tier."""
+    n = stored.n
+    in_tier: dict[int, set[int]] = {}
+    for gid, oid, blob_ids, blob_curves, blob_lo, blob_hi in rows:
+        where = f"{tier} tier group {gid}"
+        try:
+            ids_g = decode_array(blob_ids, np.int64, (None,))
+            curves_g = decode_array(blob_curves, np.float32, (len(ids_g), n))
+            lo = decode_array(blob_lo, np.float64, (DIMENSION,))
+            hi = decode_array(blob_hi, np.float64, (DIMENSION,))
+        except StorageError as exc:
+            report.add(f"{where}: {exc.message}")
+            continue
+        entry = entries.pop(gid, None)
+        if entry is None:
+            report.add(f"{where}: not in the R-tree")
+        elif not (np.array_equal(entry[0], lo) and np.array_equal(entry[1], hi)):
+            report.add(f"{where}: R-tree box differs from the stored box")
+        coords = indexed_coordinates(curves_g)
+        if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
+            report.add(f"{where}: views lie outside its box")
+        owned = stored.owned(int(oid), tier)
+        mine = in_tier.setdefault(int(oid), set())
+        for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
+            if vid not in owned:
+                report.add(f"{where}: view {vid} is not a view of its object")
+            elif vid in stored.curves and not np.array_equal(stored.curves[vid], curve):
+                report.add(f"{where}: curve of view {vid} differs from the stored curve")
+            if vid in mine:
+                report.add(f"{where}: view {vid} is in the tier twice")
+            mine.add(vid)
+    return in_tier
+
+
+def _check_members(  # type: ignore[no-untyped-def]
+    tier: str, objects, in_tier: dict[int, set[int]], stored: _StoredViews, config,
+    client: bool, report: CheckReport,
+) -> None:
+    """Each object's views in ``tier`` are exactly the ones its plan puts there."""
+    for oid, name, skimmed, symmetry in objects:
+        views = stored.views.get(int(oid), [])
+        sym = None
+        if symmetry is not None:
+            try:
+                sym = SymmetryType.from_dict(json.loads(symmetry))
+            except (ValueError, KeyError, TypeError):
+                continue  # reported with the objects
+        if client:  # the client file holds the sparse tier's views only
+            members = range(len(views)) if tier == "sparse" else range(0)
+        else:
+            members = tier_members([(a, e) for _, a, e in views], config.gap,
+                                   config.client_gap, sym, bool(skimmed))[tier]
+        expected = {views[i][0] for i in members}
+        if tier == "full":
+            expected |= stored.perspective.get(int(oid), set())
+        if in_tier.get(int(oid), set()) != expected:
+            report.add(
+                f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "
+                f"views, expected {len(expected)}"
+            )
