@@ -395,3 +395,48 @@ def test_a_client_file_holds_no_appearance(appearance_db, tmp_path):
         assert conn.execute("SELECT count(*) FROM appearance_blobs").fetchone() == (0,)
     with viewdb.open(client, read_only=True) as db:
         assert db.check().ok
+
+
+def _direction(azimuth, elevation):
+    h, v = np.radians(azimuth), np.radians(elevation)
+    return np.array([np.sin(h) * np.cos(v), np.sin(v), np.cos(h) * np.cos(v)])
+
+
+def _angle(a, b):
+    return float(np.degrees(np.arccos(np.clip(_direction(*a) @ _direction(*b), -1.0, 1.0))))
+
+
+def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, meshes):
+    """Off-grid silhouettes of a texture-less asymmetric object, posed from the nearest grid
+    view: interpolating the grid neighbours' fits (no render) lands nearer the true viewing
+    direction than the grid view, within a quarter of the gap on average (the rendering
+    walk, sampling half and quarter gaps, is closer still: measured 1.4° here, and 2.0°
+    against 1.4° at a 10° gap)."""
+    from viewdb.config import PosingConfig
+    from viewdb.pose.matched import pose_matches
+    from viewdb.search.plans import Candidate
+
+    config = BuildConfig(gap=20, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=60),
+                         perspective=PerspectiveConfig(distances=()))
+    path = tmp_path / "shape.db"
+    with viewdb.open(path, config=config) as db:
+        assert not db.ingest([sample("l_bracket")]).failed
+    renderer = get_renderer(RenderConfig(image_size=160))
+    errors: dict[str, list[float]] = {"none": [], "interpolate": [], "walk": []}
+    rng = np.random.default_rng(5)
+    with viewdb.open(path, read_only=True) as db:
+        for _ in range(6):
+            h0, v0 = 20.0 * rng.integers(0, 18), 20.0 * rng.integers(-3, 4)
+            h, v = h0 + rng.uniform(-9, 9), v0 + rng.uniform(-9, 9)
+            view = renderer.render(meshes["l_bracket"], h, v)
+            query = QueryView(view.color, view.mask)
+            match = Candidate("l_bracket", 0.0, h0, v0 % 360.0, False)
+            for way in errors:
+                pose, why = pose_matches(db._catalogue, query, [match], None, PoseConfig(),
+                                         posing=PosingConfig(shape_refine=way, near_views=0))[0]
+                assert pose is not None, why
+                assert pose.method == "shape"
+                errors[way].append(_angle((pose.azimuth, pose.elevation), (h, v)))
+    mean = {way: float(np.mean(e)) for way, e in errors.items()}
+    assert mean["interpolate"] < 0.75 * mean["none"], mean
+    assert mean["interpolate"] < config.gap / 4, mean

@@ -247,16 +247,21 @@ def interpolate_shape(
     """Texture-less objects: the viewing direction off the grid without rendering.
 
     The four grid neighbours ``(h ± gap, v)``, ``(h, v ± gap)`` of the best outline match
-    are fitted to the query from their appearance (in-plane near the match's), and the
-    match moves to a neighbour that fits better (at most ``posing.shape_climb`` times).
-    Then along each axis a parabola through the costs (1 − score) of the view and its two
-    neighbours puts the minimum at most half a gap off the view, and the pose turns that
-    share of the way towards the neighbour on that side (rotation vectors, model frame).
-    Scale and translation are the view's."""
+    are fitted to the query by their outlines alone (from their appearance, in-plane near
+    the match's; the internal edges make the fits of nearby views noisy: measured, the
+    direction's mean error 2.4° with them, 2.0° without, 1.4° for the rendering walk, on
+    off-grid renders of a texture-less object), and the match moves to a neighbour that
+    fits better (at most ``posing.shape_climb`` times). Then along each axis a parabola
+    through the costs (1 − score) of the view and its two neighbours puts the minimum at
+    most half a gap off the view, and the pose turns that share of the way towards the
+    neighbour on that side (rotation vectors, model frame). Scale and translation are the
+    view's; the score is the shape pose's at the view reached."""
     gap = catalogue.config.gap
+    full, config = config, replace(config, detail_weight=0.0)
     h, v = start.azimuth, start.elevation
     near = inplane_angle(estimate.rotation, h, v)
     centre = _fit_at(catalogue, name, query, h, v, config, near) or estimate
+    moved = False
     steps = ((gap, 0.0), (-gap, 0.0), (0.0, gap), (0.0, -gap))
     around: dict[tuple[float, float], PoseEstimate | None] = {}
     for _ in range(posing.shape_climb + 1):
@@ -268,7 +273,7 @@ def interpolate_shape(
         score, (dh, dv) = max(fitted)
         found = around[(dh, dv)]
         assert found is not None
-        h, v, centre = h + dh, v + dv, found
+        h, v, centre, moved = h + dh, v + dv, found, True
         near = inplane_angle(centre.rotation, h, v)
     turn = np.zeros(3)
     for plus, minus in (((gap, 0.0), (-gap, 0.0)), ((0.0, gap), (0.0, -gap))):
@@ -284,8 +289,10 @@ def interpolate_shape(
         turn += abs(share) * _rotation_vector(centre.rotation.T @ towards.rotation)
     rotation = centre.rotation @ rodrigues(turn)
     azimuth, elevation, inplane = rotation_to_view(rotation)
+    # the score as the shape pose gives it (edges included when they are), at the view reached
+    scored = (_fit_at(catalogue, name, query, h, v, full, near) if moved else None) or estimate
     return replace(centre, azimuth=azimuth, elevation=elevation, inplane=inplane, rotation=rotation,
-                   candidate=estimate.candidate)
+                   candidate=estimate.candidate, score=scored.score)
 
 
 def walk_shape(
