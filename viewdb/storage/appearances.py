@@ -12,7 +12,7 @@ A packed record, little-endian::
     mask:u32 edges:u32 theta:u32      lengths of the three zlib streams that follow
     zlib(packbits(box XOR box shifted down a row))     the silhouette (rows as differences)
     zlib(packbits(edge pixels in the box))
-    zlib(edge directions, uint8, row-major)
+    zlib(edge directions, uint8 levels, row-major)
     zlib(signature, uint16 BINS × BINS)       if flags & 1
 
 Decoding checks what the record promises (its box inside the image, the stream lengths,
@@ -38,8 +38,12 @@ VERSION = 1
 _HEADER = struct.Struct("<2sBB4H3I")
 
 
+#: zlib level of the bit images: level 9 took 6x the time of 6 for 10 % fewer bytes.
+BITS_LEVEL = 6
+
+
 def _bits(box: np.ndarray) -> bytes:
-    return zlib.compress(np.packbits(box, axis=None).tobytes(), 9)
+    return zlib.compress(np.packbits(box, axis=None).tobytes(), BITS_LEVEL)
 
 
 def encode_record(record: Appearance) -> bytes:
