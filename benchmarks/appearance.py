@@ -58,6 +58,10 @@ def forget(db: viewdb.ViewDB) -> None:
         cache.clear()
 
 
+def together_of(stages: dict[str, list[float]], rows: list[int]) -> list[float]:
+    return [stages["colour"][i] + stages["verify"][i] for i in rows]
+
+
 def median(values) -> float:
     v = [x for x in values if not math.isnan(x)]
     return float(np.median(v)) if v else math.nan
@@ -80,6 +84,7 @@ def main() -> None:
     ranks: dict[str, list[int]] = {"stored": [], "rendered": []}
     times: dict[str, dict[str, list[float]]] = {w: {s: [] for s in STAGES} for w in ranks}
     poses: list[tuple[str, str, float, float, float, float, float, float]] = []
+    asymmetric: list[bool] = []
     samples = db.config.features.curve_samples
     for i in range(args.photos):
         name = names[rng.integers(len(names))]
@@ -103,6 +108,7 @@ def main() -> None:
         catalogue.stored_appearance = True
         top = results["stored"].results[0] if results["stored"].results else None
         sym = db.symmetry(name)
+        asymmetric.append(sym is not None and not sym.generators)
         if top is not None and top.object == name and top.pose is not None and sym is not None \
                 and not sym.generators:
             error = view_error(top.pose, spec)
@@ -141,6 +147,12 @@ def main() -> None:
     together = [c + v for c, v in zip(times["stored"]["colour"], times["stored"]["verify"], strict=True)]
     print(f"stored: colour + verify median {median(together):.0f} ms; pose of the top result median "
           f"{median(times['stored']['pose']):.0f} ms")
+    for label, wanted in (("asymmetric", True), ("symmetric", False)):
+        rows = [i for i, a in enumerate(asymmetric) if a == wanted]
+        if rows:
+            parts = [f"{way} colour + verify {median(together_of(times[way], rows)):.0f} ms, "
+                     f"pose {median(times[way]['pose'][i] for i in rows):.0f} ms" for way in ("stored", "rendered")]
+            print(f"  photos of {label} objects ({len(rows)}): " + "; ".join(parts))
     for method in ("sift", "shape"):
         rows = [p for p in poses if p[1] == method]
         if not rows:
