@@ -151,7 +151,8 @@ def main() -> None:
         rows = [i for i, a in enumerate(asymmetric) if a == wanted]
         if rows:
             parts = [f"{way} colour + verify {median(together_of(times[way], rows)):.0f} ms, "
-                     f"pose {median(times[way]['pose'][i] for i in rows):.0f} ms" for way in ("stored", "rendered")]
+                     f"pose {median(times[way]['pose'][i] for i in rows):.0f} ms"
+                     for way in ("stored", "rendered")]
             print(f"  photos of {label} objects ({len(rows)}): " + "; ".join(parts))
     for method in ("sift", "shape"):
         rows = [p for p in poses if p[1] == method]
