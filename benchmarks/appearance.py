@@ -85,6 +85,15 @@ def main() -> None:
     times: dict[str, dict[str, list[float]]] = {w: {s: [] for s in STAGES} for w in ranks}
     poses: list[tuple[str, str, float, float, float, float, float, float]] = []
     asymmetric: list[bool] = []
+    renders: dict[str, list[int]] = {"stored": [], "rendered": []}
+    count = [0]
+    render = catalogue.render
+
+    def counted(*args, **kwargs):  # every render of a view, whatever asks for it
+        count[0] += 1
+        return render(*args, **kwargs)
+
+    catalogue.render = counted
     samples = db.config.features.curve_samples
     for i in range(args.photos):
         name = names[rng.integers(len(names))]
@@ -97,14 +106,17 @@ def main() -> None:
         for way in ("rendered", "stored"):
             catalogue.stored_appearance = way == "stored"
             forget(db)
+            count[0] = 0
             result = db.query(photo, k=args.k, pose_top=1)
+            renders[way].append(count[0])
             found = [m.object for m in result.results]
             ranks[way].append(found.index(name) + 1 if name in found else 0)
             for stage in STAGES:
                 times[way][stage].append(result.timing_ms.get(stage, 0.0))
             results[way] = result
             line.append(f"{way} {ranks[way][-1] or '-'} colour {result.timing_ms['colour']:.0f} "
-                        f"verify {result.timing_ms['verify']:.0f} pose {result.timing_ms['pose']:.0f} ms")
+                        f"verify {result.timing_ms['verify']:.0f} pose {result.timing_ms['pose']:.0f} ms "
+                        f"({renders[way][-1]} renders)")
         catalogue.stored_appearance = True
         top = results["stored"].results[0] if results["stored"].results else None
         sym = db.symmetry(name)
@@ -146,7 +158,10 @@ def main() -> None:
         for s in ("colour", "verify", "pose", "total")))
     together = [c + v for c, v in zip(times["stored"]["colour"], times["stored"]["verify"], strict=True)]
     print(f"stored: colour + verify median {median(together):.0f} ms; pose of the top result median "
-          f"{median(times['stored']['pose']):.0f} ms")
+          f"{median(times['stored']['pose']):.0f} ms; renders a query: median "
+          f"{median(renders['stored']):.0f}, "
+          f"none in {sum(n == 0 for n in renders['stored'])} of {args.photos} (rendered: median "
+          f"{median(renders['rendered']):.0f})")
     for label, wanted in (("asymmetric", True), ("symmetric", False)):
         rows = [i for i, a in enumerate(asymmetric) if a == wanted]
         if rows:
