@@ -37,7 +37,7 @@ from ..catalogue.appearance import BINS, carries_colour, colour_signature
 
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
-    "reranked_score", "rerank",
+    "reranked_score", "rerank", "rerank_by_colour",
 ]
 
 #: How much a full colour mismatch (distance 1) lengthens the outline distance: × (1 + w).
@@ -71,15 +71,24 @@ def reranked_score(distance: float, colour: float, weight: float = COLOUR_WEIGHT
 
 def rerank(
     distances: Sequence[float], query: NDArray[np.float32],
-    signatures: Sequence[NDArray[np.float32] | None],
+    signatures: Sequence[NDArray[np.float32] | None], weight: float = COLOUR_WEIGHT,
 ) -> tuple[list[int], list[float | None], list[float]]:
     """The order of results (indices) by score, ties kept in the given order; each one's
     colour distance (None: its mesh has no colour) and score (:func:`reranked_score`). A
     result without a signature is scored with the mean colour distance of those with one;
     when none has one the scores are the distances."""
     colours = [None if s is None else colour_distance(query, s) for s in signatures]
+    order, scores = rerank_by_colour(distances, colours, weight)
+    return order, colours, scores
+
+
+def rerank_by_colour(
+    distances: Sequence[float], colours: Sequence[float | None], weight: float = COLOUR_WEIGHT,
+) -> tuple[list[int], list[float]]:
+    """:func:`rerank` from colour distances already measured: the order and the scores."""
     known = [c for c in colours if c is not None]
     neutral = float(np.mean(known)) if known else 0.0
-    scores = [reranked_score(d, neutral if c is None else c) for d, c in zip(distances, colours, strict=True)]
+    scores = [reranked_score(d, neutral if c is None else c, weight)
+              for d, c in zip(distances, colours, strict=True)]
     order = sorted(range(len(distances)), key=lambda i: (scores[i], i))
-    return order, colours, scores
+    return order, scores
