@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 # cheap and needed to report any error: imported at once
 from .config import (
     DEFAULT_MAX_FACES,
+    AppearanceConfig,
     BuildConfig,
     FeatureConfig,
     IndexConfig,
@@ -48,6 +49,7 @@ from .errors import (
 #: SQLAlchemy; ``viewdb.open`` and the rest work as plain attributes.
 _LAZY: dict[str, str] = {
     **dict.fromkeys(("DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"), "api"),
+    "Appearance": "catalogue.appearance",
     **dict.fromkeys(("FileOutcome", "IngestProgress", "IngestReport"), "catalogue.ingest"),
     "NormalisedMesh": "catalogue.mesh",
     **dict.fromkeys(("CandidatePose", "CatalogueReader", "ObjectInfo", "StoredView"), "catalogue.reading"),
@@ -70,6 +72,7 @@ _LAZY: dict[str, str] = {
 
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .api import DatabaseInfo, ViewDB, describe_paths, open, render_model
+    from .catalogue.appearance import Appearance
     from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
     from .catalogue.mesh import NormalisedMesh
     from .catalogue.reading import CandidatePose, CatalogueReader, ObjectInfo, StoredView
@@ -106,6 +109,8 @@ def __dir__() -> list[str]:
 __version__ = "0.1.0"
 
 __all__ = [
+    "Appearance",
+    "AppearanceConfig",
     "BuildConfig",
     "Candidate",
     "CandidatePose",
