@@ -12,7 +12,7 @@ from typing import Any
 
 __all__ = [
     "BuildConfig", "FeatureConfig", "IndexConfig", "PerspectiveConfig", "RenderConfig",
-    "SiftConfig", "SkimConfig", "default_client_gap",
+    "SearchConfig", "SiftConfig", "SkimConfig", "default_client_gap",
 ]
 
 
@@ -91,6 +91,26 @@ class IndexConfig:
     def __post_init__(self) -> None:
         if self.group_views < 1:
             raise ValueError(f"group_views must be at least 1, got {self.group_views}")
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The shift search (:mod:`viewdb.search.shifts`): one search over the circular shifts
+    of the query curve instead of one per in-plane turn. Query-time settings, not stored
+    in a file."""
+
+    #: Consecutive shifts bounded together by one wedge before they are tried one by one
+    #: (``benchmarks/shift_search.py`` measured the choice).
+    shift_block: int = 8
+    #: Degrees either side of a gravity hint's in-plane turn searched
+    #: (:func:`viewdb.search.shifts.turn_window`).
+    roll_tolerance: float = 15.0
+
+    def __post_init__(self) -> None:
+        if self.shift_block < 1:
+            raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
+        if not 0 <= self.roll_tolerance <= 180:
+            raise ValueError(f"roll_tolerance must be in [0, 180], got {self.roll_tolerance}")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,313 @@
+"""The compiled refinement of a search over a stack of query curves (:mod:`.shifts`).
+
+The same best-first loop as :mod:`viewdb.search.refine` (read its module doc first: the
+candidate groups arrive sorted by key, the limits ``min(U, bound[o])``, the stop rule and
+the exactness argument are the same), over entries of five kinds, each keyed by a lower
+bound of the distance of everything it stands for (:mod:`viewdb.search.shifts` proves each)
+and never below its parent's key:
+
+========  ===========================  ============================================
+entry     stands for                   key
+========  ===========================  ============================================
+GB        a group against a block      group key, MINDIST of the block's union box,
+                                       curve-box bound of the block's wedge
+VB        a view against a block       + Fourier_Dist, LB_PAA of the block's wedge
+VBC       (the same, bound known)      + LB_Keogh of the block's wedge
+VP        a view against one curve     + Fourier_Dist, LB_PAA of the curve's envelope
+VC        (the same, bound known)      + LB_Keogh of the curve's envelope
+========  ===========================  ============================================
+
+each for the view as stored or mirrored. Opening a group pushes its GB entries (one per
+block and orientation); a GB pops into VB entries of the group's views (VP entries
+directly for a block of one curve); a VB computes its LB_Keogh and comes back as a VBC
+(or goes on at once when that is no larger than the next key), which pops into the VP
+entries of the block's curves; a VP becomes a VC the same way, and a VC is refined to
+its exact DTW (the UCR cascade against that curve). So a view is compared with a single
+curve only when the wedge of its block could not rule the whole block out.
+
+Per object the loop keeps, besides ``bound`` and ``exact`` (as :mod:`.refine`), the
+curve ``exact_curve[o]`` of the best view; among entries at exactly the same distance
+the lowest row, then the unmirrored view, then the lowest curve wins, whatever order
+they were refined in (every entry at an object's final distance is refined, whatever
+the bounds), so bounded (CS1) and unbounded searches report the same view and shift.
+
+The heap holds at most a few entries per pushed parent; when a pop could overflow it the
+kernel returns :data:`FULL` before popping and the caller grows the heap.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .bounds import _cascade_env_kernel, _fourier_dist2, _lb_keogh2, _lb_paa2
+from .refine import DONE, EXHAUSTED, NEED, RADIUS, _heap_pop, _heap_push, _kth, _load_row, _widen
+
+__all__ = ["FULL", "refine_stack", "scan_stack"]
+
+#: :func:`refine_stack` status besides those of :mod:`.refine`: the heap may overflow.
+FULL = 4
+
+# entry kinds (the low 3 bits of a code; bit 3 is "mirrored", the rest the payload)
+_GB, _VB, _VBC, _VC = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True)
+def _first(row, mirrored, curve, other_row, other_mirrored, other_curve):  # pragma: no cover
+    # canonical order among entries at exactly the same distance: row, unmirrored, curve
+    if row != other_row:
+        return row < other_row
+    if mirrored != other_mirrored:
+        return not mirrored
+    return curve < other_curve
+
+
+@njit(cache=True, nogil=True)
+def _group_block_key2(lo, hi, clo, chi, g, blo, bhi, wlo, whi):  # pragma: no cover - compiled
+    # squared max(MINDIST(block box, MBR of g), curve-box bound(block wedge, range of g))
+    a = 0.0
+    for j in range(lo.shape[1]):
+        e = max(blo[j] - hi[g, j], 0.0) + max(lo[g, j] - bhi[j], 0.0)
+        a += e * e
+    b = 0.0
+    for t in range(clo.shape[1]):
+        e = max(clo[g, t] - whi[t], 0.0) + max(wlo[t] - chi[g, t], 0.0)
+        b += e * e
+    return max(a, b)
+
+
+@njit(cache=True, nogil=True)
+def _reverse_lb2(q, lower, upper, limit2):  # pragma: no cover - compiled
+    # squared LB_Keogh of the query curve against a view's envelope [lower, upper],
+    # abandoned (some value > limit2) as soon as it passes limit2
+    s = 0.0
+    for t in range(q.shape[0]):
+        x = q[t]
+        if x > upper[t]:
+            e = x - upper[t]
+            s += e * e
+        elif x < lower[t]:
+            e = lower[t] - x
+            s += e * e
+        if s > limit2:
+            return s
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _envelope_into(c, r, lower, upper):  # pragma: no cover - compiled
+    # the band-r envelope of c (bounds.envelope) into lower, upper
+    n = c.shape[0]
+    for i in range(n):
+        a = max(0, i - r)
+        b = min(n - 1, i + r)
+        lo = c[a]
+        hi = c[a]
+        for j in range(a + 1, b + 1):
+            v = c[j]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        lower[i] = lo
+        upper[i] = hi
+
+
+@njit(cache=True, nogil=True)
+def _stack_kernel(  # pragma: no cover - compiled
+    Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
+    block_start, block_end, wedge_lo, wedge_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
+    order, keys, start_at, ready, stop_key,
+    group_start, group_count, group_owner, row_owner, curves, coords, means,
+    mbr_lo, mbr_hi, range_lo, range_hi,
+    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize,
+):
+    n_samples = Q.shape[1]
+    n_curves = Q.shape[0]
+    n_blocks = block_start.shape[0]
+    scratch = np.empty(n_samples)
+    view_lo = np.empty(n_samples)
+    view_hi = np.empty(n_samples)
+    widest = 1
+    for b in range(n_blocks):
+        widest = max(widest, block_end[b] - block_start[b])
+    most = 0
+    for g in range(group_count.shape[0]):
+        most = max(most, group_count[g])
+    room = max(2 * n_blocks, most, widest) + 1  # pushes of one step at most
+    U = _kth(bound, k, cap)
+    size = hsize[0]
+    i = start_at
+    status = EXHAUSTED
+    while True:
+        if size + room > hkey.shape[0]:
+            status = FULL
+            break
+        if i < ready:
+            gk = keys[i]
+        elif ready < order.shape[0]:
+            status = NEED
+            break
+        else:
+            gk = np.inf
+        top = hkey[0] if size > 0 else np.inf
+        if size == 0 and gk == np.inf:
+            status = EXHAUSTED
+            break
+        if min(gk, top) > _widen(U):
+            status = DONE if _widen(U) <= stop_key else RADIUS
+            break
+        if top <= gk:
+            if top > stop_key:
+                status = RADIUS
+                break
+            code = hcode[0]
+            size = _heap_pop(hkey, hcode, size)
+            kind = code & 7
+            m = (code >> 3) & 1
+            payload = code >> 4
+            if kind == _GB:
+                g = payload // n_blocks
+                b = payload % n_blocks
+                o = group_owner[g]
+            elif kind == _VC:
+                row = payload // n_curves
+                t = payload % n_curves
+                o = row_owner[row]
+            else:
+                row = payload // n_blocks
+                b = payload % n_blocks
+                o = row_owner[row]
+            limit = _widen(min(U, bound[o]))
+            if top > limit:
+                continue
+            limit2 = limit * limit
+            if kind == _GB:  # the group's views against the block
+                s = group_start[g]
+                n = group_count[g]
+                stats[1] += n
+                for row in range(s, s + n):
+                    fd = _fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
+                    if fd > limit2:
+                        continue
+                    pd = _lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
+                    if pd > limit2:
+                        continue
+                    size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), top),
+                                      (((row * n_blocks + b) << 1 | m) << 3) | _VB)
+                continue
+            if kind == _VB:  # the view against the block's wedge
+                stats[2] += 1
+                lb = _lb_keogh2(curves, row, wedge_lo[m, b], wedge_hi[m, b], limit2)
+                if lb > limit2:
+                    continue
+                lb = math.sqrt(lb)
+                if lb > top:
+                    size = _heap_push(hkey, hcode, size, lb,
+                                      (((row * n_blocks + b) << 1 | m) << 3) | _VBC)
+                    continue
+            if kind == _VB or kind == _VBC:
+                # the view against each curve of the block: LB_Keogh both ways
+                _load_row(curves, row, m == 1, scratch)
+                _envelope_into(scratch, r, view_lo, view_hi)
+                single = block_end[b] - block_start[b] == 1
+                for t in range(block_start[b], block_end[b]):
+                    lb = top * top
+                    if not single:
+                        stats[2] += 1
+                        lb = max(lb, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
+                        if lb > limit2:
+                            continue
+                    lb = max(lb, _reverse_lb2(Q[t], view_lo, view_hi, limit2))
+                    if lb > limit2:
+                        continue
+                    size = _heap_push(hkey, hcode, size, math.sqrt(lb),
+                                      (((row * n_curves + t) << 1 | m) << 3) | _VC)
+                continue
+            _load_row(curves, row, m == 1, scratch)  # a view against one curve: DTW
+            stats[3] += 1
+            dist = _cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
+            if dist > limit:
+                continue
+            if dist < exact[o] or (dist == exact[o] and _first(
+                    row, m == 1, t, exact_row[o], exact_mirrored[o], exact_curve[o])):
+                exact[o] = dist
+                exact_row[o] = row
+                exact_mirrored[o] = m == 1
+                exact_curve[o] = t
+            if dist < bound[o]:
+                bound[o] = dist
+                if dist < U:
+                    U = _kth(bound, k, cap)
+            continue
+        # open the next group: one entry per block and orientation still under the limit
+        if gk > stop_key:
+            status = RADIUS
+            break
+        g = order[i]
+        i += 1
+        o = group_owner[g]
+        limit = _widen(min(U, bound[o]))
+        if gk > limit:
+            continue
+        limit2 = limit * limit
+        stats[0] += 1
+        for b in range(n_blocks):
+            for m in range(2):
+                kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
+                                       wbox_hi[m, b], wedge_lo[m, b], wedge_hi[m, b])
+                if kb > limit2:
+                    continue
+                size = _heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
+                                  (((g * n_blocks + b) << 1 | m) << 3) | _GB)
+    hsize[0] = size
+    return i, status
+
+
+def refine_stack(
+    query, order, keys, start_at, ready, stop_key, source_groups, rows, groups, state, k, cap, stats,
+) -> tuple[int, int]:
+    """One call of the compiled refinement for a :class:`~viewdb.search.shifts.CurveQuery`;
+    returns ``(next group position, status)`` with the statuses of
+    :func:`~viewdb.search.refine.refine_groups` and :data:`FULL`.
+
+    ``source_groups`` is ``(group_start, group_count, group_owner, row_owner)``, ``rows``
+    the source's ``(curves, coords, means)``, ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
+    curve_hi)`` and ``state`` ``(bound, exact, exact_row, exact_mirrored, exact_curve,
+    heap keys, heap codes, heap size)``, all updated in place. Inputs are trusted.
+    """
+    q = query
+    i, status = _stack_kernel(
+        q.curves, q.band, q.env_lo, q.env_hi, q.box_lo, q.box_hi, q.seg_lo, q.seg_hi, q.widths,
+        q.block_start, q.block_end, q.wedge_lo, q.wedge_hi, q.wbox_lo, q.wbox_hi,
+        q.wseg_lo, q.wseg_hi, order, keys, start_at, ready, stop_key,
+        *source_groups, *rows, *groups, *state[:5], k, cap, stats, *state[5:],
+    )
+    return int(i), int(status)
+
+
+@njit(cache=True, nogil=True)
+def _scan_stack_kernel(Q, lower, upper, curves, r, out):  # pragma: no cover - compiled
+    scratch = np.empty(Q.shape[1])
+    for row in range(curves.shape[0]):
+        best = np.inf
+        for m in range(2):
+            _load_row(curves, row, m == 1, scratch)
+            for t in range(Q.shape[0]):
+                d = _cascade_env_kernel(Q[t], scratch, r, best, lower[t], upper[t], True)
+                if d < best:
+                    best = d
+        out[row] = best
+
+
+def scan_stack(query, curves: np.ndarray) -> np.ndarray:
+    """The exact distance of every row of ``curves`` to a
+    :class:`~viewdb.search.shifts.CurveQuery` (the smallest DTW over its curves and the
+    row's mirror), with no index and no bound shared between rows (each row's DTWs only
+    abandon past that row's best so far): the brute-force baseline of the benchmarks."""
+    out = np.empty(len(curves))
+    _scan_stack_kernel(query.curves, query.env_lo[0], query.env_hi[0], np.ascontiguousarray(curves),
+                       query.band, out)
+    return out
