@@ -58,14 +58,17 @@ def photo_queries(db: viewdb.ViewDB, count: int, seed: int) -> list[dict]:
         name = names[rng.integers(len(names))]
         spec = draw_photo_spec(rng, name)
         jpeg = encode_jpeg(render_photo(db.mesh(name), spec), spec.jpeg_quality)
-        rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR),
+                           cv2.COLOR_BGR2RGB)
         mask = segment(load_image(rgb)).mask
         out.append({"name": name, "curve": distance_curve(mask, n), "bearings": sample_bearings(mask, n),
                     "turns": np.stack([c for _, c in rotated_curves(mask, n, 12)])})
     return out
 
 
-def turns_with_prior(curves: np.ndarray, source: TierSource, k: int, band: int) -> tuple[list[Neighbour], SearchStats]:
+def turns_with_prior(
+    curves: np.ndarray, source: TierSource, k: int, band: int
+) -> tuple[list[Neighbour], SearchStats]:
     """Today's search: one search per turn, each bounded by the merged results so far
     (what ``ViewDB.recognise(..., prior=)`` does)."""
     best: dict[int, Neighbour] = {}
@@ -129,8 +132,8 @@ def main() -> None:
     for b in (1, 8):
         designs[f"roll±{args.tolerance:g}-b{b}"] = (
             lambda q: shifted_curves(q["curve"], turn_window(q["bearings"], 0.0, args.tolerance).shifts(n)),
-            lambda q, s, b=b: knn(q["curve"], s, k, band, shifts=turn_window(q["bearings"], 0.0, args.tolerance),
-                                  block=b))
+            lambda q, s, b=b: knn(q["curve"], s, k, band, block=b,
+                                  shifts=turn_window(q["bearings"], 0.0, args.tolerance)))
 
     reader = db._tier_reader()  # the file's R-tree, as ViewDB.search reads it
     with reader.snapshot():
@@ -150,8 +153,8 @@ def main() -> None:
 
     base_wall = np.median([r[0] for r in results["turns12"]])
     base_cpu = np.median([r[1] for r in results["turns12"]])
-    print(f"\n{'design':12s} {'p50 ms':>7s} {'p95 ms':>7s} {'vs turns12':>10s} {'CPU p50':>8s} {'vs turns12':>10s} "
-          f"{'DTWs':>6s} {'groups':>6s} {'rank-1':>7s} {'rank-5':>7s}")
+    print(f"\n{'design':12s} {'p50 ms':>7s} {'p95 ms':>7s} {'vs turns12':>10s} {'CPU p50':>8s} "
+          f"{'vs turns12':>10s} {'DTWs':>6s} {'groups':>6s} {'rank-1':>7s} {'rank-5':>7s}")
     for label, rows in results.items():
         wall = np.array([r[0] for r in rows])
         cpu = np.array([r[1] for r in rows])
@@ -161,7 +164,8 @@ def main() -> None:
             ranks.append(names.index(q["name"]) + 1 if q["name"] in names else 0)
         r = np.array(ranks)
         print(f"{label:12s} {np.median(wall) * 1e3:7.1f} {np.percentile(wall, 95) * 1e3:7.1f} "
-              f"{base_wall / np.median(wall):9.2f}x {np.median(cpu) * 1e3:8.1f} {base_cpu / np.median(cpu):9.2f}x "
+              f"{base_wall / np.median(wall):9.2f}x {np.median(cpu) * 1e3:8.1f} "
+              f"{base_cpu / np.median(cpu):9.2f}x "
               f"{np.mean([x[3].dtw for x in rows]):6.0f} {np.mean([x[3].groups_visited for x in rows]):6.0f} "
               f"{np.mean(r == 1) * 100:6.1f}% {np.mean((r >= 1) & (r <= 5)) * 100:6.1f}%")
 
@@ -180,7 +184,7 @@ def main() -> None:
                 expected = brute_top(CurveQuery.of(stack_of(q), band), tier.curves, tier.owner, tier.names, k)
                 times.append(time.process_time() - cpu)
                 found = results[label][i][2]
-                assert [nb.object for nb in found] == [name for _, name in expected], f"{label}: brute force disagrees"
+                assert [nb.object for nb in found] == [name for _, name in expected], label
                 assert np.allclose([nb.distance for nb in found], [d for d, _ in expected], rtol=0, atol=1e-9)
             searched = np.mean([r[1] for r in results[label][:count]])
             print(f"  {label:12s} {np.mean(times) * 1e3:9.0f} ms CPU a query, same answers; "

@@ -25,7 +25,15 @@ from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
 from .catalogue.mesh import DEFAULT_MAX_FACES
 from .catalogue.render import RenderedView
 from .catalogue.symmetry import SymmetryType
-from .config import BuildConfig, FeatureConfig, IndexConfig, RenderConfig, SiftConfig, SkimConfig
+from .config import (
+    BuildConfig,
+    FeatureConfig,
+    IndexConfig,
+    RenderConfig,
+    SearchConfig,
+    SiftConfig,
+    SkimConfig,
+)
 from .errors import (
     FeatureError,
     ImageError,
@@ -42,6 +50,7 @@ from .errors import (
 from .http.client import RemoteServer
 from .pose.intrinsics import parse_intrinsics
 from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from .search.shifts import ShiftWindow
 
 __version__ = "0.1.0"
 
@@ -71,9 +80,11 @@ __all__ = [
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
+    "SearchConfig",
     "SearchHit",
     "ServerError",
     "ServerReply",
+    "ShiftWindow",
     "SiftConfig",
     "SkimConfig",
     "StorageError",

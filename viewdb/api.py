@@ -40,6 +40,7 @@ from .search.plans import (
     walk,
 )
 from .search.refine import scan_all
+from .search.shifts import ShiftWindow
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store
 from .storage.schema import SCHEMA_REVISION
@@ -193,6 +194,8 @@ class SearchHit:
     #: The view is a perspective silhouette from this many bounding radii (None: an
     #: orthographic view).
     camera_distance: float | None = None
+    #: The query curve matched started at this sample (a shift search; None: as given).
+    shift: int | None = None
 
 
 @dataclass(frozen=True)
@@ -327,10 +330,12 @@ class ViewDB:
 
     # ------------------------------------------------------------------ plans
     def client_candidates(
-        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6,
+        shifts: ShiftWindow | None = None,
     ) -> tuple[list[Candidate], SearchStats]:
-        """The client half of CS1/CS2: the k nearest objects on this file's sparse tier."""
-        return self._knn(self._query_curve(curve, k, "sparse"), k, band, "sparse")
+        """The client half of CS1/CS2: the k nearest objects on this file's sparse tier
+        (over ``shifts`` of the curve, as :meth:`search`)."""
+        return self._knn(self._query_curve(curve, k, "sparse"), k, band, "sparse", shifts)
 
     def refine(self, request: RefineRequest) -> ServerReply:
         """The server half of CS1 (Algorithm 3): exact, the same answer as ``plan="server"``
@@ -344,7 +349,8 @@ class ViewDB:
             versions = reader.object_versions()
             found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
             angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None),
+                           stats.to_dict())
 
     def walk(self, request: WalkRequest) -> ServerReply:
         """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views.
@@ -386,7 +392,7 @@ class ViewDB:
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
         client: ViewDB | None = None, server: ServerTier | None = None,
-        prior: Sequence[Candidate] = (),
+        prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``).
 
@@ -401,31 +407,36 @@ class ViewDB:
         of them, or its own) is left out. Merging the results of several curves, each
         searched with the merged results so far as ``prior``, gives exactly the merge of
         their unbounded searches.
+
+        ``shifts``: every plan searches the smallest distance over these circular shifts
+        of the curve (:class:`~viewdb.search.shifts.ShiftWindow`; one search instead of one
+        per in-plane turn); each result's ``shift`` is the start sample that matched.
         """
         if plan not in PLANS:
             raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
         if server is not None:
             if client is not None:
                 raise QueryError("give either a client file or a server, not both")
-            return self._recognise_remote(curve, k, band, plan, server, prior)
+            return self._recognise_remote(curve, k, band, plan, server, prior, shifts)
         self._full_tier_only()
         q = self._query_curve(curve, k, "full")
         start = time.perf_counter()
         if plan == "server" and prior:
-            reply = self.refine(RefineRequest(q, band, k, _best_of(prior, [], k)))
+            reply = self.refine(RefineRequest(q, band, k, _best_of(prior, [], k), shifts))
             return Recognition(plan, reply.results, [], 0.0, (time.perf_counter() - start) * 1e3,
                                reply.stats, 0, 0)
         if plan == "server":
-            hits, stats = self.search(q, k, band=band, tier="full")
+            hits, stats = self.search(q, k, band=band, tier="full", shifts=shifts)
             found = [Candidate(h.object, h.distance, h.azimuth, h.elevation, h.mirrored,
-                               camera_distance=h.camera_distance) for h in hits]
+                               camera_distance=h.camera_distance, shift=h.shift) for h in hits]
             return Recognition(plan, found, [], 0.0, (time.perf_counter() - start) * 1e3,
                                stats.to_dict(), 0, 0)
         side = client or self
-        mine, _ = side.client_candidates(q, k, band=band)
+        mine, _ = side.client_candidates(q, k, band=band, shifts=shifts)
         middle = time.perf_counter()
         if plan == "cs1":
-            request: RefineRequest | WalkRequest = RefineRequest(q, band, k, _best_of(mine, prior, k))
+            request: RefineRequest | WalkRequest = RefineRequest(q, band, k, _best_of(mine, prior, k),
+                                                                 shifts)
             reply = self.refine(request)
         else:
             request = WalkRequest(q, band, k, side.config.client_gap, mine)
@@ -438,16 +449,16 @@ class ViewDB:
 
     def _recognise_remote(
         self, curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
-        prior: Sequence[Candidate] = (),
+        prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
     ) -> Recognition:
         q = self._query_curve(curve, k, "sparse")
         start = time.perf_counter()
-        mine = [] if plan == "server" else self.client_candidates(q, k, band=band)[0]
+        mine = [] if plan == "server" else self.client_candidates(q, k, band=band, shifts=shifts)[0]
         client_ms = (time.perf_counter() - start) * 1e3
         if plan == "cs2":
             reply, exchange = server.walk(WalkRequest(q, band, k, self.config.client_gap, mine))
         else:  # cs1; and the server plan is CS1 without client candidates
-            reply, exchange = server.refine(RefineRequest(q, band, k, _best_of(mine, prior, k)))
+            reply, exchange = server.refine(RefineRequest(q, band, k, _best_of(mine, prior, k), shifts))
         return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                            exchange.sent, exchange.received,
                            max(exchange.wall_ms - exchange.server_ms, 0.0))
@@ -471,6 +482,8 @@ class ViewDB:
         colour: bool = True,
         verify: bool = True,
         pose_top: int | None = None,
+        shifts: ShiftWindow | None = None,
+        roll: float | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses.
 
@@ -490,7 +503,9 @@ class ViewDB:
         (:mod:`viewdb.recognition.verify`); ``colour=False, verify=False`` ranks by outline alone, as
         the paper does.
         ``pose_top``: pose only the best this many results (default all k; about 0.4 s
-        each).
+        each). ``shifts`` searches these circular shifts of the upright curve in one search
+        instead of ``rotations`` turned silhouettes; ``roll`` (a gravity hint, degrees)
+        only those near that in-plane turn (:func:`viewdb.recognition.pipeline.run_query`).
 
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
@@ -501,7 +516,8 @@ class ViewDB:
         return run_query(self, image, k=k, plan=plan, client=client, mask=mask, band=band,
                          rotations=rotations, pose=pose and (self.role == "full" or server is not None),
                          intrinsics=intrinsics, server=server, label_map=label_map, label=label,
-                         rerank=rerank, colour=colour, verify=verify, pose_top=pose_top)
+                         rerank=rerank, colour=colour, verify=verify, pose_top=pose_top,
+                         shifts=shifts, roll=roll)
 
     def estimate_pose(
         self,
@@ -556,7 +572,8 @@ class ViewDB:
         return [(v.azimuth, v.elevation) for v in self._store.views(name)]
 
     def search(
-        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full"
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full",
+        shifts: ShiftWindow | None = None,
     ) -> tuple[list[SearchHit], SearchStats]:
         """The ``k`` objects whose views in ``tier`` are nearest to a distance curve.
 
@@ -564,24 +581,27 @@ class ViewDB:
         same objects and distances as a scan of every view of the tier with DTW
         (Sakoe–Chiba band of ``band`` samples) against the curve and its mirror.
         ``tier`` is ``"full"`` (every stored view) or ``"sparse"`` (the client grid).
+        ``shifts``: the distance is the smallest over these circular shifts of the curve
+        (:class:`~viewdb.search.shifts.ShiftWindow`, e.g. ``ShiftWindow()`` for every
+        in-plane turn), in one search; each hit's ``shift`` is the start that matched.
         """
-        found, stats = self._knn(self._query_curve(curve, k, tier), k, band, tier)
-        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance)
-                for c in found]
+        found, stats = self._knn(self._query_curve(curve, k, tier), k, band, tier, shifts)
+        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance,
+                          c.shift) for c in found]
         return hits, stats
 
     def _knn(
-        self, q: NDArray[np.float64], k: int, band: int, tier: str
+        self, q: NDArray[np.float64], k: int, band: int, tier: str, shifts: ShiftWindow | None = None,
     ) -> tuple[list[Candidate], SearchStats]:
         """Algorithm 2 on one tier, in one read snapshot, with the views' angles."""
         with self._tier_reader().snapshot() as reader:
             source = reader.tier(tier)
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
-            found, stats = knn(q, source, k, band)
+            found, stats = knn(q, source, k, band, shifts=shifts)
             angles = reader.view_projections([n.view for n in found])
             versions = reader.object_versions()
-        return neighbours_to_candidates(found, angles, versions), stats
+        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None), stats
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, *, band: int = 6, tier: str = "full"

@@ -33,9 +33,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.features import distance_curve
+from ..catalogue.features import distance_curve, sample_bearings
 from ..catalogue.pinhole import get_pinhole_renderer
 from ..catalogue.render import get_renderer
+from ..config import SearchConfig
 from ..errors import FeatureError, ImageError, QueryError, ViewDBError
 from ..pose.estimate import (
     GL_TO_CV,
@@ -50,6 +51,7 @@ from ..pose.estimate import (
 from ..pose.intrinsics import Intrinsics, parse_intrinsics
 from ..pose.silhouette import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
 from ..search.plans import Candidate
+from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .colour import colour_signature, has_colour, rerank
 from .image import LoadedImage, Segmentation, label_mask, load_image, segment
 from .verify import physical_view, rerank_by_fit
@@ -511,6 +513,8 @@ def run_query(
     colour: bool = True,
     verify: bool = True,
     pose_top: int | None = None,
+    shifts: ShiftWindow | None = None,
+    roll: float | None = None,
 ) -> QueryResult:
     """Recognise the object a query image shows and estimate its pose (see module doc).
 
@@ -536,6 +540,13 @@ def run_query(
 
     With ``server`` (e.g. :class:`viewdb.http.RemoteServer`), ``db`` is the client file:
     the client half of the plan runs on it, the server half and the pose on ``server``.
+
+    ``shifts`` (instead of ``rotations``): one search over these circular shifts of the
+    upright curve (:class:`~viewdb.search.shifts.ShiftWindow`; ``ShiftWindow()`` is every
+    in-plane turn), each result's in-plane turn the one its shift stands for. ``roll``: a
+    gravity hint, the in-plane turn (degrees, clockwise on screen, as ``inplane``) that
+    makes the photo upright; only the shifts within
+    :attr:`~viewdb.config.SearchConfig.roll_tolerance` of it are searched (0: upright).
     """
     start = time.perf_counter()
     if pose_top is not None and pose_top < 0:
@@ -551,11 +562,17 @@ def run_query(
         assert label is not None
         mask, ignore = label_mask(label_map, label, loaded)
     seg: Segmentation = segment(loaded, mask)
-    plain = rotated_curves(seg.mask, db.config.features.curve_samples, rotations)
-    curves = list(plain)
     completed = completed_mask(seg.mask, ignore)
-    if completed is not None:
-        curves += rotated_curves(completed, db.config.features.curve_samples, rotations)
+    samples = db.config.features.curve_samples
+    if shifts is None and roll is None:
+        plain = rotated_curves(seg.mask, samples, rotations)
+        curves = list(plain)
+        if completed is not None:
+            curves += rotated_curves(completed, samples, rotations)
+    else:  # one search over the shifts of each silhouette's upright curve
+        shapes = [seg.mask] + ([completed] if completed is not None else [])
+        upright = [(distance_curve(m, samples), sample_bearings(m, samples)) for m in shapes]
+        plain = [(0.0, upright[0][0])]
     segmented = time.perf_counter()
     meshes = server is not None or db.role == "full"
     recolour = colour and meshes and has_colour(loaded.rgb)
@@ -565,14 +582,26 @@ def run_query(
     client_ms = server_ms = 0.0
     traffic = _Traffic()
     pose_server_ms = 0.0
-    for angle, curve in curves:
+    by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
+    searches = ([(angle, curve, None, None) for angle, curve in curves] if shifts is None and roll is None
+                else [(0.0, curve, bearings, shifts if roll is None else
+                       turn_window(bearings, roll, SearchConfig().roll_tolerance))
+                      for curve, bearings in upright])
+    for angle, curve, bearings, window in searches:
         # the turns so far bound this one's search (the merged result is unchanged)
         prior = [c for c, _ in _merge(per_turn, pool)]
         if server is None:
-            found = db.recognise(curve, pool, band=band, plan=plan, client=client, prior=prior)
+            found = db.recognise(curve, pool, band=band, plan=plan, client=client, prior=prior,
+                                 shifts=window)
         else:
-            found = db.recognise(curve, pool, band=band, plan=plan, server=server, prior=prior)
-        per_turn.append((angle, found.results))
+            found = db.recognise(curve, pool, band=band, plan=plan, server=server, prior=prior,
+                                 shifts=window)
+        if window is None:
+            per_turn.append((angle, found.results))
+        for c in found.results if window is not None else ():  # the turn each shift stands for
+            turn = shift_turn(bearings, c.shift or 0)
+            per_turn.append((turn, [c]))
+            by_angle.setdefault(turn, shifted(curve, c.shift or 0))
         client_ms += found.client_ms
         server_ms += found.server_ms
         traffic.add(found.bytes_sent, found.bytes_received, int(plan != "server" or server is not None),
@@ -606,7 +635,6 @@ def run_query(
     merged = merged[:k]
     recognised = time.perf_counter()
     matches: list[QueryMatch] = []
-    by_angle = dict(plain)  # each turn's curve of the silhouette as segmented
     verify = rerank and pose and camera is not None
     posed = len(merged) if pose else 0  # how many of the results get a pose
     if pose_top is not None and not verify:  # re-ranking needs every result's pose

@@ -730,7 +730,8 @@ def envelope_box(
     Returns
     -------
     (lo, hi) : tuple of numpy.ndarray
-        float64 ``(d,)`` (``(T, d)`` for several envelopes, one row each): ``lo_k = sum_t min(F_kt L_t, F_kt U_t)`` and
+        float64 ``(d,)`` (``(T, d)`` for several envelopes, one row each):
+        ``lo_k = sum_t min(F_kt L_t, F_kt U_t)`` and
         ``hi_k = sum_t max(F_kt L_t, F_kt U_t)``, the min and max of ``F_k . x`` over
         ``L <= x <= U`` (a linear function on a box attains its extremes at a vertex,
         chosen per ``t`` by the sign of ``F_kt``), each rounded outward by

@@ -72,7 +72,7 @@ from ..errors import QueryError
 from .bounds import envelope_box, fourier_coordinates, paa_edges
 from .grouping import INDEXED_COEFFICIENTS, indexed_rows
 
-__all__ = ["CurveQuery", "ShiftWindow", "shifted", "shifted_curves", "turn_window"]
+__all__ = ["CurveQuery", "ShiftWindow", "shift_turn", "shifted", "shifted_curves", "turn_window"]
 
 
 @dataclass(frozen=True)
@@ -131,6 +131,13 @@ def shifted_curves(curve: NDArray[np.floating], shifts: NDArray[np.integer]) -> 
     q = np.asarray(curve, dtype=np.float64)
     idx = (np.arange(len(q))[None, :] + np.asarray(shifts, dtype=np.int64)[:, None]) % len(q)
     return np.ascontiguousarray(q[idx])
+
+
+def shift_turn(bearings: NDArray[np.floating], shift: int) -> float:
+    """The in-plane turn a shift stands for: the silhouette turned back (clockwise on
+    screen) by this many degrees starts its curve at sample ``shift`` (see
+    :func:`turn_window`), in ``[0, 360)``."""
+    return float((-float(bearings[shift])) % 360.0)
 
 
 def turn_window(bearings: NDArray[np.floating], turn: float, tolerance: float) -> ShiftWindow:
