@@ -344,3 +344,21 @@ def test_shift_requests_round_trip_through_json_and_bad_ones_are_refused():
                 {**req.to_dict(), "client": [{**req.client[0].to_dict(), "shift": -2}]}):
         with pytest.raises(viewdb.QueryError):
             viewdb.RefineRequest.from_dict(json.loads(json.dumps(bad)))
+
+
+@pytest.mark.parametrize("name", ["arrow", "l_bracket"])
+def test_a_query_turned_in_the_image_is_found_by_one_shift_search_within_the_roll_window(tiered_db, name):
+    with viewdb.open(tiered_db, create=False) as db:
+        view = db.render(name, 60.0, 30.0)  # a stored view: distance 0 at the right turn
+        rgba = np.dstack([view.color, view.mask.astype(np.uint8) * 255])
+        photo = np.ascontiguousarray(np.rot90(rgba))  # turned 90 degrees anticlockwise on screen
+        upright = db.query(rgba, k=3, pose=False, colour=False, verify=False, rotations=1).results[0]
+        bearings = sample_bearings(photo[..., 3] > 0, 128)
+        window = turn_window(bearings, 90.0, viewdb.SearchConfig().roll_tolerance)
+        turns = {round(shift_turn(bearings, int(s)), 6) for s in window.shifts(128)}
+        for options in ({"shifts": ShiftWindow()}, {"roll": 90.0}):
+            top = db.query(photo, k=3, pose=False, colour=False, verify=False, **options).results[0]
+            assert top.object == name, options
+            assert top.distance <= upright.distance + 0.3  # the turned curve is resampled (96 px)
+            if "roll" in options:  # only the turns near the hint were searched
+                assert round(top.inplane, 6) in turns
