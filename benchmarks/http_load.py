@@ -68,10 +68,10 @@ def workload(db_path: Path, client_path: Path, plan: str, count: int, seed: int)
             mine, _ = client.client_candidates(curve, 5)
             if plan == "cs1":
                 req = RefineRequest(curve, 6, 5, mine)
-                expected = db.refine(req).results
+                expected = db.server_tier().refine(req)[0].results
             else:
                 req = WalkRequest(curve, 6, 5, client.config.client_gap, mine)
-                expected = db.walk(req).results
+                expected = db.server_tier().walk(req)[0].results
             out.append((req, expected))
             if len(poses) < 8:
                 poses.append((QueryView(view.color, view.mask), expected[:2]))

@@ -36,7 +36,7 @@ from viewdb.catalogue.gl import pyrender_module
 from viewdb.catalogue.render import _offscreen
 from viewdb.errors import FeatureError
 from viewdb.recognition.image import load_image, segment
-from viewdb.recognition.pipeline import rotated_curves
+from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.knn import TierArrays, knn
 
 SIZE = 256

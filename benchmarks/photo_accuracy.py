@@ -1,4 +1,4 @@
-"""Recognition and pose accuracy on synthetic photographs, per plan (issue 5's benchmark).
+"""Recognition and pose accuracy on synthetic photographs, per plan.
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]

@@ -41,7 +41,7 @@ import viewdb
 from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
 from viewdb.catalogue.features import distance_curve, sample_bearings
 from viewdb.recognition.image import load_image, segment
-from viewdb.recognition.pipeline import rotated_curves
+from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.knn import Neighbour, SearchStats, TierSource, knn, knn_stack
 from viewdb.search.multirefine import scan_stack
 from viewdb.search.shifts import CurveQuery, ShiftWindow, shifted_curves, turn_window
@@ -135,7 +135,7 @@ def main() -> None:
             lambda q, s, b=b: knn(q["curve"], s, k, band, block=b,
                                   shifts=turn_window(q["bearings"], 0.0, args.tolerance)))
 
-    reader = db._tier_reader()  # the file's R-tree, as ViewDB.search reads it
+    reader = db._catalogue.tier_reader()  # the file's R-tree, as ViewDB.search reads it
     with reader.snapshot():
         source = reader.tier("full")
         print(f"full tier: {source.n_objects} objects, {int(source.group_count.sum())} views, "

@@ -156,7 +156,7 @@ def test_k_one_still_re_ranks_among_the_pool(twins_db):
 
 def test_view_colours_of_an_unknown_object_is_a_clear_error(twins_db):
     with viewdb.open(twins_db, read_only=True) as db, pytest.raises(viewdb.NotFound, match="nope"):
-        db.view_colours([("nope", 0.0, 0.0)])
+        db.server_tier().view_colours([("nope", 0.0, 0.0)])
 
 
 def test_a_result_without_colour_counts_as_the_pools_mean_mismatch():
@@ -178,5 +178,5 @@ def test_only_meshes_with_colour_of_their_own_carry_colour(twins_db, tiered_db):
         assert carries_colour(db.mesh("b_blue"))
     with viewdb.open(tiered_db, read_only=True) as db:
         assert not carries_colour(db.mesh("l_bracket"))  # an STL: no colour at all
-        assert db.view_colours([("l_bracket", 0.0, 0.0)]) == [None]
+        assert db.server_tier().view_colours([("l_bracket", 0.0, 0.0)]) == [None]
         assert carries_colour(db.mesh("mug"))

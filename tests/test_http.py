@@ -139,16 +139,16 @@ def test_health_info_and_openapi(server, remote):
 
 
 def test_the_documented_models_accept_real_messages():
-    req = viewdb.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3, [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True)])
+    req = viewdb.http.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3, [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True)])
     models.RefineRequestModel.model_validate(json.loads(json.dumps(req.to_dict())))
-    walk = viewdb.WalkRequest(req.curve, 6, 3, 90.0, req.client)
+    walk = viewdb.http.WalkRequest(req.curve, 6, 3, 90.0, req.client)
     models.WalkRequestModel.model_validate(json.loads(json.dumps(walk.to_dict())))
     img = np.zeros((32, 40, 3), np.uint8)
     mask = np.zeros((32, 40), bool)
     mask[5:20, 8:30] = True
     pose = PoseRequest.from_query(QueryView(img, mask), req.client, (100.0, 100.0, 20.0, 16.0))
     models.PoseRequestModel.model_validate(json.loads(json.dumps(pose.to_dict())))
-    reply = viewdb.ServerReply(req.client, {"dtw": 3.0})
+    reply = viewdb.http.ServerReply(req.client, {"dtw": 3.0})
     models.ServerReplyModel.model_validate(reply.to_dict())
 
 
@@ -283,7 +283,7 @@ def test_the_remote_client_reports_server_errors_in_one_line(server, files):
     with pytest.raises(viewdb.ServerError, match="not a server URL"):
         viewdb.RemoteServer("ftp://x")
     with viewdb.RemoteServer(server.url, token=TOKEN) as r:
-        req = viewdb.RefineRequest(np.ones(64), 6, 3, [])  # a client file of another build
+        req = viewdb.http.RefineRequest(np.ones(64), 6, 3, [])  # a client file of another build
         with pytest.raises(viewdb.ServerError, match=r"\(422\).*128 samples"):
             r.refine(req)
 
@@ -368,7 +368,7 @@ def _fuzz_one(url, path, body):
         elif path == "/fits":
             assert len(FitReply.from_dict(reply).fits) == len(body["views"])
         else:
-            viewdb.ServerReply.from_dict(reply)
+            viewdb.http.ServerReply.from_dict(reply)
     else:
         assert reply["status"] == got and isinstance(reply["error"], str) and "\n" not in reply["error"]
 

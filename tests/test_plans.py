@@ -97,7 +97,7 @@ def test_client_file_holds_the_sparse_tier_only(tiered_db, client_file):
         with pytest.raises(viewdb.ViewDBError, match="client database"):
             client.ingest([])
         with pytest.raises(viewdb.QueryError, match="client database"):
-            client.refine(viewdb.RefineRequest(np.ones(128), 6, 1, []))
+            client.server_tier().refine(viewdb.http.RefineRequest(np.ones(128), 6, 1, []))
 
 
 def test_export_refuses_to_overwrite_and_leaves_nothing_when_it_fails(tiered_db, tmp_path, monkeypatch):
@@ -127,7 +127,7 @@ def test_export_refuses_to_overwrite_and_leaves_nothing_when_it_fails(tiered_db,
     max_leaves=20,
 ))
 def test_malformed_requests_get_a_query_error(data):
-    for cls in (viewdb.RefineRequest, viewdb.WalkRequest):
+    for cls in (viewdb.http.RefineRequest, viewdb.http.WalkRequest):
         try:
             cls.from_dict(data)
         except viewdb.QueryError:
@@ -135,15 +135,15 @@ def test_malformed_requests_get_a_query_error(data):
 
 
 def test_requests_round_trip_through_json():
-    req = viewdb.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3,
+    req = viewdb.http.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3,
                                [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True)])
-    back = viewdb.RefineRequest.from_dict(json.loads(json.dumps(req.to_dict())))
+    back = viewdb.http.RefineRequest.from_dict(json.loads(json.dumps(req.to_dict())))
     assert back.client == req.client and back.k == 3 and np.array_equal(back.curve, req.curve)
     for bad in ({**req.to_dict(), "curve": [1.0] * 127 + [float("nan")]},
                 {**req.to_dict(), "k": 0}, {**req.to_dict(), "band": -1},
                 {**req.to_dict(), "client": [{"object": "", "distance": 1, "azimuth": 0, "elevation": 0}]}):
         with pytest.raises(viewdb.QueryError):
-            viewdb.RefineRequest.from_dict(json.loads(json.dumps(bad)))
+            viewdb.http.RefineRequest.from_dict(json.loads(json.dumps(bad)))
 
 
 @settings(max_examples=25)
@@ -206,7 +206,7 @@ def test_candidates_of_objects_the_server_lacks_are_not_bounds(tiered_db):
         for _ in range(5):
             q = arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128)
             strangers = [viewdb.Candidate(f"gone{i}", 1e-6 * i, 0.0, 0.0, False) for i in range(3)]
-            reply = db.refine(viewdb.RefineRequest(q, 6, 3, strangers))
+            reply = db.server_tier().refine(viewdb.http.RefineRequest(q, 6, 3, strangers))[0]
             _same(reply.results, brute_force_knn(q, arrays, 3, 6))
 
 
@@ -216,10 +216,10 @@ def test_cs2_walk_leaves_out_candidates_of_objects_the_server_lacks(tiered_db, c
         for q in _queries(db, rng, 4):
             mine, _ = client.client_candidates(q, 3)
             gap = client.config.client_gap
-            want = db.walk(viewdb.WalkRequest(q, 6, 3, gap, mine))
+            want = db.server_tier().walk(viewdb.http.WalkRequest(q, 6, 3, gap, mine))[0]
             assert want.results
             strangers = [viewdb.Candidate(f"gone{i}", 1e-6 * i, c.azimuth, c.elevation, False)
                          for i, c in enumerate(mine)]
-            mixed = db.walk(viewdb.WalkRequest(q, 6, 3, gap, strangers[:1] + mine + strangers[1:]))
+            mixed = db.server_tier().walk(viewdb.http.WalkRequest(q, 6, 3, gap, strangers[:1] + mine + strangers[1:]))[0]
             assert mixed.results == want.results
-            assert db.walk(viewdb.WalkRequest(q, 6, 3, gap, strangers)).results == []
+            assert db.server_tier().walk(viewdb.http.WalkRequest(q, 6, 3, gap, strangers))[0].results == []

@@ -14,7 +14,7 @@ from viewdb.errors import ImageError, QueryError
 from viewdb.pose.estimate import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.pose.silhouette import fibonacci_directions, lift_alignment, ray_rotation, to_mesh_units
 from viewdb.recognition.image import label_mask, load_image
-from viewdb.recognition.pipeline import completed_mask
+from viewdb.recognition.shapes import completed_mask
 from viewdb_cli.main import main
 
 K4 = (500.0, 510.0, 160.0, 120.0)

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 import viewdb
 from tests.reference import naive_dtw, naive_knn_over_curves, naive_lb_keogh, naive_shifted
 from viewdb.catalogue.features import distance_curve, mirror_curve, sample_bearings
-from viewdb.recognition.pipeline import rotated_curves
+from viewdb.http import RefineRequest
+from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.bounds import dtw, envelope, lb_keogh, paa_edges, paa_means
 from viewdb.search.grouping import indexed_coordinates
 from viewdb.search.knn import TierArrays, knn, knn_stack
@@ -329,21 +330,21 @@ def test_a_client_candidate_from_outside_the_window_is_no_bound(tiered_db):
         truth = db.recognise(q, 2, plan="server", shifts=window).results
         # a lying client: the true best object's distance at a shift the window leaves out
         bogus = viewdb.Candidate(arrays.names[0], 0.0, 0.0, 0.0, False, shift=40)
-        reply = db.refine(viewdb.RefineRequest(q, 6, 2, [bogus], window))
+        reply, _ = db.server_tier().refine(RefineRequest(q, 6, 2, [bogus], window))
         assert [c.to_dict() for c in reply.results] == [c.to_dict() for c in truth]
 
 
 def test_shift_requests_round_trip_through_json_and_bad_ones_are_refused():
-    req = viewdb.RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3,
+    req = RefineRequest(np.linspace(0.5, 1.5, 128), 6, 3,
                                [viewdb.Candidate("mug", 0.25, 30.0, 60.0, True, shift=7)], ShiftWindow(3, 9, 2))
-    back = viewdb.RefineRequest.from_dict(json.loads(json.dumps(req.to_dict())))
+    back = RefineRequest.from_dict(json.loads(json.dumps(req.to_dict())))
     assert back.shifts == req.shifts and back.client == req.client
-    assert viewdb.RefineRequest.from_dict({**req.to_dict(), "shifts": None}).shifts is None
+    assert RefineRequest.from_dict({**req.to_dict(), "shifts": None}).shifts is None
     for bad in ({**req.to_dict(), "shifts": {"centre": -1}}, {**req.to_dict(), "shifts": {"step": 0}},
                 {**req.to_dict(), "shifts": "all"},
                 {**req.to_dict(), "client": [{**req.client[0].to_dict(), "shift": -2}]}):
         with pytest.raises(viewdb.QueryError):
-            viewdb.RefineRequest.from_dict(json.loads(json.dumps(bad)))
+            RefineRequest.from_dict(json.loads(json.dumps(bad)))
 
 
 @pytest.mark.parametrize("name", ["arrow", "l_bracket"])
@@ -354,7 +355,7 @@ def test_a_query_turned_in_the_image_is_found_by_one_shift_search_within_the_rol
         photo = np.ascontiguousarray(np.rot90(rgba))  # turned 90 degrees anticlockwise on screen
         upright = db.query(rgba, k=3, pose=False, colour=False, verify=False, rotations=1).results[0]
         bearings = sample_bearings(photo[..., 3] > 0, 128)
-        window = turn_window(bearings, 90.0, viewdb.SearchConfig().roll_tolerance)
+        window = turn_window(bearings, 90.0, viewdb.RecognitionConfig().roll_tolerance)
         turns = {round(shift_turn(bearings, int(s)), 6) for s in window.shifts(128)}
         for options in ({"shifts": ShiftWindow()}, {"roll": 90.0}):
             top = db.query(photo, k=3, pose=False, colour=False, verify=False, **options).results[0]

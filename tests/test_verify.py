@@ -81,9 +81,9 @@ def test_the_right_objects_view_fits_best(tiered_db):
             img, mask = _on_grey(db, name, h, v)
             query = QueryView(img, mask)
             grid = (round(h / 30) * 30 % 360, round(v / 30) * 30 % 360)
-            fits = dict(zip(names, db.view_fits(query, [(n, *grid) for n in names]), strict=True))
+            fits = dict(zip(names, db.server_tier().view_fits(query, [(n, *grid) for n in names]), strict=True))
             assert fits[name] == max(fits.values()), (name, fits)
-            assert db.view_fits(query, [(name, h, v)])[0] > 0.95
+            assert db.server_tier().view_fits(query, [(name, h, v)])[0] > 0.95
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +140,7 @@ def test_view_fits_of_an_unknown_object_is_a_clear_error(cubes_db):
     with viewdb.open(cubes_db, read_only=True) as db:
         img, mask = _on_grey(db, "cube_dice", 0, 0)
         with pytest.raises(viewdb.NotFound, match="nope"):
-            db.view_fits(QueryView(img, mask), [("nope", 0.0, 0.0)])
+            db.server_tier().view_fits(QueryView(img, mask), [("nope", 0.0, 0.0)])
 
 
 def test_fit_messages_round_trip_and_reject_bad_input():
@@ -182,8 +182,8 @@ def test_a_mirrored_match_is_compared_by_the_colours_of_the_side_the_photo_shows
                 if not m.mirrored or m.colour is None:
                     continue
                 match = Candidate(m.object, m.distance, m.azimuth, m.elevation, True)
-                shown = db.view_colours([(m.object, *physical_view(match))])[0]
+                shown = db.server_tier().view_colours([(m.object, *physical_view(match))])[0]
                 assert m.colour == pytest.approx(colour_distance(query, shown), abs=1e-6)
-                matched = db.view_colours([(m.object, m.azimuth, m.elevation)])[0]
+                matched = db.server_tier().view_colours([(m.object, m.azimuth, m.elevation)])[0]
                 telling += abs(colour_distance(query, matched) - m.colour) > 0.05
     assert telling >= 1  # some mirrored match's own view has other colours than its opposite

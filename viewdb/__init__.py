@@ -5,30 +5,24 @@ Estimation for a Single-view Query Image in a Mobile Environment").
 >>> import viewdb
 >>> with viewdb.open("catalogue.db", gap=30) as db:          # doctest: +SKIP
 ...     db.ingest(["mug.glb", "chair.obj"])
-...     db.objects()
+...     db.query("photo.jpg").results[0].object
+
+The wire messages of the client–server plans live in :mod:`viewdb.http`.
 """
 
-from .api import (
-    CandidatePose,
-    DatabaseInfo,
-    ObjectInfo,
-    QueryResult,
-    Recognition,
-    SearchHit,
-    StoredView,
-    ViewDB,
-    describe_paths,
-    open,
-    render_model,
-)
+from .api import DatabaseInfo, ViewDB, describe_paths, open, render_model
 from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
-from .catalogue.mesh import DEFAULT_MAX_FACES
+from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh
+from .catalogue.reading import CandidatePose, CatalogueReader, ObjectInfo, StoredView
 from .catalogue.render import RenderedView
-from .catalogue.symmetry import SymmetryType
+from .catalogue.symmetry import SymmetryType, ViewClasses
 from .config import (
     BuildConfig,
     FeatureConfig,
     IndexConfig,
+    PerspectiveConfig,
+    PosingConfig,
+    RecognitionConfig,
     RenderConfig,
     SearchConfig,
     SiftConfig,
@@ -48,18 +42,30 @@ from .errors import (
     ViewDBError,
 )
 from .http.client import RemoteServer
-from .pose.intrinsics import parse_intrinsics
-from .search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from .pose.estimate import PoseConfig, PoseEstimate
+from .pose.intrinsics import Intrinsics, parse_intrinsics
+from .recognition.local_tier import LocalServerTier
+from .recognition.options import QueryOptions
+from .recognition.results import QueryMatch, QueryResult
+from .recognition.retrieval import Recognition
+from .recognition.server_tier import Exchange, ServerTier
+from .search.knn import SearchStats, TierArrays
+from .search.plans import Candidate
 from .search.shifts import ShiftWindow
+from .storage.catalogue import SearchHit
+from .storage.integrity import CheckReport
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BuildConfig",
-    "DEFAULT_MAX_FACES",
     "Candidate",
     "CandidatePose",
+    "CatalogueReader",
+    "CheckReport",
+    "DEFAULT_MAX_FACES",
     "DatabaseInfo",
+    "Exchange",
     "FeatureConfig",
     "FeatureError",
     "FileOutcome",
@@ -67,14 +73,23 @@ __all__ = [
     "IndexConfig",
     "IngestProgress",
     "IngestReport",
+    "Intrinsics",
+    "LocalServerTier",
     "MeshError",
+    "NormalisedMesh",
     "NotFound",
     "ObjectInfo",
+    "PerspectiveConfig",
+    "PoseConfig",
     "PoseError",
+    "PoseEstimate",
+    "PosingConfig",
     "QueryError",
+    "QueryMatch",
+    "QueryOptions",
     "QueryResult",
     "Recognition",
-    "RefineRequest",
+    "RecognitionConfig",
     "RemoteServer",
     "RenderConfig",
     "RenderError",
@@ -82,17 +97,19 @@ __all__ = [
     "SchemaMismatch",
     "SearchConfig",
     "SearchHit",
+    "SearchStats",
     "ServerError",
-    "ServerReply",
+    "ServerTier",
     "ShiftWindow",
     "SiftConfig",
     "SkimConfig",
     "StorageError",
     "StoredView",
     "SymmetryType",
+    "TierArrays",
+    "ViewClasses",
     "ViewDB",
     "ViewDBError",
-    "WalkRequest",
     "__version__",
     "describe_paths",
     "open",

@@ -11,8 +11,9 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "IndexConfig", "PerspectiveConfig", "RenderConfig",
-    "SearchConfig", "SiftConfig", "SkimConfig", "default_client_gap",
+    "BuildConfig", "FeatureConfig", "IndexConfig", "PerspectiveConfig", "PosingConfig",
+    "RecognitionConfig", "RenderConfig", "SearchConfig", "SiftConfig", "SkimConfig",
+    "default_client_gap",
 ]
 
 
@@ -91,26 +92,6 @@ class IndexConfig:
     def __post_init__(self) -> None:
         if self.group_views < 1:
             raise ValueError(f"group_views must be at least 1, got {self.group_views}")
-
-
-@dataclass(frozen=True)
-class SearchConfig:
-    """The shift search (:mod:`viewdb.search.shifts`): one search over the circular shifts
-    of the query curve instead of one per in-plane turn. Query-time settings, not stored
-    in a file."""
-
-    #: Consecutive shifts bounded together by one wedge before they are tried one by one
-    #: (``benchmarks/shift_search.py`` measured the choice).
-    shift_block: int = 8
-    #: Degrees either side of a gravity hint's in-plane turn searched
-    #: (:func:`viewdb.search.shifts.turn_window`).
-    roll_tolerance: float = 15.0
-
-    def __post_init__(self) -> None:
-        if self.shift_block < 1:
-            raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
-        if not 0 <= self.roll_tolerance <= 180:
-            raise ValueError(f"roll_tolerance must be in [0, 180], got {self.roll_tolerance}")
 
 
 @dataclass(frozen=True)
@@ -231,3 +212,66 @@ class BuildConfig:
             # ingest of their unchanged sources adds the perspective views they lack
             perspective=PerspectiveConfig(**data.get("perspective", {})),
         )
+
+
+@dataclass(frozen=True)
+class RecognitionConfig:
+    """Tunables of the query pipeline (:mod:`viewdb.recognition.pipeline`)."""
+
+    #: Objects the plan finds (at least k) before the colour and shape re-rankings keep
+    #: the best k.
+    pool: int = 5
+    #: An occluder's pixels inside the silhouette's convex hull make a completed query
+    #: shape only when they are at least this share of the silhouette's area
+    #: (:func:`viewdb.recognition.shapes.completed_mask`).
+    hidden_min_share: float = 0.02
+    #: With a gravity hint (``roll``), the in-plane turns searched: those within this many
+    #: degrees of the hint's (:func:`viewdb.search.shifts.turn_window`).
+    roll_tolerance: float = 15.0
+
+    def __post_init__(self) -> None:
+        if self.pool < 1:
+            raise ValueError(f"pool must be at least 1, got {self.pool}")
+        if not 0.0 <= self.hidden_min_share <= 1.0:
+            raise ValueError(f"hidden_min_share must be in [0, 1], got {self.hidden_min_share}")
+        if not 0.0 <= self.roll_tolerance <= 180.0:
+            raise ValueError(f"roll_tolerance must be in [0, 180], got {self.roll_tolerance}")
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The search over a stack of query curves (:func:`viewdb.search.knn.knn_stack`, the
+    circular shifts of a curve). Query-time settings, not stored in a file."""
+
+    #: Consecutive curves (shifts) bounded together by one wedge before they are tried one
+    #: by one (``benchmarks/shift_search.py`` measured the choice).
+    shift_block: int = 8
+
+    def __post_init__(self) -> None:
+        if self.shift_block < 1:
+            raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
+
+
+@dataclass(frozen=True)
+class PosingConfig:
+    """How a recognised match is posed from its catalogue (:mod:`viewdb.pose.matched`)."""
+
+    #: Most candidate poses examined per result (a sphere has every grid view as one).
+    max_candidates: int = 24
+    #: Besides the matched view's same-shape poses, those of the object's next nearest
+    #: views (by the query curve) are candidates too: a silhouette often matches several
+    #: sides of an object about equally, and SIFT can tell them apart.
+    near_views: int = 4
+    #: Image size of the orthographic silhouettes the perspective silhouette search aligns.
+    silhouette_search_size: int = 128
+    #: The off-grid shape refinement stops at this step (degrees).
+    shape_refine_step: float = 2.0
+    #: IoU re-ranking: results fitted again with the full silhouette search after the
+    #: quick one (besides the plan's first).
+    rerank_full: int = 1
+
+    def __post_init__(self) -> None:
+        if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0:
+            raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0")
+        if not (16 <= self.silhouette_search_size <= 4096 and self.shape_refine_step > 0):
+            raise ValueError("need 16 <= silhouette_search_size <= 4096 and shape_refine_step > 0")

@@ -1,8 +1,20 @@
-"""viewdb over HTTP: the server tier as an ASGI app (:mod:`viewdb.http.app`, run by
-:func:`viewdb.http.serve.run_server`, i.e. ``viewdb serve``) and :class:`RemoteServer`,
-the client that calls it. Only the client is imported here (stdlib only); the app needs
-FastAPI and uvicorn."""
+"""The server tier over HTTP: ``viewdb serve`` (:mod:`viewdb.http.app`), the client that
+talks to it (:class:`RemoteServer`), and the wire messages of the client–server plans."""
 
+from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .client import RemoteServer
+from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 
-__all__ = ["RemoteServer"]
+__all__ = [
+    "Candidate",
+    "ColourReply",
+    "ColourRequest",
+    "FitReply",
+    "FitRequest",
+    "PoseReply",
+    "PoseRequest",
+    "RefineRequest",
+    "RemoteServer",
+    "ServerReply",
+    "WalkRequest",
+]

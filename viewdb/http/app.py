@@ -51,7 +51,6 @@ from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
-from ..recognition.pipeline import pose_matches
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models
 from .wire import (
@@ -294,7 +293,7 @@ def create_app(
     async def refine(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
-        found, ms = await run(lambda db: db.refine(req))
+        found, ms = await run(lambda db: db.server_tier().refine(req)[0])
         return reply(found, ms)
 
     @app.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
@@ -303,7 +302,7 @@ def create_app(
     async def walk(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))
-        found, ms = await run(lambda db: db.walk(req))
+        found, ms = await run(lambda db: db.server_tier().walk(req)[0])
         return reply(found, ms)
 
     @app.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
@@ -313,8 +312,8 @@ def create_app(
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
         query = _parse(lambda: decode_query(req.image))
-        poses, ms = await run(lambda db: pose_matches(db, query, req.matches, req.intrinsics,
-                                                          curves=req.curves))
+        poses, ms = await run(lambda db: db.server_tier().poses(
+            query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
 
     @app.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
@@ -323,7 +322,7 @@ def create_app(
     async def colours(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: ColourRequest.from_dict(data))
-        signatures, ms = await run(lambda db: db.view_colours(req.views))
+        signatures, ms = await run(lambda db: db.server_tier().colours(req.views)[0])
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
     @app.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
@@ -333,7 +332,7 @@ def create_app(
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
         query = _parse(lambda: decode_query(req.image))
-        found, ms = await run(lambda db: db.view_fits(query, req.views))
+        found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
     def openapi() -> dict[str, Any]:

@@ -31,7 +31,8 @@ __all__ = ["RemoteServer"]
 
 
 class RemoteServer:
-    """The server tier at ``url`` (``http://host:port``, optionally with a path prefix).
+    """The server tier (:class:`~viewdb.recognition.server_tier.ServerTier`) at ``url``
+    (``http://host:port``, optionally with a path prefix).
 
     ``token`` is sent as ``Authorization: Bearer <token>``. Errors are
     :class:`~viewdb.errors.ServerError` naming the URL: cannot connect, timed out, or the
@@ -47,6 +48,7 @@ class RemoteServer:
         except ValueError as exc:
             raise ServerError(f"has a bad port: {exc}", url) from exc
         self.url = url.rstrip("/")
+        self.remote = True
         self._https = parts.scheme == "https"
         self._host, self._port = parts.hostname, port
         self._prefix = parts.path.rstrip("/")
@@ -154,7 +156,7 @@ class RemoteServer:
         self, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[np.ndarray | None], Exchange]:
         if not views:
-            return [], Exchange(0, 0, 0.0, 0.0)
+            return [], Exchange(0, 0, 0.0, 0.0, trips=0)
         reply, exchange = self.request("POST", "/colours", ColourRequest(list(views)).to_dict())
         signatures = _parse_reply(ColourReply.from_dict, reply, self.url).signatures
         if len(signatures) != len(views):
@@ -165,7 +167,7 @@ class RemoteServer:
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:
         if not views:
-            return [], Exchange(0, 0, 0.0, 0.0)
+            return [], Exchange(0, 0, 0.0, 0.0, trips=0)
         reply, exchange = self.request("POST", "/fits", FitRequest.from_query(query, views).to_dict())
         fits = _parse_reply(FitReply.from_dict, reply, self.url).fits
         if len(fits) != len(views):
@@ -175,12 +177,12 @@ class RemoteServer:
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,
-        curves: Sequence[np.ndarray | None] | None = None,
+        curves: Sequence[np.ndarray | None] | None = None, rerank: bool = False,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         if not matches:
-            return [], Exchange(0, 0, 0.0, 0.0)
+            return [], Exchange(0, 0, 0.0, 0.0, trips=0)
         reply, exchange = self.request(
-            "POST", "/pose", PoseRequest.from_query(query, matches, intrinsics, curves).to_dict())
+            "POST", "/pose", PoseRequest.from_query(query, matches, intrinsics, curves, rerank).to_dict())
         poses = _parse_reply(PoseReply.from_dict, reply, self.url).poses
         if len(poses) != len(matches):
             raise ServerError(f"server posed {len(poses)} matches, not {len(matches)}", self.url)

@@ -103,6 +103,8 @@ class PoseRequestModel(_Strict):
     curves: list[list[float] | None] | None = Field(
         default=None, description="per match, the query's distance curve at the in-plane turn that "
                                   "matched (its nearest views add pose candidates), or null")
+    rerank: bool = Field(default=False, description="with intrinsics: fit every match's perspective "
+                                                    "silhouette so they can be ranked by IoU")
 
 
 class PoseModel(_Strict):

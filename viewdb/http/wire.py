@@ -151,25 +151,30 @@ class PoseRequest:
     matches: list[Candidate]
     intrinsics: tuple[float, float, float, float] | None = None
     #: Per match, the query's distance curve at the in-plane turn that matched (its
-    #: nearest views add pose candidates, :data:`viewdb.recognition.pipeline.NEAR_VIEWS`), or None.
+    #: nearest views add pose candidates, :class:`viewdb.config.PosingConfig`), or None.
     curves: list[np.ndarray | None] | None = field(default=None, repr=False)
+    #: Fit every match so they can be ranked by silhouette IoU (with intrinsics).
+    rerank: bool = False
 
     @classmethod
     def from_query(
         cls, query: QueryView, matches: Sequence[Candidate],
         intrinsics: tuple[float, float, float, float] | None = None,
-        curves: Sequence[np.ndarray | None] | None = None,
+        curves: Sequence[np.ndarray | None] | None = None, rerank: bool = False,
     ) -> PoseRequest:
         return cls(encode_query(query), list(matches), _intrinsics(
             None if intrinsics is None else [float(v) for v in intrinsics]),
-            None if curves is None else list(curves))
+            None if curves is None else list(curves), rerank)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"image": base64.b64encode(self.image).decode("ascii"),
-                "matches": [c.to_dict() for c in self.matches],
-                "intrinsics": None if self.intrinsics is None else list(self.intrinsics),
-                "curves": None if self.curves is None else [
-                    None if c is None else [float(x) for x in c] for c in self.curves]}
+        out = {"image": base64.b64encode(self.image).decode("ascii"),
+               "matches": [c.to_dict() for c in self.matches],
+               "intrinsics": None if self.intrinsics is None else list(self.intrinsics),
+               "curves": None if self.curves is None else [
+                   None if c is None else [float(x) for x in c] for c in self.curves]}
+        if self.rerank:
+            out["rerank"] = True
+        return out
 
     @classmethod
     def from_dict(cls, data: Any) -> PoseRequest:
@@ -185,7 +190,10 @@ class PoseRequest:
                 if not isinstance(curves, list) or len(curves) != len(matches):
                     raise QueryError("curves must be null or one per match")
                 curves = [None if c is None else _curve(c) for c in curves]
-            return cls(raw, matches, _intrinsics(data.get("intrinsics")), curves)
+            rerank = data.get("rerank", False)
+            if not isinstance(rerank, bool):
+                raise QueryError("rerank must be true or false")
+            return cls(raw, matches, _intrinsics(data.get("intrinsics")), curves, rerank)
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 

@@ -1,9 +1,11 @@
-"""The server half of the plans as seen from a client: what a remote server must offer.
+"""The server half of the plans, as the query pipeline sees it: one protocol, two tiers.
 
-:meth:`viewdb.ViewDB.query` with ``server=...`` runs the client half of a plan on a client
-file and hands the rest to an object of this shape; :class:`viewdb.http.RemoteServer`
-is the one that talks HTTP to ``viewdb serve``. Each call returns, beside its answer, an
-:class:`Exchange`: what went over the wire and how long it took.
+The pipeline (:mod:`viewdb.recognition.pipeline`) hands everything that needs the full
+catalogue (the server half of a plan, the re-rankings' colours and fits, the poses) to an
+object of this shape. :class:`viewdb.recognition.local_tier.LocalServerTier` answers from
+a full file in this process; :class:`viewdb.http.RemoteServer` talks HTTP to ``viewdb
+serve``, which answers from its own ``LocalServerTier``. Each call returns, beside its
+answer, an :class:`Exchange`: what went (or would go) over the wire and how long it took.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..pose.estimate import PoseEstimate, QueryView
+from ..pose.intrinsics import Intrinsics
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 
 __all__ = ["Exchange", "ServerTier"]
@@ -30,10 +33,16 @@ class Exchange:
     received: int
     wall_ms: float
     server_ms: float
+    #: Round trips it counts as (0: answered in this process without a message, e.g. a
+    #: local ``server`` plan or a local re-ranking).
+    trips: int = 1
 
 
 class ServerTier(Protocol):
-    """The server half of CS1/CS2 and the pose, behind some transport."""
+    """The server half of CS1/CS2, the re-rankings and the pose, behind some transport."""
+
+    #: Whether the tier is reached over a network (its ``Exchange`` times include one).
+    remote: bool
 
     def refine(self, request: RefineRequest) -> tuple[ServerReply, Exchange]:
         """CS1 (an empty ``client`` list makes it the ``server`` plan's exact k-NN)."""
@@ -61,9 +70,12 @@ class ServerTier(Protocol):
 
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: Intrinsics | None = None,
         curves: Sequence[NDArray[np.float64] | None] | None = None,
+        rerank: bool = False,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         """``(pose, None)`` or ``(None, why not)`` per match, from the segmented query
-        (and per match the query's curve at the turn that matched, or None)."""
+        (and per match the query's curve at the turn that matched, or None); ``rerank``
+        (with intrinsics): fitted so they can be ranked by silhouette IoU
+        (:func:`viewdb.pose.matched.pose_matches`)."""
         ...

@@ -1,0 +1,34 @@
+"""The client tier: the client half of CS1 and CS2 (the paper's mobile side), the k-NN on
+the sparse tier of a file in this process, a client file from ``export-client`` or any
+full file."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..search.plans import Candidate
+from ..search.shifts import ShiftWindow
+from ..storage.catalogue import StoredCatalogue
+
+__all__ = ["ClientTier"]
+
+
+class ClientTier:
+    """The sparse tier of ``catalogue``."""
+
+    def __init__(self, catalogue: StoredCatalogue) -> None:
+        self.catalogue = catalogue
+
+    @property
+    def client_gap(self) -> float:
+        """The sparse tier's grid gap (what CS2's walk starts from)."""
+        return self.catalogue.config.client_gap
+
+    def candidates(
+        self, curve: NDArray[np.floating], k: int, band: int = 6, shifts: ShiftWindow | None = None
+    ) -> list[Candidate]:
+        """The k nearest objects on the sparse tier (over ``shifts`` of the curve), each
+        with its content hash as ``version`` (so a server can tell a stale client file's
+        bounds)."""
+        return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts)[0]

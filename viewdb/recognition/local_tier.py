@@ -1,0 +1,165 @@
+"""The server tier in this process: the server half of the plans, the re-rankings' colours
+and fits, and the poses, answered from a full catalogue.
+
+It is what ``viewdb serve`` runs behind HTTP, and what a local query uses, so a query
+takes the same path whether its server is a file here or a URL. Its :class:`Exchange`
+reports what the messages would weigh as JSON on the wire (``count_bytes``; a local
+``server`` plan exchanges nothing) and the time spent.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import PoseError, QueryError, RenderError
+from ..pose.estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, shape_fit
+from ..pose.intrinsics import Intrinsics
+from ..pose.matched import pose_matches
+from ..search.plans import (
+    Candidate,
+    RefineRequest,
+    ServerReply,
+    WalkRequest,
+    neighbours_to_candidates,
+    refine,
+    walk,
+)
+from ..storage.catalogue import StoredCatalogue
+from .colour import carries_colour, colour_signature
+from .server_tier import Exchange
+
+__all__ = ["LocalServerTier"]
+
+#: Views whose colour signatures stay cached.
+COLOUR_CACHE_VIEWS = 4096
+
+T = TypeVar("T")
+
+
+class LocalServerTier:
+    """The server tier of a full :class:`~viewdb.storage.catalogue.StoredCatalogue`."""
+
+    remote = False
+
+    def __init__(self, catalogue: StoredCatalogue, *, count_bytes: bool = True,
+                 pose_config: PoseConfig | None = None) -> None:
+        """``count_bytes``: report what the plans' messages would weigh as JSON, and count
+        each as a round trip (False for a local ``server`` plan, which exchanges nothing);
+        ``pose_config``: the pose's tunables (default :class:`~viewdb.pose.estimate.PoseConfig`)."""
+        self.catalogue = catalogue
+        self.count_bytes = count_bytes
+        self.pose_config = pose_config
+
+    def _full_tier_only(self) -> None:
+        if self.catalogue.role == "client":
+            raise QueryError(
+                "is a client database (no full tier): give the full database as --db, or a "
+                "server", self.catalogue.path,
+            )
+
+    def _exchange(self, call: Callable[[], T], request: Any = None,
+                  reply: Callable[[T], Any] | None = None) -> tuple[T, Exchange]:
+        start = time.perf_counter()
+        answer = call()
+        ms = (time.perf_counter() - start) * 1e3
+        if request is None or reply is None or not self.count_bytes:
+            return answer, Exchange(0, 0, ms, ms, trips=0)
+        return answer, Exchange(len(json.dumps(request)), len(json.dumps(reply(answer))), ms, ms)
+
+    # ------------------------------------------------------------------ the plans
+    def refine(self, request: RefineRequest) -> tuple[ServerReply, Exchange]:
+        """The server half of CS1 (Algorithm 3): exact, the same answer as the ``server``
+        plan whenever the client's candidates come from this file's sparse tier (or a
+        client file exported from it); candidates of objects this file lacks, or holds in
+        another version (a stale client file), are not used as bounds."""
+        return self._exchange(lambda: self._refine(request), request.to_dict(), ServerReply.to_dict)
+
+    def _refine(self, request: RefineRequest) -> ServerReply:
+        self._full_tier_only()
+        q = self.catalogue.query_curve(request.curve, request.k, "full")
+        with self.catalogue.tier_reader().snapshot() as reader:
+            versions = reader.object_versions()
+            found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
+            angles = reader.view_projections([n.view for n in found])
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None),
+                           stats.to_dict())
+
+    def walk(self, request: WalkRequest) -> tuple[ServerReply, Exchange]:
+        """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views.
+        Candidates of objects this file lacks (a stale client file) are left out."""
+        return self._exchange(lambda: self._walk(request), request.to_dict(), ServerReply.to_dict)
+
+    def _walk(self, request: WalkRequest) -> ServerReply:
+        self._full_tier_only()
+        q = self.catalogue.query_curve(request.curve, request.k, "full")
+        with self.catalogue.tier_reader().snapshot() as reader:
+            known = reader.object_versions()
+        client = [c for c in request.client if c.object in known]
+        found, stats = walk(replace(request, curve=q, client=client), self.catalogue.grid_curve,
+                            self.catalogue.config.gap)
+        return ServerReply(found, stats)
+
+    # ------------------------------------------------------------------ re-ranking
+    def colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
+        """The colour signatures of views ``(object, azimuth, elevation)``, rendered from
+        the stored meshes (cached); None for an object whose mesh has no colour."""
+        return self._exchange(lambda: self.view_colours(views))
+
+    def view_colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> list[NDArray[np.float32] | None]:
+        def signature(name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
+            if not carries_colour(self.catalogue.mesh(name)):
+                return None
+            view = self.catalogue.render(name, azimuth, elevation)
+            return colour_signature(view.color, view.mask)
+
+        return [self.catalogue.derived("colour", (name, float(azimuth), float(elevation)),
+                                       lambda n=name, a=azimuth, e=elevation: signature(n, a, e),
+                                       COLOUR_CACHE_VIEWS)
+                for name, azimuth, elevation in views]
+
+    def fits(
+        self, query: QueryView, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[float | None], Exchange]:
+        """How well each view ``(object, azimuth, elevation)``, rendered from the stored
+        mesh, explains the segmented query's shape (in [0, 1]; None: no silhouette)."""
+        return self._exchange(lambda: self.view_fits(query, views))
+
+    def view_fits(self, query: QueryView, views: Sequence[tuple[str, float, float]]) -> list[float | None]:
+        config = self.catalogue.config
+        empty = np.zeros((0, 3), np.float32)
+        fits: list[float | None] = []
+        for name, azimuth, elevation in views:
+            try:
+                rendered = self.catalogue.render(name, azimuth, elevation)
+                view = CandidateView(
+                    azimuth=azimuth, elevation=elevation, mirrored=False,
+                    keypoints=np.zeros((0, 5), np.float32), descriptors=np.zeros((0, 128), np.uint8),
+                    points3d=empty, mask=rendered.mask, image_size=config.render.image_size,
+                    xmag=config.render.xmag, color=rendered.color,
+                )
+                fits.append(shape_fit(query, view))
+            except (PoseError, RenderError):
+                fits.append(None)
+        return fits
+
+    # ------------------------------------------------------------------ pose
+    def poses(
+        self, query: QueryView, matches: Sequence[Candidate],
+        intrinsics: Intrinsics | None = None,
+        curves: Sequence[NDArray[np.float64] | None] | None = None,
+        rerank: bool = False,
+    ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
+        """``(pose, None)`` or ``(None, why not)`` per match (:func:`viewdb.pose.matched.pose_matches`)."""
+        return self._exchange(lambda: pose_matches(self.catalogue, query, matches, intrinsics,
+                                                   self.pose_config, curves, rerank=rerank))

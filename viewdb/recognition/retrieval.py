@@ -1,0 +1,93 @@
+"""Retrieval: the k objects a distance curve shows, by plan, over a client and a server tier.
+
+``server``: the server tier's exact k-NN (CS1 with no client candidates). ``cs1``: the
+client tier's k-NN on its sparse tier bounds the server's exact refinement (Algorithm 3;
+the same answer as ``server``). ``cs2``: the server walks the grid from the client's
+views (Algorithm 4; heuristic). A query searches several curves (in-plane turns, a
+completed silhouette); :func:`merge` keeps each object's best, and each search is bounded
+by the objects found so far (``prior``), which leaves the merged answer unchanged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import QueryError
+from ..search.plans import PLANS, Candidate, RefineRequest, WalkRequest
+from ..search.shifts import ShiftWindow
+from .client_tier import ClientTier
+from .server_tier import ServerTier
+
+__all__ = ["Recognition", "best_of", "merge", "recognise_curve"]
+
+
+@dataclass(frozen=True)
+class Recognition:
+    """What one curve's search found: the objects, best first, and what it cost."""
+
+    plan: str
+    results: list[Candidate]
+    #: The client half's answer (CS1/CS2; empty for ``server``).
+    client_results: list[Candidate]
+    client_ms: float
+    server_ms: float
+    server_stats: dict[str, float]
+    #: JSON bytes the client sent and received (would send, for a local server tier).
+    bytes_sent: int
+    bytes_received: int
+    #: With a remote server: the round trip's wall time beyond the server's own time.
+    network_ms: float = 0.0
+    #: Round trips to the server tier (0 for a local ``server`` plan).
+    round_trips: int = 0
+
+
+def best_of(mine: Sequence[Candidate], prior: Sequence[Candidate], k: int) -> list[Candidate]:
+    """The k best of two candidate lists, one per object (its smaller distance)."""
+    best: dict[str, Candidate] = {}
+    for c in (*mine, *prior):
+        if c.object not in best or c.distance < best[c.object].distance:
+            best[c.object] = c
+    return sorted(best.values(), key=lambda c: (c.distance, c.object))[:k]
+
+
+def recognise_curve(
+    curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
+    client: ClientTier | None, prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
+) -> Recognition:
+    """The k objects ``curve`` shows by ``plan`` (module doc). ``client`` runs the client
+    half of ``cs1``/``cs2`` (unused by ``server``). ``prior``: the best objects already
+    found for the same photo by other curves; their distances bound the search as a CS1
+    client's do (``server``, ``cs1``). ``shifts``: both halves search the smallest distance
+    over these circular shifts of the curve (:class:`~viewdb.search.shifts.ShiftWindow`)."""
+    if plan not in PLANS:
+        raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+    if plan != "server" and client is None:
+        raise QueryError(f"the {plan} plan needs a client tier")
+    q = np.asarray(curve, dtype=np.float64)
+    start = time.perf_counter()
+    mine = [] if client is None or plan == "server" else client.candidates(q, k, band, shifts)
+    client_ms = (time.perf_counter() - start) * 1e3
+    if plan == "cs2":
+        assert client is not None
+        reply, exchange = server.walk(WalkRequest(q, band, k, client.client_gap, mine))
+    else:
+        reply, exchange = server.refine(RefineRequest(q, band, k, best_of(mine, prior, k), shifts))
+    return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
+                       exchange.sent, exchange.received, max(exchange.wall_ms - exchange.server_ms, 0.0),
+                       exchange.trips)
+
+
+def merge(per_curve: Sequence[tuple[float, list[Candidate]]], k: int) -> list[tuple[Candidate, float]]:
+    """Each object's best candidate over several curves' results, with the in-plane angle
+    of the curve that found it, best first; the first ``k``."""
+    best: dict[str, tuple[Candidate, float]] = {}
+    for angle, found in per_curve:
+        for c in found:
+            if c.object not in best or c.distance < best[c.object][0].distance:
+                best[c.object] = (c, angle)
+    return sorted(best.values(), key=lambda x: (x[0].distance, x[0].object))[:k]

@@ -1,0 +1,325 @@
+"""The read side of a viewdb file: its objects, any view of them (stored, or rendered from
+the stored mesh and described on demand), renders, meshes, curves, and the k-NN search
+of its tiers.
+
+:class:`StoredCatalogue` implements :class:`viewdb.catalogue.reading.CatalogueReader`. It
+keeps bounded caches of what is dear to make (decoded meshes, renders, regenerated views,
+an object's curves); :meth:`StoredCatalogue.forget` drops an object's entries when it is
+written again.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import grid_views, normalise_angle
+from ..catalogue.describe import describe_view
+from ..catalogue.features import mirror_curve
+from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
+from ..catalogue.reading import CandidatePose, ObjectInfo, StoredView
+from ..catalogue.render import RenderedView, get_renderer
+from ..catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
+from ..config import BuildConfig
+from ..errors import FeatureError, NotFound, QueryError
+from ..search.knn import SearchStats, TierArrays, knn, objects_within
+from ..search.plans import Candidate, neighbours_to_candidates
+from ..search.refine import scan_all
+from ..search.shifts import ShiftWindow
+from .store import ObjectRow, Store
+from .tiers import TIERS, TierReader
+
+__all__ = ["SearchHit", "StoredCatalogue"]
+
+#: How many decoded meshes a catalogue keeps in memory.
+MESH_CACHE_SIZE = 8
+#: How many regenerated (pruned or off-grid) views a catalogue keeps in memory.
+VIEW_CACHE_SIZE = 256
+#: How many renders (about 0.5 MB each) a catalogue keeps: posing a result renders its
+#: candidate views, then walks off the grid around the best, and the walk's steps overlap.
+RENDER_CACHE_SIZE = 64
+#: How many objects' stored curves a catalogue keeps in memory for CS2 walks.
+CURVE_CACHE_OBJECTS = 64
+
+_K = TypeVar("_K")
+_V = TypeVar("_V")
+
+
+def cached(cache: OrderedDict[_K, _V], key: _K, make: Callable[[], _V], limit: int) -> _V:
+    """``cache[key]``, made by ``make()`` when missing (an exception caches nothing); the
+    least recently used entries go past ``limit``."""
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = cache[key] = make()
+    while len(cache) > limit:
+        cache.popitem(last=False)
+    return value
+
+
+@dataclass(frozen=True)
+class SearchHit:
+    """One object found by a k-NN search, with its best stored view."""
+
+    object: str
+    distance: float
+    azimuth: float
+    elevation: float
+    #: The query matches the stored view's mirror (its reversed curve).
+    mirrored: bool
+    #: The view is a perspective silhouette from this many bounding radii (None: an
+    #: orthographic view).
+    camera_distance: float | None = None
+    #: The query curve matched started at this sample (a shift search; None: as given).
+    shift: int | None = None
+
+
+class StoredCatalogue:
+    """The read side of an open :class:`~viewdb.storage.store.Store` built with ``config``."""
+
+    def __init__(self, store: Store, config: BuildConfig) -> None:
+        self._store = store
+        self.config = config
+        self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
+        self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
+        self._renders: OrderedDict[tuple[str, float, float], RenderedView] = OrderedDict()
+        self._curves: OrderedDict[str, dict[tuple[float, float], NDArray[np.float32]]] = OrderedDict()
+        self._plans: dict[str, ViewClasses] = {}
+        self._derived: dict[str, OrderedDict[tuple[Any, ...], Any]] = {}
+        self._reader: TierReader | None = None
+        self._role: str | None = None
+
+    @property
+    def path(self) -> Path:
+        return self._store.path
+
+    @property
+    def role(self) -> str:
+        """``"full"`` (meshes, SIFT, both tiers) or ``"client"`` (an exported client file)."""
+        if self._role is None:
+            self._role = self._store.role()
+        return self._role
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+    def forget(self, name: str) -> None:
+        """Drop what is cached of object ``name`` (it was written again)."""
+        self._curves.clear()
+        self._meshes.pop(name, None)
+        self._plans.pop(name, None)
+        for cache in (self._regenerated, self._renders, *self._derived.values()):
+            for key in [k for k in cache if k[0] == name]:
+                del cache[key]
+
+    def derived(self, kind: str, key: tuple[Any, ...], make: Callable[[], _V], limit: int) -> _V:
+        """A bounded cache of what later stages derive from this file's data (e.g. colour
+        signatures of renders), by ``kind``; ``key`` starts with the object's name, so
+        :meth:`forget` drops it with the object."""
+        return cached(self._derived.setdefault(kind, OrderedDict()), key, make, limit)
+
+    # ------------------------------------------------------------------ objects
+    def _info(self, row: ObjectRow) -> ObjectInfo:
+        return ObjectInfo(
+            name=row.name, source=row.source, content_hash=row.content_hash,
+            n_faces=row.n_faces, n_vertices=row.n_vertices, scale=row.scale,
+            centre=row.centre, views_stored=row.views,
+            views_grid=len(grid_views(self.config.gap)), empty_views=row.empty_views,
+            ingest_seconds=row.ingest_seconds, created_at=row.created_at,
+            skimmed=row.skimmed,
+            symmetry=None if row.symmetry is None else SymmetryType.from_dict(row.symmetry),
+            perspective_views=row.perspective_views,
+        )
+
+    def objects(self) -> list[ObjectInfo]:
+        """Every object, by name."""
+        return [self._info(r) for r in self._store.objects()]
+
+    def object(self, name: str) -> ObjectInfo:
+        rows = self._store.objects(name)
+        if not rows:
+            raise NotFound(f"no object named {name!r}", self.path)
+        return self._info(rows[0])
+
+    def views(self, name: str) -> list[tuple[float, float]]:
+        """``(azimuth, elevation)`` of every stored view of object ``name``."""
+        return [(v.azimuth, v.elevation) for v in self._store.views(name)]
+
+    def view_plan(self, name: str) -> ViewClasses:
+        """How the object's grid views map to its stored ones (identity if not skimmed)."""
+        plan = self._plans.get(name)
+        if plan is None:
+            info = self.object(name)
+            if info.skimmed and info.symmetry is not None:
+                plan = skim_plan(info.symmetry, self.config.gap)
+            else:
+                plan = plan_without_skimming(self.config.gap)
+            self._plans[name] = plan
+        return plan
+
+    def candidate_poses(self, name: str, azimuth: float, elevation: float) -> list[CandidatePose]:
+        """Every grid view with the same or the mirrored silhouette as grid view (h, v).
+
+        The paper's candidate pose extraction (eqs. 1–2), from the object's verified
+        symmetry generators; a query matched at one view could be in any of these poses.
+        """
+        a, e = normalise_angle(azimuth), normalise_angle(elevation)
+        stored = set(self.views(name))
+        symmetry = self.object(name).symmetry
+        classes = skim_plan(symmetry, self.config.gap) if symmetry else self.view_plan(name)
+        try:
+            members = classes.members(a, e)
+        except ValueError as exc:
+            raise QueryError(str(exc)) from exc
+        return [CandidatePose(h, v, m, (h, v) in stored) for h, v, m in members]
+
+    # ------------------------------------------------------------------ views
+    def view(self, name: str, azimuth: float, elevation: float) -> StoredView:
+        """The features of any view of a stored object.
+
+        A stored view is read from the database; any other (pruned by skimming, or off
+        the grid) is rendered from the stored mesh and described, and kept in a bounded
+        cache. Either way the result has the same fields.
+        """
+        a, e = normalise_angle(azimuth), normalise_angle(elevation)
+        try:
+            f = self._store.view_features(name, a, e)
+        except NotFound:
+            return cached(self._regenerated, (name, a, e), lambda: self._describe(name, a, e),
+                          VIEW_CACHE_SIZE)
+        return StoredView(name, a, e, f["curve"], f["fourier"], f["keypoints"],
+                          f["descriptors"], f["points3d"])
+
+    def _describe(self, name: str, azimuth: float, elevation: float) -> StoredView:
+        stored_as, mirrored = None, False
+        try:
+            stored_as, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
+        except KeyError:
+            pass  # off the grid
+        try:
+            desc = describe_view(self.render(name, azimuth, elevation), self.config)
+        except FeatureError as exc:
+            raise NotFound(
+                f"object {name!r} has no silhouette at azimuth {azimuth:g}, "
+                f"elevation {elevation:g}", self.path,
+            ) from exc
+        return StoredView(
+            name, azimuth, elevation, desc.curve, desc.fourier, desc.sift.keypoints,
+            desc.sift.descriptors, desc.sift.points3d, regenerated=True,
+            stored_as=stored_as, mirrored=mirrored,
+        )
+
+    def mesh(self, name: str) -> NormalisedMesh:
+        """The stored normalised mesh of ``name`` (decoded once, then cached)."""
+        return cached(self._meshes, name, lambda: mesh_from_glb(self._store.mesh_glb(name), name),
+                      MESH_CACHE_SIZE)
+
+    def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
+        """Render any view of a stored object from the database alone (the last
+        :data:`RENDER_CACHE_SIZE` are kept; their arrays are read-only)."""
+        key = (name, normalise_angle(azimuth), normalise_angle(elevation))
+
+        def make() -> RenderedView:
+            view = get_renderer(self.config.render).render(self.mesh(name), key[1], key[2])
+            for array in (view.color, view.mask, view.depth, view.pose):
+                array.setflags(write=False)
+            return view
+
+        return cached(self._renders, key, make, RENDER_CACHE_SIZE)
+
+    # ------------------------------------------------------------------ curves
+    def stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
+        """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
+        return cached(self._curves, name, lambda: self._store.object_curves(name), CURVE_CACHE_OBJECTS)
+
+    def grid_curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float64] | None:
+        """The curve of grid view (h, v) of ``name`` from the stored views (a pruned view is
+        its stand-in's curve, reversed if mirrored); None where there is no silhouette."""
+        curves = self.stored_curves(name)
+        try:
+            stored, mirrored = self.view_plan(name).mapping[(azimuth, elevation)]
+        except KeyError:
+            stored, mirrored = (azimuth, elevation), False
+        curve = curves.get(stored)
+        if curve is None:
+            return None
+        out = np.asarray(curve, np.float64)
+        return np.ascontiguousarray(mirror_curve(out)) if mirrored else out
+
+    def query_curve(self, curve: NDArray[np.floating], k: int = 1, tier: str = "full") -> NDArray[np.float64]:
+        """``curve`` as a search query of this file (``QueryError`` if it is not one)."""
+        if k < 1:
+            raise QueryError(f"k must be at least 1, got {k}")
+        if tier not in TIERS:
+            raise QueryError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
+        q = np.asarray(curve, dtype=np.float64)
+        if q.shape != (self.config.features.curve_samples,) or not np.all(np.isfinite(q)):
+            raise QueryError(
+                f"query curve must be {self.config.features.curve_samples} finite samples"
+            )
+        return q
+
+    def nearest_views(
+        self, name: str, curve: NDArray[np.floating], n: int, *, band: int = 6
+    ) -> list[tuple[float, float, float]]:
+        """The ``n`` stored views of object ``name`` nearest to a query curve, as
+        ``(azimuth, elevation, distance)`` (the exact distance, either orientation), best
+        first: the other views a photo might show when its silhouette is ambiguous."""
+        q = self.query_curve(curve)
+        stored = self.stored_curves(name)
+        if not stored:
+            return []
+        keys = list(stored)
+        distances = scan_all(q, np.stack([np.asarray(stored[key], np.float64) for key in keys]), band)
+        order = np.argsort(distances, kind="stable")[:n]
+        return [(keys[i][0], keys[i][1], float(distances[i])) for i in order]
+
+    # ------------------------------------------------------------------ tiers
+    def tier_reader(self) -> TierReader:
+        """The read connection the searches use (opened on first use)."""
+        if self._reader is None:
+            self._reader = TierReader(self.path, self._store.connect)
+        return self._reader
+
+    def nearest_objects(
+        self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full",
+        shifts: ShiftWindow | None = None,
+    ) -> tuple[list[Candidate], SearchStats]:
+        """Algorithm 2 on one tier, in one read snapshot: the ``k`` nearest objects, each
+        with its best view (and the object's content hash as its ``version``); over the
+        circular ``shifts`` of the curve in one search (each with the shift that matched)."""
+        q = self.query_curve(curve, k, tier)
+        with self.tier_reader().snapshot() as reader:
+            source = reader.tier(tier)
+            if source.n_groups == 0:
+                raise QueryError("the database holds no views", self.path)
+            found, stats = knn(q, source, k, band, shifts=shifts)
+            angles = reader.view_projections([n.view for n in found])
+            versions = reader.object_versions()
+        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None), stats
+
+    def objects_within(
+        self, curve: NDArray[np.floating], distance: float, band: int = 6, tier: str = "full"
+    ) -> dict[str, float]:
+        """Objects of ``tier`` that may have a view within ``distance`` of the curve (an
+        R-tree range query): ``name -> lower bound of its distance``."""
+        q = self.query_curve(curve, 1, tier)
+        if not distance >= 0:
+            raise QueryError(f"distance must be >= 0, got {distance}")
+        with self.tier_reader().snapshot() as reader:
+            return objects_within(q, reader.tier(tier), float(distance), band)
+
+    def tier_arrays(self, tier: str = "full") -> tuple[TierArrays, list[tuple[int, float, float]]]:
+        """Every view of ``tier`` in memory, with ``(view id, azimuth, elevation)`` per row."""
+        if tier not in TIERS:
+            raise QueryError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
+        with self.tier_reader().snapshot() as reader:
+            return reader.tier_arrays(tier)
