@@ -279,6 +279,16 @@ def test_turn_windows_cover_the_tolerance():
         turn_window(bearings, 0.0, -1.0)
 
 
+def test_a_turn_window_follows_the_contour_and_not_a_concavity_passing_the_same_bearing():
+    # a contour that passes the bearings near 0 twice: samples 126..4 and, across a
+    # concavity, samples 60..63; only the run the start moves along counts
+    bearings = np.linspace(0, 360, 128, endpoint=False).copy()
+    bearings[60:64] = [356.0, 358.0, 2.0, 4.0]
+    w = turn_window(bearings, 0.0, 8.0)
+    assert w.centre == 0 and w.half_width == 2
+    assert not set(w.shifts(128).tolist()) & set(range(60, 64))
+
+
 # ---------------------------------------------------------------------------------------
 # through the file's R-trees, and CS1 == server
 # ---------------------------------------------------------------------------------------

@@ -13,17 +13,19 @@ GB        a group against a block      group key, MINDIST of the block's union b
                                        curve-box bound of the block's wedge
 VB        a view against a block       + Fourier_Dist, LB_PAA of the block's wedge
 VBC       (the same, bound known)      + LB_Keogh of the block's wedge
-VP        a view against one curve     + Fourier_Dist, LB_PAA of the curve's envelope
-VC        (the same, bound known)      + LB_Keogh of the curve's envelope
+VC        a view against one curve     + LB_Keogh of the curve's envelope
 ========  ===========================  ============================================
 
 each for the view as stored or mirrored. Opening a group pushes its GB entries (one per
-block and orientation); a GB pops into VB entries of the group's views (VP entries
-directly for a block of one curve); a VB computes its LB_Keogh and comes back as a VBC
-(or goes on at once when that is no larger than the next key), which pops into the VP
-entries of the block's curves; a VP becomes a VC the same way, and a VC is refined to
-its exact DTW (the UCR cascade against that curve). So a view is compared with a single
-curve only when the wedge of its block could not rule the whole block out.
+block and orientation); a GB pops into VB entries of the group's views; a VB computes
+its LB_Keogh against the wedge and comes back as a VBC (or goes on at once when that is
+no larger than the next key), which pops into VC entries, one per curve of the block
+whose own LB_Keogh is under the limit (for a block of one curve the wedge *is* the
+curve's envelope); a VC is refined to its exact DTW by the UCR cascade against that
+curve (LB_Keogh the other way, then DTW abandoned on its cumulative bound). So a view is
+compared with a single curve only when the wedge of its block could not rule the whole
+block out. (Computing the view's own envelope to key VC entries by the reverse LB_Keogh
+as well cost more than it saved: the cascade computes it anyway.)
 
 Per object the loop keeps, besides ``bound`` and ``exact`` (as :mod:`.refine`), the
 curve ``exact_curve[o]`` of the best view; among entries at exactly the same distance
@@ -79,43 +81,6 @@ def _group_block_key2(lo, hi, clo, chi, g, blo, bhi, wlo, whi):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def _reverse_lb2(q, lower, upper, limit2):  # pragma: no cover - compiled
-    # squared LB_Keogh of the query curve against a view's envelope [lower, upper],
-    # abandoned (some value > limit2) as soon as it passes limit2
-    s = 0.0
-    for t in range(q.shape[0]):
-        x = q[t]
-        if x > upper[t]:
-            e = x - upper[t]
-            s += e * e
-        elif x < lower[t]:
-            e = lower[t] - x
-            s += e * e
-        if s > limit2:
-            return s
-    return s
-
-
-@njit(cache=True, nogil=True)
-def _envelope_into(c, r, lower, upper):  # pragma: no cover - compiled
-    # the band-r envelope of c (bounds.envelope) into lower, upper
-    n = c.shape[0]
-    for i in range(n):
-        a = max(0, i - r)
-        b = min(n - 1, i + r)
-        lo = c[a]
-        hi = c[a]
-        for j in range(a + 1, b + 1):
-            v = c[j]
-            if v < lo:
-                lo = v
-            if v > hi:
-                hi = v
-        lower[i] = lo
-        upper[i] = hi
-
-
-@njit(cache=True, nogil=True)
 def _stack_kernel(  # pragma: no cover - compiled
     Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
     block_start, block_end, wedge_lo, wedge_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
@@ -128,8 +93,6 @@ def _stack_kernel(  # pragma: no cover - compiled
     n_curves = Q.shape[0]
     n_blocks = block_start.shape[0]
     scratch = np.empty(n_samples)
-    view_lo = np.empty(n_samples)
-    view_hi = np.empty(n_samples)
     widest = 1
     for b in range(n_blocks):
         widest = max(widest, block_end[b] - block_start[b])
@@ -209,18 +172,15 @@ def _stack_kernel(  # pragma: no cover - compiled
                                       (((row * n_blocks + b) << 1 | m) << 3) | _VBC)
                     continue
             if kind == _VB or kind == _VBC:
-                # the view against each curve of the block: LB_Keogh both ways
-                _load_row(curves, row, m == 1, scratch)
-                _envelope_into(scratch, r, view_lo, view_hi)
-                single = block_end[b] - block_start[b] == 1
+                # the view against each curve of the block (a block of one: its bound is
+                # the curve's own)
+                if block_end[b] - block_start[b] == 1:
+                    size = _heap_push(hkey, hcode, size, top,
+                                      (((row * n_curves + block_start[b]) << 1 | m) << 3) | _VC)
+                    continue
                 for t in range(block_start[b], block_end[b]):
-                    lb = top * top
-                    if not single:
-                        stats[2] += 1
-                        lb = max(lb, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
-                        if lb > limit2:
-                            continue
-                    lb = max(lb, _reverse_lb2(Q[t], view_lo, view_hi, limit2))
+                    stats[2] += 1
+                    lb = max(top * top, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
                     if lb > limit2:
                         continue
                     size = _heap_push(hkey, hcode, size, math.sqrt(lb),

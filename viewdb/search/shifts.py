@@ -141,16 +141,18 @@ def shift_turn(bearings: NDArray[np.floating], shift: int) -> float:
 
 
 def turn_window(bearings: NDArray[np.floating], turn: float, tolerance: float) -> ShiftWindow:
-    """The shifts whose start samples lie within ``tolerance`` degrees of the in-plane
-    turn ``turn``.
+    """The shifts that stand for the in-plane turns within ``tolerance`` degrees of
+    ``turn``.
 
     ``bearings[i]`` is the direction of sample ``i`` seen from the centroid, in degrees
     clockwise from up on screen (:func:`viewdb.catalogue.features.sample_bearings`): the
     silhouette turned back by ``turn`` degrees (clockwise on screen, as
-    :func:`viewdb.recognition.pipeline.rotated_curves` turns it) starts at the sample
-    whose bearing is ``-turn``. The window is centred on the sample nearest that bearing
-    and wide enough to hold every sample within the tolerance (a contour that is not
-    star-shaped can pass a bearing more than once; the window covers them all).
+    :func:`viewdb.recognition.shapes.rotated_curves` turns it) starts its curve where the
+    contour crosses the ray of bearing ``-turn`` (the topmost crossing once turned). The
+    window is centred on the sample nearest that bearing (sample 0 for turn 0) and reaches
+    as far along the contour either way as the samples stay within the tolerance: the
+    start moves along the contour as the turn changes (a jump across a concavity, where
+    the ray grazes the contour, is left to the DTW band).
     """
     b = np.asarray(bearings, dtype=np.float64)
     if b.ndim != 1 or len(b) == 0 or not np.all(np.isfinite(b)):
@@ -160,10 +162,11 @@ def turn_window(bearings: NDArray[np.floating], turn: float, tolerance: float) -
     n = len(b)
     off = np.abs((b + turn + 180.0) % 360.0 - 180.0)  # angle between bearing and -turn
     centre = int(np.argmin(off))
-    inside = np.flatnonzero(off <= tolerance)
-    steps = (inside - centre + n // 2) % n - n // 2  # signed sample offsets from the centre
-    half = int(np.abs(steps).max()) if len(inside) else 0
-    return ShiftWindow(centre, half)
+    reach = [0, 0]
+    for side, sign in enumerate((-1, 1)):
+        while reach[side] < n // 2 and off[(centre + sign * (reach[side] + 1)) % n] <= tolerance:
+            reach[side] += 1
+    return ShiftWindow(centre, max(reach))
 
 
 # ---------------------------------------------------------------------------------------
