@@ -1,31 +1,36 @@
-"""One search over every circular shift of the query curve, against today's 12 in-plane turns.
+"""One search over the circular shifts of the query curve, against today's 12 in-plane turns.
 
     python benchmarks/shift_search.py DB [--photos 40] [--seed 1] [-k 5] [--band 6]
-                                         [--blocks 4,8,16] [--brute 3] [--tolerance 15]
+                                         [--blocks 4,8] [--grids 8,4] [--tolerance 15]
+                                         [--brute 2] [--turned]
 
 The queries are real: synthetic photos (:mod:`viewdb.bench.photos`, the generator of
-``benchmarks/photo_accuracy.py``; same seed, same photos) segmented automatically as a
-user's would be, then turned into distance curves. Every design below is exact for its
-own distance; each is timed on the same curves in the same run, on the file's full tier
-through its R-tree (k distinct objects, Sakoe-Chiba band ``--band``):
+``benchmarks/photo_accuracy.py``; same seed, same photos), segmented automatically as a
+user's would be, then turned into distance curves; ``--turned`` also turns each photo by
+a random angle in the image plane (a camera held at a random roll). Every design is
+exact for its own distance and is timed on the same curves in the same run, on the
+file's full tier through its R-tree (k distinct objects, Sakoe-Chiba band ``--band``):
 
 * ``turns12``: today's search: the silhouette turned by 12 angles (each turn rendered and
   its curve resampled), one search per turn, each bounded by the turns before (``prior``);
-* ``stack12-bB``: the same 12 curves in one best-first search (:func:`viewdb.search.knn.knn_stack`),
-  ``B`` curves per wedge (1: every key is per turn; 12: one wedge for all turns);
+* ``stack12``: the same 12 curves in one best-first search
+  (:func:`viewdb.search.knn.knn_stack`, each turn keyed by its own bounds);
 * ``shifts-bB``: every circular shift of the upright curve in one search
   (``knn(..., shifts=ShiftWindow())``), ``B`` shifts per wedge;
+* ``gridT``: ``T`` evenly spaced shifts of the upright curve in one search
+  (``ShiftWindow(step=S)``, ``--grids`` gives the steps);
 * ``upright``: the upright curve alone (today's ``rotations=1``, a fixed start);
-* ``roll±T``: a gravity hint (the photos are upright): the shifts within ``--tolerance``
-  degrees of turn 0 (:func:`viewdb.search.shifts.turn_window`).
+* ``roll±D-bB``: a gravity hint (the photo's true roll: 0, or its random turn): the shifts
+  within ``--tolerance`` degrees of it (:func:`viewdb.search.shifts.turn_window`).
 
-Printed per design: p50 and p95 of the search time, the ratio of the p50 to ``turns12``'s,
-DTWs and groups opened, and the rank-1 / rank-5 of the photo's object by the search alone
-(the outline, before any re-ranking). Brute force: for the first ``--brute`` queries, every
-view's exact distance by a compiled scan with no index (each view's DTWs abandon only past
-that view's own best, :func:`viewdb.search.multirefine.scan_stack`) for the 12 turns and
-for all shifts; the script checks that it gives the same objects and distances as the
-searches and prints its time against them.
+Printed per design: p50 and p95 of the search's wall time and its ratio to ``turns12``'s,
+the median CPU time and its ratio (steadier on a shared machine), the DTWs and groups,
+and the rank-1 / rank-5 of the photo's object by the search alone (the outline, before
+any re-ranking). Brute force, on the first ``--brute`` queries (one for the 128-shift
+stack): every view's exact distance for the design's stack of curves by a compiled scan
+with no index (each view's DTWs abandon only past that view's own best,
+:func:`viewdb.search.multirefine.scan_stack`); the script checks that each design finds
+the same objects and distances and prints the scan's CPU time against the search's.
 """
 
 from __future__ import annotations
@@ -47,12 +52,14 @@ from viewdb.search.multirefine import scan_stack
 from viewdb.search.shifts import CurveQuery, ShiftWindow, shifted_curves, turn_window
 
 
-def photo_queries(db: viewdb.ViewDB, count: int, seed: int) -> list[dict]:
+def photo_queries(db: viewdb.ViewDB, count: int, seed: int, turned: bool) -> list[dict]:
     """Seeded synthetic photos, segmented: the object's name, the upright curve, the 12
-    turned curves and the samples' bearings."""
+    turned curves, the samples' bearings and the roll a gravity sensor would report (the
+    in-plane turn that makes the photo upright: 0, or the random turn of ``turned``)."""
     names = [o.name for o in db.objects()]
     n = db.config.features.curve_samples
     rng = np.random.default_rng(seed)
+    turns = np.random.default_rng(seed + 1000)
     out = []
     for _ in range(count):
         name = names[rng.integers(len(names))]
@@ -60,9 +67,14 @@ def photo_queries(db: viewdb.ViewDB, count: int, seed: int) -> list[dict]:
         jpeg = encode_jpeg(render_photo(db.mesh(name), spec), spec.jpeg_quality)
         rgb = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR),
                            cv2.COLOR_BGR2RGB)
+        roll = float(turns.uniform(0.0, 360.0)) if turned else 0.0
+        if roll:  # the camera rolled: the photo turned anticlockwise on screen by `roll`
+            size = rgb.shape[1], rgb.shape[0]
+            m = cv2.getRotationMatrix2D(((size[0] - 1) / 2, (size[1] - 1) / 2), roll, 1.0)
+            rgb = cv2.warpAffine(rgb, m, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         mask = segment(load_image(rgb)).mask
         out.append({"name": name, "curve": distance_curve(mask, n), "bearings": sample_bearings(mask, n),
-                    "turns": np.stack([c for _, c in rotated_curves(mask, n, 12)])})
+                    "turns": np.stack([c for _, c in rotated_curves(mask, n, 12)]), "roll": roll})
     return out
 
 
@@ -105,11 +117,13 @@ def main() -> None:
     parser.add_argument("--grids", default="8,4", help="steps of the shift grids to try")
     parser.add_argument("--brute", type=int, default=3, help="queries also scanned by brute force")
     parser.add_argument("--tolerance", type=float, default=15.0, help="degrees around a roll hint")
+    parser.add_argument("--turned", action="store_true",
+                        help="turn each photo by a random in-plane angle (the roll hint then gives it)")
     args = parser.parse_args()
     k, band = args.k, args.band
     db = viewdb.open(args.db, read_only=True)
     start = time.perf_counter()
-    queries = photo_queries(db, args.photos, args.seed)
+    queries = photo_queries(db, args.photos, args.seed, args.turned)
     print(f"{len(queries)} photos (seed {args.seed}) segmented in {time.perf_counter() - start:.1f} s")
 
     n = db.config.features.curve_samples
@@ -129,11 +143,13 @@ def main() -> None:
             lambda q, w=window: shifted_curves(q["curve"], w.shifts(n)),
             lambda q, s, w=window: knn(q["curve"], s, k, band, shifts=w, block=1))
     designs["upright"] = (lambda q: q["curve"][None], lambda q, s: knn(q["curve"], s, k, band))
+    def hinted(q: dict) -> ShiftWindow:
+        return turn_window(q["bearings"], q["roll"], args.tolerance)
+
     for b in (1, 8):
         designs[f"roll±{args.tolerance:g}-b{b}"] = (
-            lambda q: shifted_curves(q["curve"], turn_window(q["bearings"], 0.0, args.tolerance).shifts(n)),
-            lambda q, s, b=b: knn(q["curve"], s, k, band, block=b,
-                                  shifts=turn_window(q["bearings"], 0.0, args.tolerance)))
+            lambda q: shifted_curves(q["curve"], hinted(q).shifts(n)),
+            lambda q, s, b=b: knn(q["curve"], s, k, band, block=b, shifts=hinted(q)))
 
     reader = db._catalogue.tier_reader()  # the file's R-tree, as ViewDB.search reads it
     with reader.snapshot():
