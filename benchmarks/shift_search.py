@@ -1,7 +1,7 @@
 """One search over the circular shifts of the query curve, against today's 12 in-plane turns.
 
     python benchmarks/shift_search.py DB [--photos 40] [--seed 1] [-k 5] [--band 6]
-                                         [--blocks 4,8] [--grids 8,4] [--tolerance 15]
+                                         [--blocks 4,8] [--grids 8,4] [--tolerance 5,15]
                                          [--brute 2] [--turned]
 
 The queries are real: synthetic photos (:mod:`viewdb.bench.photos`, the generator of
@@ -115,8 +115,8 @@ def main() -> None:
     parser.add_argument("--band", type=int, default=6)
     parser.add_argument("--blocks", default="4,8", help="shifts per wedge to try (all shifts)")
     parser.add_argument("--grids", default="8,4", help="steps of the shift grids to try")
-    parser.add_argument("--brute", type=int, default=3, help="queries also scanned by brute force")
-    parser.add_argument("--tolerance", type=float, default=15.0, help="degrees around a roll hint")
+    parser.add_argument("--brute", type=int, default=2, help="queries also scanned by brute force")
+    parser.add_argument("--tolerance", default="5,15", help="degrees around a roll hint (a comma list)")
     parser.add_argument("--turned", action="store_true",
                         help="turn each photo by a random in-plane angle (the roll hint then gives it)")
     args = parser.parse_args()
@@ -143,13 +143,14 @@ def main() -> None:
             lambda q, w=window: shifted_curves(q["curve"], w.shifts(n)),
             lambda q, s, w=window: knn(q["curve"], s, k, band, shifts=w, block=1))
     designs["upright"] = (lambda q: q["curve"][None], lambda q, s: knn(q["curve"], s, k, band))
-    def hinted(q: dict) -> ShiftWindow:
-        return turn_window(q["bearings"], q["roll"], args.tolerance)
+    def hinted(q: dict, tolerance: float) -> ShiftWindow:
+        return turn_window(q["bearings"], q["roll"], tolerance)
 
-    for b in (1, 8):
-        designs[f"roll±{args.tolerance:g}-b{b}"] = (
-            lambda q: shifted_curves(q["curve"], hinted(q).shifts(n)),
-            lambda q, s, b=b: knn(q["curve"], s, k, band, block=b, shifts=hinted(q)))
+    for tol in (float(x) for x in args.tolerance.split(",")):
+        for b in (1, 8):
+            designs[f"roll±{tol:g}-b{b}"] = (
+                lambda q, t=tol: shifted_curves(q["curve"], hinted(q, t).shifts(n)),
+                lambda q, s, b=b, t=tol: knn(q["curve"], s, k, band, block=b, shifts=hinted(q, t)))
 
     reader = db._catalogue.tier_reader()  # the file's R-tree, as ViewDB.search reads it
     with reader.snapshot():
