@@ -35,7 +35,8 @@ from viewdb.catalogue.features import distance_curve
 from viewdb.catalogue.gl import pyrender_module
 from viewdb.catalogue.render import _offscreen
 from viewdb.errors import FeatureError
-from viewdb.recognition.image import load_image, segment
+from viewdb.recognition.image import load_image
+from viewdb.recognition.segmentation import segment
 from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.knn import TierArrays, knn
 

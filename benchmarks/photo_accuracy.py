@@ -42,7 +42,7 @@ from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_
 from viewdb.camera import camera_pose
 from viewdb.catalogue.gl import pyrender_module
 from viewdb.catalogue.render import _offscreen, pyrender_mesh
-from viewdb.pose.estimate import GL_TO_CV, rotation_angle, view_rotation
+from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.search.shifts import ShiftWindow
 
 

@@ -57,8 +57,10 @@ from scipy.spatial import cKDTree
 import viewdb
 from viewdb.catalogue.mesh import load_mesh
 from viewdb.catalogue.pinhole import Window, get_pinhole_renderer
-from viewdb.pose.estimate import rotation_angle
-from viewdb.recognition.image import load_image, segment
+from viewdb.pose.frames import rotation_angle
+from viewdb.recognition.image import load_image
+from viewdb.recognition.segmentation import segment
+from viewdb.typed import Intrinsics
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
@@ -170,7 +172,7 @@ def pose_errors(sym: Symmetry, r_est: np.ndarray, t_est: np.ndarray, r_gt: np.nd
 
 # ---------------------------------------------------------------------- overlays
 def silhouette(mesh_path: Path, rotation: np.ndarray, translation: np.ndarray,
-               intrinsics: tuple[float, float, float, float], shape: tuple[int, int]) -> np.ndarray:
+               intrinsics: Intrinsics, shape: tuple[int, int]) -> np.ndarray:
     """The mesh (own units) rendered at an OpenCV pose through the intrinsics: bool (H, W)."""
     mesh = load_mesh(mesh_path)  # normalised; pose it as original = c + s·n
     t_n = (np.asarray(rotation) @ mesh.centre + np.asarray(translation)) / mesh.scale

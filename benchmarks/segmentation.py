@@ -7,13 +7,13 @@ Every sample model (``sample_models/``) is rendered from ``--views`` random view
 ``tests/test_query_image.py`` (plain light, plain dark, gradient, mild clutter, and
 ``clutter_strong``, which is beyond "mild" and only measured): scaled, off-centre,
 anti-aliased, with sensor noise.  Each colour method of
-:func:`viewdb.recognition.image.segment` cuts the object out and is scored by IoU against the
+:func:`viewdb.recognition.segmentation.segment` cuts the object out and is scored by IoU against the
 render's silhouette with its holes filled (a refusal scores 0), and by the RMS
 difference between the distance curves of its mask and of the truth (what a query is
 searched with; a refusal scores 1).  Prints IoU mean, minimum, 10th percentile and the
 share of cases at IoU >= 0.95 and >= 0.90, the curve error's median, 90th percentile and
 share below 0.05, the mean CPU time per photo (process time: all threads), and the
-worst cases (model, azimuth, elevation, seed).  This is how ``DEFAULT_METHOD`` was
+worst cases (model, azimuth, elevation, seed).  This is how ``SegmentationConfig.default_method`` was
 chosen.  About 3 minutes on 2 cores with the defaults.
 """
 
@@ -46,8 +46,10 @@ def main() -> None:
     from tests.conftest import sample_files
     from tests.test_query_image import ALL_BACKGROUNDS, make_scene
     from viewdb.catalogue.features import distance_curve
+    from viewdb.config import SegmentationConfig
     from viewdb.errors import ImageError
-    from viewdb.recognition.image import DEFAULT_METHOD, load_image, segment
+    from viewdb.recognition.image import load_image
+    from viewdb.recognition.segmentation import segment
 
     methods = args.methods.split(",")
     scores: dict[tuple[str, str], list[tuple[float, str]]] = {}
@@ -83,7 +85,7 @@ def main() -> None:
 
     per_background = photos // len(ALL_BACKGROUNDS)
     print(f"{per_background} photos per background ({len(sample_files())} models x {args.views} views), "
-          f"240 x 320 pixels; auto default: {DEFAULT_METHOD}")
+          f"240 x 320 pixels; auto default: {SegmentationConfig().default_method}")
     print(f"{'':24} {'IoU':-^34}  {'curve RMS':-^20}")
     print(f"{'method':8} {'background':15} {'mean':>6} {'min':>6} {'p10':>6} {'>=.95':>6} {'>=.90':>6}"
           f"  {'median':>6} {'p90':>6} {'<.05':>6}")

@@ -30,7 +30,7 @@ from viewdb.catalogue.describe import classify_object
 from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.catalogue.mesh import load_mesh
 from viewdb.catalogue.render import get_renderer
-from viewdb.catalogue.symmetry import skim_plan
+from viewdb.catalogue.skimming import skim_plan
 from viewdb.config import BuildConfig
 
 

@@ -29,6 +29,7 @@ from rich.text import Text
 
 import viewdb
 import viewdb.bench as viewdb_bench
+from viewdb.typed import Intrinsics
 
 app = typer.Typer(
     name="viewdb",
@@ -248,7 +249,7 @@ def render(
     out.print(f"wrote {out_path}")
 
 
-def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
+def _intrinsics(text: str | None) -> Intrinsics | None:
     if text is None:
         return None
     if Path(text).suffix.lower() in (".json", ".yaml", ".yml") or Path(text).is_file():
@@ -415,16 +416,18 @@ def serve(
         int, typer.Option(help="Largest /refine, /walk or /colours body in bytes.", min=1024)
     ] = 256 * 1024,
     max_image_body: Annotated[
-        int, typer.Option(help="Largest /pose or /fits body (the query image) in bytes.", min=1024)
+        int, typer.Option(help="Largest /pose, /fits or /query body (the photo) in bytes.", min=1024)
     ] = 32 * 1024 * 1024,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
     ] = "warning",
+    no_ui: Annotated[bool, typer.Option("--no-ui", help="Do not serve the web page at /.")] = False,
 ) -> None:
     """Serve the server tier of a full database over HTTP (read-only; OpenAPI at /openapi.json).
 
     POST /refine (CS1), /walk (CS2), /pose; GET /info, /health. Clients run
-    `viewdb query IMAGE --client CLIENT --server URL`.
+    `viewdb query IMAGE --client CLIENT --server URL`. A web page at / recognises
+    uploaded photos (POST /query) and shows the catalogue (GET /objects).
     """
     from viewdb.http.serve import run_server
 
@@ -433,12 +436,13 @@ def serve(
 
     def ready(url: str, objects: int) -> None:
         auth = ", bearer token required" if token else ""
+        page = "" if no_ui else f"; web page at {url}/"
         out.print(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
-                  f"worker{'s' if workers > 1 else ''}{auth}; Ctrl-C stops")
+                  f"worker{'s' if workers > 1 else ''}{auth}{page}; Ctrl-C stops")
         sys.stdout.flush()
 
     run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
-               max_image_body=max_image_body, log_level=log_level, ready=ready)
+               max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui)
 
 
 @app.command()
@@ -476,17 +480,12 @@ def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:
     """A synthetic photo: the object at an off-grid view, turned 20° in the image plane,
     scaled 0.8 and off-centre, on a light grey background."""
     import cv2
-    import numpy as np
+
+    from viewdb.bench.photos import composite_photo
 
     with viewdb.open(db_path, create=False) as vdb:
         view = vdb.render(name, 37.0, 22.0)
-    size = view.mask.shape[0]
-    m = cv2.getRotationMatrix2D((size / 2, size / 2), 20.0, 0.8)
-    m[:, 2] += (12, -8)
-    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
-    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
-    photo = np.full((size, size, 3), 200, np.uint8)
-    photo[mask] = color[mask]
+    photo, _ = composite_photo(view, turn=20.0, scale=0.8, shift=(12, -8), background=200)
     if not cv2.imwrite(str(out_path), cv2.cvtColor(photo, cv2.COLOR_RGB2BGR)):
         raise viewdb.ViewDBError("cannot write the image", out_path)
 

@@ -193,7 +193,7 @@ def naive_dft(x: np.ndarray, m: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------
-# Oracle for viewdb.catalogue.symmetry: brute-force view relations of a finite symmetry group.
+# Oracle for viewdb.catalogue.skimming: brute-force view relations of a finite symmetry group.
 # Shares nothing with the module but the camera contract (viewdb.camera.camera_pose):
 # the group is closed by multiplying all pairs until nothing new appears, and every pair
 # of grid views is compared with every g·C·M directly as matrices (no decomposition into

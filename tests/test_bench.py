@@ -17,7 +17,7 @@ from viewdb.bench import BenchConfig, run_bench
 from viewdb.bench.log import ResultLog
 from viewdb.bench.metrics import cmc, rank_of
 from viewdb.bench.queries import grid_queries, photo_queries
-from viewdb.bench.runner import plan_tasks
+from viewdb.bench.tasks import plan_tasks
 from viewdb.camera import grid_views
 from viewdb.config import BuildConfig, IndexConfig
 from viewdb.search.grouping import tier_members

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
+from viewdb.bench.photos import composite_photo
 from viewdb.config import BuildConfig, IndexConfig, RenderConfig
 from viewdb.http.wire import ColourReply, ColourRequest
 from viewdb.recognition.colour import carries_colour, colour_distance, colour_signature, has_colour, rerank
@@ -114,10 +115,7 @@ def twins_db(tmp_path_factory):
 
 
 def _photo(db, name, h, v):
-    view = db.render(name, h, v)
-    img = np.full(view.color.shape, 170, np.uint8)
-    img[view.mask] = view.color[view.mask]
-    return img
+    return composite_photo(db.render(name, h, v), background=170)[0]
 
 
 def test_colour_tells_apart_objects_of_the_same_shape(twins_db):

@@ -393,3 +393,15 @@ def test_mirror_curve_reverses_about_the_start(curve: np.ndarray) -> None:
     mc = mirror_curve(curve)
     assert [mc[i] for i in range(n)] == [curve[(-i) % n] for i in range(n)]
     np.testing.assert_array_equal(mirror_curve(mc), curve)
+
+
+@SETTINGS
+@given(hnp.arrays(np.float64, st.tuples(st.integers(1, 4), st.integers(1, 64)),
+                  elements=st.floats(-1e3, 1e3, allow_nan=False)))
+def test_a_stack_of_curves_is_mirrored_curve_by_curve(stack: np.ndarray) -> None:
+    stacked = mirror_curve(stack)
+    assert stacked.shape == stack.shape
+    for row, curve in zip(stacked, stack, strict=True):
+        np.testing.assert_array_equal(row, mirror_curve(curve))
+    with pytest.raises(ValueError, match="at least 1-D"):
+        mirror_curve(np.float64(1.0))

@@ -23,6 +23,7 @@ from PIL import Image
 import viewdb
 from tests.conftest import mixed_query_curves
 from tests.serving import ServerProcess, request
+from viewdb.bench.photos import composite_photo
 from viewdb.http import models
 from viewdb.http.wire import FitReply, PoseRequest, decode_query, encode_query
 from viewdb.pose.estimate import QueryView
@@ -64,14 +65,7 @@ def remote(server):
 
 
 def photo(db, name, h, v, turn):
-    view = db.render(name, h, v)
-    size = view.mask.shape[0]
-    m = cv2.getRotationMatrix2D((size / 2, size / 2), turn, 0.85)
-    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
-    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
-    img = np.full((size, size, 3), 190, np.uint8)
-    img[mask] = color[mask]
-    return img
+    return composite_photo(db.render(name, h, v), turn=turn, scale=0.85, background=190)[0]
 
 
 _curves = mixed_query_curves

@@ -1,4 +1,4 @@
-"""Pose estimation (viewdb.pose.estimate): the rotation convention, SIFT poses off the grid, PnP with
+"""Pose estimation (viewdb.pose): the rotation convention, SIFT poses off the grid, PnP with
 intrinsics, the silhouette fallback for texture-less objects, and the errors."""
 
 from __future__ import annotations
@@ -16,20 +16,16 @@ from tests.conftest import sample
 from viewdb.camera import camera_direction, camera_pose, grid_views, normalise_angle
 from viewdb.catalogue.sift import extract_sift
 from viewdb.errors import PoseError
-from viewdb.pose.estimate import (
+from viewdb.pose.estimate import CandidateView, PoseConfig, QueryView, estimate_pose
+from viewdb.pose.frames import (
     GL_TO_CV,
-    SHAPE_NEAR_WINDOW,
-    CandidateView,
-    PoseConfig,
-    QueryView,
-    estimate_pose,
     inplane_angle,
     rotation_angle,
     rotation_to_view,
     rotation_z,
-    solve_pnp,
     view_rotation,
 )
+from viewdb.pose.solvers import solve_pnp
 
 GAP = 30
 SIZE = 256
@@ -324,7 +320,7 @@ def test_shape_fallback_near_a_known_turn(pose_db, offset):
     assert near.method == "shape" and near.candidate == full.candidate
     assert rotation_angle(near.rotation, full.rotation) <= 0.6
     far = estimate_pose(flat(query), cands, inplane_near=37.3 + 90.0)
-    reach = SHAPE_NEAR_WINDOW + PoseConfig().coarse_step  # the fine search's last step
+    reach = PoseConfig().shape_near_window + PoseConfig().coarse_step  # the fine search's last step
     assert angle_gap(inplane_angle(far.rotation, cands[far.candidate].azimuth,
                                    cands[far.candidate].elevation), 37.3 + 90.0) <= reach + 1e-6
     assert rotation_angle(far.rotation, rot) > 30.0
@@ -462,12 +458,11 @@ def test_pose_config_is_validated(kwargs):
         PoseConfig(**kwargs)
 
 
-def test_a_small_object_is_enlarged_before_sift(pose_db, monkeypatch):
+def test_a_small_object_is_enlarged_before_sift(pose_db):
     # the mug at 0.3 of the views' size: as it is, too few keypoints match and the outline
     # decides (60 deg off when measured); enlarged to the views' size, SIFT finds the pose
     query, (rot, _, _), _ = make_query(pose_db, "mug", 60, 30, 25, 0.3, (0, 0))
     est = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30))
     assert est.method == "sift" and rotation_angle(est.rotation, rot) <= 3.0
-    monkeypatch.setattr("viewdb.pose.estimate.MAX_SIFT_UPSCALE", 1.0)
-    plain = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30))
+    plain = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30), PoseConfig(max_sift_upscale=1.0))
     assert plain.inliers < est.inliers

@@ -7,21 +7,16 @@ import numpy as np
 import pytest
 
 import viewdb
-from viewdb.pose.estimate import rotation_angle, view_rotation
+from viewdb.bench.photos import composite_photo
+from viewdb.pose.frames import rotation_angle, view_rotation
 from viewdb_cli.main import main
 
 
 def photo(db, name, h, v, turn=0.0, scale=1.0, shift=(0, 0), background=200):
     """An off-grid render turned in-plane by ``turn`` (counter-clockwise), scaled, shifted,
     on a plain background; and the model-to-camera rotation it shows."""
-    view = db.render(name, h, v)
-    size = view.mask.shape[0]
-    m = cv2.getRotationMatrix2D((size / 2, size / 2), turn, scale)
-    m[:, 2] += shift
-    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
-    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
-    img = np.full((size, size, 3), background, np.uint8)
-    img[mask] = color[mask]
+    img, _ = composite_photo(db.render(name, h, v), turn=turn, scale=scale, shift=shift,
+                             background=background)
     return img, view_rotation(h, v, turn)
 
 

@@ -3,7 +3,7 @@
 Segmentation is measured on renders of the sample models composited, anti-aliased, scaled
 and off-centre, over synthetic backgrounds (:func:`make_scene`, also used by
 ``benchmarks/segmentation.py``); the truth is the render's silhouette with its holes
-filled, as :func:`viewdb.recognition.image.segment` promises.
+filled, as :func:`viewdb.recognition.segmentation.segment` promises.
 """
 
 from __future__ import annotations
@@ -26,9 +26,10 @@ from scipy.ndimage import binary_fill_holes
 import viewdb
 from tests.conftest import sample
 from viewdb.catalogue.features import distance_curve
+from viewdb.config import SegmentationConfig
 from viewdb.errors import ImageError
-from viewdb.recognition import image as qi
-from viewdb.recognition.image import LoadedImage, load_image, query_curve, segment
+from viewdb.recognition.image import LoadedImage, load_image
+from viewdb.recognition.segmentation import Segmentation, query_curve, segment
 
 # ------------------------------------------------------------------- synthetic photos
 
@@ -154,7 +155,7 @@ def check_auto_segmentation(stems, kind, min_iou):
     for stem in stems:
         photo, truth = scene(stem, kind, seed=1)
         seg = segment(load_image(photo))
-        assert seg.method == qi.DEFAULT_METHOD
+        assert seg.method == SegmentationConfig().default_method
         assert seg.mask.shape == truth.shape and seg.mask.dtype == np.bool_
         assert seg.area_fraction == pytest.approx(seg.mask.mean())
         scores[stem] = round(iou(seg.mask, truth), 3)
@@ -188,7 +189,7 @@ def test_large_photo_is_segmented_at_working_size_and_scaled_back():
     big_truth = cv2.resize(truth.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
     seg = segment(load_image(big))
     assert seg.mask.shape == (960, 1280)
-    assert max(size) > qi.WORK_MAX_SIDE
+    assert max(size) > SegmentationConfig().work_max_side
     assert iou(seg.mask, big_truth) >= 0.95
     assert rms(query_curve(seg, 128), distance_curve(big_truth, 128)) < MAX_CURVE_RMS
 
@@ -227,7 +228,7 @@ def test_opaque_alpha_is_ignored_and_alpha_without_transparency_is_refused():
     opaque = load_image(np.dstack([photo, np.full(photo.shape[:2], 255, np.uint8)]))
     assert opaque.alpha is not None
     seg = segment(opaque)
-    assert seg.method == qi.DEFAULT_METHOD and iou(seg.mask, truth) >= MIN_IOU["plain_light"]
+    assert seg.method == SegmentationConfig().default_method and iou(seg.mask, truth) >= MIN_IOU["plain_light"]
     with pytest.raises(ImageError, match="no transparent pixels"):
         segment(opaque, method="alpha")
     with pytest.raises(ImageError, match="no transparent pixels"):
@@ -283,7 +284,7 @@ def test_query_curve_is_the_distance_curve_of_the_mask():
 
 
 def test_query_curve_turns_feature_errors_into_image_errors():
-    tiny = qi.Segmentation(np.zeros((20, 20), bool), "mask", 0.0, "q.png")
+    tiny = Segmentation(np.zeros((20, 20), bool), "mask", 0.0, "q.png")
     with pytest.raises(ImageError) as info:
         query_curve(tiny, 128)
     assert str(info.value).startswith("q.png: ")

@@ -112,11 +112,11 @@ def _downgrade(path, revision):
     import sqlalchemy as sa
     from alembic import command
 
-    from viewdb.storage.store import _alembic_config
+    from viewdb.storage.connection import alembic_config
 
     engine = sa.create_engine(f"sqlite:///{path}")
     with engine.begin() as conn:
-        command.downgrade(_alembic_config(conn), revision)
+        command.downgrade(alembic_config(conn), revision)
     engine.dispose()
 
 

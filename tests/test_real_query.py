@@ -11,9 +11,10 @@ import viewdb
 from tests.conftest import sample
 from viewdb.catalogue.pinhole import Window, get_pinhole_renderer
 from viewdb.errors import ImageError, QueryError
-from viewdb.pose.estimate import GL_TO_CV, rotation_angle, view_rotation
+from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.pose.silhouette import fibonacci_directions, lift_alignment, ray_rotation, to_mesh_units
-from viewdb.recognition.image import label_mask, load_image
+from viewdb.recognition.image import load_image
+from viewdb.recognition.segmentation import label_mask
 from viewdb.recognition.shapes import completed_mask
 from viewdb_cli.main import main
 

@@ -1,4 +1,4 @@
-"""viewdb.catalogue.symmetry: exact view relations, classification of real renders, no-loss proof.
+"""viewdb.catalogue.skimming and .symmetry: exact view relations, classification of real renders, no-loss proof.
 
 Render-based tests use silhouette-only renders at 128 px (gap 30: 144 views per model,
 plus two models on the full gap-10 grid); a model's curves are rendered once per module.
@@ -16,21 +16,23 @@ from hypothesis import strategies as st
 from tests.conftest import sample
 from tests.reference import naive_view_relations
 from viewdb.camera import camera_pose, grid_views
-from viewdb.catalogue.symmetry import (
-    DEFAULT_SIGMA,
-    SymmetryType,
+from viewdb.catalogue.features import mirror_curve
+from viewdb.catalogue.skimming import (
     ViewClasses,
     candidate_poses,
     canonical_generator,
-    classify,
     generator_matrix,
     grid_pose_of,
     plan_without_skimming,
     pose_rotation,
     related_views,
-    reverse_curve,
-    shape_distance,
     skim_plan,
+)
+from viewdb.catalogue.symmetry import (
+    DEFAULT_SIGMA,
+    SymmetryType,
+    classify,
+    shape_distance,
     views_needed_for_classification,
 )
 
@@ -308,11 +310,11 @@ def _synthetic_object(gens, gap, seed=0, n=64):
         coef = rng.normal(0, 0.15, size=(6, 2))
         c = 1 + sum(a * np.cos(2 * np.pi * (k + 1) * t) + b * np.sin(2 * np.pi * (k + 1) * t) for k, (a, b) in enumerate(coef))
         if vc.is_self_mirror(*kept):
-            c = (c + reverse_curve(c)) / 2
+            c = (c + mirror_curve(c)) / 2
         per_class[kept] = c / c.mean()
     curves = {}
     for view, (kept, mirrored) in vc.mapping.items():
-        curves[view] = reverse_curve(per_class[kept]) if mirrored else per_class[kept]
+        curves[view] = mirror_curve(per_class[kept]) if mirrored else per_class[kept]
     return vc, curves
 
 
@@ -356,7 +358,7 @@ def test_verifier_rejects_a_ring_that_only_looks_symmetric():
         c = ring_curve if view[1] in (0.0, 180.0) else 1 + 0.1 * rng.normal(size=n)
         curves[view] = c
     for view, (kept, mirrored) in pairs.mapping.items():
-        curves[view] = reverse_curve(curves[kept]) if mirrored else curves[kept]
+        curves[view] = mirror_curve(curves[kept]) if mirrored else curves[kept]
     sym = classify(lambda h, v: curves[(h, v)], gap)
     assert (sym.h_type, sym.v_type) == ("H4", "V4") and sym.generators == ()
     statuses = {(r.generator, r.status) for r in sym.verification}
@@ -453,10 +455,10 @@ def _assert_no_loss(stem: str, gap: int) -> ViewClasses:
     plan = skim_plan(sym)
     worst = 0.0
     for view, (kept, mirrored) in plan.mapping.items():
-        expect = reverse_curve(curves[kept]) if mirrored else curves[kept]
+        expect = mirror_curve(curves[kept]) if mirrored else curves[kept]
         err = shape_distance(curves[view], expect)
         if plan.is_self_mirror(*view):  # both parities claimed: check the other one too
-            err = max(err, shape_distance(curves[view], reverse_curve(curves[kept])))
+            err = max(err, shape_distance(curves[view], mirror_curve(curves[kept])))
         worst = max(worst, err)
         assert err <= NO_LOSS_TOL, (stem, gap, view, kept, mirrored, err)
     assert worst <= NO_LOSS_TOL

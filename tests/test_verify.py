@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
+from viewdb.bench.photos import composite_photo
 from viewdb.config import BuildConfig, IndexConfig, PerspectiveConfig, RenderConfig
 from viewdb.http.wire import FitReply, FitRequest, decode_query
 from viewdb.pose.estimate import QueryView
@@ -63,11 +64,7 @@ def test_a_perfect_fit_keeps_the_score_and_no_fit_is_the_worst():
 
 
 def _on_grey(db, name, h, v, background=(128, 128, 128)):
-    view = db.render(name, h, v)
-    img = np.empty(view.color.shape, np.uint8)
-    img[:] = background
-    img[view.mask] = view.color[view.mask]
-    return img, view.mask
+    return composite_photo(db.render(name, h, v), background=background)
 
 
 def test_the_right_objects_view_fits_best(tiered_db):
@@ -169,7 +166,8 @@ def test_a_mirrored_match_is_compared_by_the_colours_of_the_side_the_photo_shows
     match, the view from the opposite side (whose colours can differ: the marked cube's
     faces are painted differently)."""
     from viewdb.recognition.colour import colour_distance, colour_signature
-    from viewdb.recognition.image import load_image, segment
+    from viewdb.recognition.image import load_image
+    from viewdb.recognition.segmentation import segment
 
     telling = 0
     with viewdb.open(tiered_db, read_only=True) as db:

@@ -15,7 +15,8 @@ from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
 from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh
 from .catalogue.reading import CandidatePose, CatalogueReader, ObjectInfo, StoredView
 from .catalogue.render import RenderedView
-from .catalogue.symmetry import SymmetryType, ViewClasses
+from .catalogue.skimming import ViewClasses
+from .catalogue.symmetry import SymmetryType
 from .config import (
     BuildConfig,
     FeatureConfig,

@@ -21,7 +21,8 @@ from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition,
 from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
-from .catalogue.symmetry import SymmetryType, ViewClasses
+from .catalogue.skimming import ViewClasses
+from .catalogue.symmetry import SymmetryType
 from .config import BuildConfig, RenderConfig
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate

@@ -11,9 +11,9 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "IndexConfig", "PerspectiveConfig", "PosingConfig",
-    "RecognitionConfig", "RenderConfig", "SearchConfig", "SiftConfig", "SkimConfig",
-    "default_client_gap",
+    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig",
+    "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig", "SearchConfig", "SegmentationConfig",
+    "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
 ]
 
 
@@ -134,6 +134,186 @@ class PerspectiveConfig:
     @property
     def enabled(self) -> bool:
         return bool(self.distances)
+
+
+@dataclass(frozen=True)
+class ImageConfig:
+    """Limits on query images (:mod:`viewdb.recognition.image`, the HTTP query decoder)."""
+
+    #: Default ``max_pixels`` of :func:`~viewdb.recognition.image.load_image`: larger
+    #: images are refused undecoded.
+    max_pixels: int = 40_000_000
+    #: Smallest accepted width and height, in pixels.
+    min_side: int = 16
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """Cutting the object out of a query photo (:mod:`viewdb.recognition.segmentation`)."""
+
+    #: A kept object must cover at least this share of the image ...
+    min_object_fraction: float = 0.005
+    #: ... and at least this many pixels ...
+    min_object_pixels: int = 64
+    #: ... and at most this share (else no background was found).
+    max_object_fraction: float = 0.98
+    #: The colour methods work on a copy scaled to at most this many pixels on the longer side.
+    work_max_side: int = 1024
+    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``).
+    default_method: str = "grabcut"
+    #: Width of the border strip that samples the background, as a share of the shorter side.
+    border_strip: float = 0.02
+    #: Colour clusters of the background model; clusters holding less than
+    #: ``min_cluster_share`` of the border samples are dropped (object pixels on the border).
+    background_clusters: int = 4
+    min_cluster_share: float = 0.01
+    #: At most this many border pixels (evenly spaced along the strip) fit the model.
+    border_samples: int = 4000
+    #: A pixel is object when its Lab distance to the background model exceeds
+    #: ``max(min_threshold, threshold_factor · the border_quantile quantile of the border's
+    #: own distances)``.
+    min_threshold: float = 8.0
+    threshold_factor: float = 2.0
+    border_quantile: float = 0.99
+    #: The closing that bridges cracks adds only pixels at least this share of the local
+    #: object contrast away from the background.
+    bridge_share: float = 0.1
+    #: GrabCut iterations.
+    grabcut_iterations: int = 4
+
+    def __post_init__(self) -> None:
+        if self.default_method not in ("border", "otsu", "grabcut"):
+            raise ValueError(
+                f"default_method must be 'border', 'otsu' or 'grabcut', got {self.default_method!r}"
+            )
+
+
+@dataclass(frozen=True)
+class PoseConfig:
+    """Tunables of :func:`viewdb.pose.estimate.estimate_pose`. Pixel tolerances are fractions of the query
+    object's extent (the larger side of its mask's bounding box), floored at
+    :attr:`min_threshold_px`, so they hold for any image size."""
+
+    #: SIFT keypoints extracted from the query (views store up to 128).
+    max_keypoints: int = 512
+    #: Lowe's ratio test between the best and the second best match.
+    ratio: float = 0.75
+    #: Geometrically consistent matches needed to accept the SIFT pose.
+    min_inliers: int = 8
+    #: RANSAC tolerance of the 2-D similarity from a grid view to the query. Loose: an
+    #: off-grid query differs from the nearest view by parallax a similarity cannot model.
+    similarity_threshold: float = 0.04
+    #: Reprojection tolerance of the refined 3-D pose (orthographic or PnP).
+    pose_threshold: float = 0.015
+    #: Floor of both tolerances, in query pixels.
+    min_threshold_px: float = 2.0
+    #: Refine the orthographic pose off the grid from the 2-D–3-D correspondences, scoring
+    #: proposals on the matches of all candidates. False is the grid-only baseline: the
+    #: similarity's pose ``R_z(α)·R_viewᵀ`` of the candidate with most RANSAC inliers.
+    #: (The PnP path, with intrinsics, always refines.)
+    refine: bool = True
+    #: Shape fallback: in-plane angle search, coarse step then fine step (degrees).
+    coarse_step: float = 5.0
+    fine_step: float = 0.5
+    #: Shape fallback: points sampled along each outer contour for the chamfer distance.
+    contour_samples: int = 256
+    #: Shape fallback: weight of the internal-edge distance added to the outline distance
+    #: (both over the object's sqrt(area)) for the alignments whose outlines fit about as
+    #: well as the best (:attr:`shape_tie_ratio`): Canny edges inside the query's silhouette
+    #: against those of each candidate's shaded render (:attr:`viewdb.pose.views.CandidateView.color`) under
+    #: the outline alignment, a symmetric oriented chamfer distance. It tells apart poses
+    #: whose outlines agree (a chair from the front and from the back). 0: the outline
+    #: alone. Measured on 216 off-grid renders of the sample models, segmented as queries
+    #: are, among the candidate poses of the nearest grid view: a wrong pose picked 25
+    #: times, against 98 by the outline alone; flat for weights 0.5-2, truncations
+    #: 0.05-0.2, orientation shares 0-0.5.
+    detail_weight: float = 1.0
+    #: Each edge pixel's distance is truncated at this fraction of sqrt(area) ...
+    detail_truncation: float = 0.1
+    #: ... and mixed with this share of its difference in direction to the nearest edge
+    #: pixel of the other image (0°: none, 90°: the truncated distance).
+    detail_orientation: float = 0.5
+
+    #: Matches a candidate needs to propose a pose hypothesis.
+    min_hypothesis_matches: int = 4
+    #: Best-supported hypotheses refined on the pooled matches, and refit rounds for each.
+    refined_hypotheses: int = 3
+    pooled_rounds: int = 3
+    #: A query object smaller than the candidate views by at least this factor is enlarged
+    #: before SIFT, by at most :attr:`max_sift_upscale`
+    #: (:func:`viewdb.pose.sift_pose.sift_upscale`).
+    min_sift_upscale: float = 1.5
+    max_sift_upscale: float = 3.0
+    #: Shape fallback: in-plane angles kept per candidate (local minima of the outline
+    #: distance within :attr:`shape_angle_slack` of its best), so that when a silhouette
+    #: looks alike turned (a square, a rectangle) the internal edges can choose the turn too.
+    shape_angles: int = 4
+    shape_angle_slack: float = 0.05
+    #: Shape fallback near a known pose (``inplane_near``): the in-plane angles searched lie
+    #: within this many degrees of it.
+    shape_near_window: float = 15.0
+    #: Shape fallback: the internal edges decide among the alignments whose outline distance
+    #: is within this ratio (plus margin) of the best; an outline that fits clearly worse is
+    #: not rescued by its edges (thin objects have few edges inside, and a candidate view far
+    #: from the query's direction has edges in the wrong places).
+    shape_tie_ratio: float = 0.1
+    shape_tie_margin: float = 0.003
+    #: Internal edges: Canny hysteresis thresholds (on the L2 magnitude of the 3×3 Sobel
+    #: gradient of the grey image, after a 3×3 Gaussian blur). The query's are found at the
+    #: level of its image pyramid nearest each view's scale. Thresholds of 15/45 and colour
+    #: edges were measured no better on the sample models.
+    edge_thresholds: tuple[float, float] = (30.0, 90.0)
+    #: Edges closer to the silhouette than this fraction of the view's image size (at least
+    #: 2 pixels) are the outline's, which the outline distance already scores.
+    edge_margin: float = 0.012
+    #: A query has internal detail (and the edge term is used) when its interior holds at
+    #: least this many edge pixels per pixel of sqrt(area), at about the views' resolution.
+    min_detail_edges: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.max_keypoints < 1:
+            raise ValueError(f"max_keypoints must be at least 1, got {self.max_keypoints}")
+        if not 0.0 < self.ratio <= 1.0:
+            raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
+        if self.min_inliers < 4:
+            raise ValueError(f"min_inliers must be at least 4, got {self.min_inliers}")
+        if not (self.similarity_threshold > 0 and self.pose_threshold > 0):
+            raise ValueError("thresholds must be positive")
+        if not 0.0 < self.fine_step <= self.coarse_step <= 90.0:
+            raise ValueError("need 0 < fine_step <= coarse_step <= 90")
+        if self.contour_samples < 16:
+            raise ValueError(f"contour_samples must be at least 16, got {self.contour_samples}")
+        if not (self.detail_weight >= 0 and self.detail_truncation > 0 and 0 <= self.detail_orientation <= 1):
+            raise ValueError("need detail_weight >= 0, detail_truncation > 0, 0 <= detail_orientation <= 1")
+
+
+@dataclass(frozen=True)
+class SilhouetteConfig:
+    """Tunables of :func:`viewdb.pose.silhouette.search_silhouette_pose`."""
+
+    #: Viewing directions rendered for the orthographic search (about 20° apart).
+    directions: int = 100
+    #: Hypotheses (direction + in-plane alignment) lifted and refined coarsely ...
+    coarse_starts: int = 8
+    #: ... and the best of them refined finely.
+    fine_starts: int = 2
+    #: Window sizes (pixels) of the coarse and fine IoU refinement.
+    coarse_size: int = 96
+    fine_size: int = 160
+    #: Most IoU evaluations (renders) per refinement.
+    max_evaluations: int = 400
+    #: Pattern-search steps: rotation (radians), origin pixel (window pixels), log depth;
+    #: the first steps, and the smallest of the coarse and of the fine refinement (the fine
+    #: refinement starts from the coarse one's smallest).
+    start_steps: tuple[float, float, float] = (0.12, 3.0, 0.06)
+    coarse_min_steps: tuple[float, float, float] = (0.02, 0.75, 0.01)
+    fine_min_steps: tuple[float, float, float] = (0.004, 0.2, 0.002)
+
+    def __post_init__(self) -> None:
+        if not (self.directions >= 1 and self.coarse_starts >= 1 and self.fine_starts >= 0):
+            raise ValueError("need directions >= 1, coarse_starts >= 1, fine_starts >= 0")
+        if not (16 <= self.coarse_size <= 1024 and 16 <= self.fine_size <= 1024):
+            raise ValueError("window sizes must be in [16, 1024]")
 
 
 def default_client_gap(gap: float) -> float:
@@ -275,3 +455,81 @@ class PosingConfig:
             raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0")
         if not (16 <= self.silhouette_search_size <= 4096 and self.shape_refine_step > 0):
             raise ValueError("need 16 <= silhouette_search_size <= 4096 and shape_refine_step > 0")
+
+
+@dataclass(frozen=True)
+class OverlayConfig:
+    """How a posed mesh is drawn over a photo (:mod:`viewdb.recognition.overlay`). Widths
+    and the label's size are per 1000 pixels of the drawn image's longer side, so an
+    overlay looks the same at any resolution (never thinner than one pixel)."""
+
+    #: Longest side of the drawn image in pixels (the photo is shrunk to it first);
+    #: None: the photo's own size.
+    max_side: int | None = None
+    #: A photo whose longer side is shorter than this is enlarged to it first (so that
+    #: lines and labels stay legible over a small photo); None: never enlarged.
+    min_side: int | None = None
+    #: Width of the outline (the posed mesh's silhouette, its holes included).
+    outline_width: float = 3.0
+    #: Width of the internal edges (creases and parts in front of others).
+    edge_width: float = 1.5
+    #: Faces whose normals differ by more than this (degrees) meet at a drawn crease.
+    crease_degrees: float = 35.0
+    #: Neighbouring visible surfaces further apart in depth than this share of the
+    #: model's bounding radius meet at a drawn edge (a part in front of another).
+    occlusion_depth: float = 0.1
+    #: Opacity of the shaded mesh drawn under the lines (0: lines only).
+    fill_opacity: float = 0.3
+    #: Length of the drawn model axes (x red, y green, z blue) in bounding radii; 0: none.
+    axis_length: float = 0.6
+    #: Height of the label's letters.
+    label_size: float = 22.0
+    #: Whether each result is labelled with its rank, name and score.
+    labels: bool = True
+    #: One colour (RGB) per result, best first; repeated when there are more results.
+    colours: tuple[tuple[int, int, int], ...] = (
+        (0, 230, 118), (41, 121, 255), (255, 145, 0), (213, 0, 249), (255, 23, 68), (0, 229, 255),
+    )
+
+    def __post_init__(self) -> None:
+        if self.max_side is not None and self.max_side < 16:
+            raise ValueError(f"max_side must be at least 16 pixels, got {self.max_side}")
+        if self.min_side is not None and not 16 <= self.min_side <= (self.max_side or self.min_side):
+            raise ValueError(f"min_side must be at least 16 pixels and at most max_side, got {self.min_side}")
+        for name in ("outline_width", "edge_width", "axis_length", "label_size", "occlusion_depth"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be at least 0, got {getattr(self, name)}")
+        if not 0.0 <= self.fill_opacity <= 1.0:
+            raise ValueError(f"fill_opacity must be in [0, 1], got {self.fill_opacity}")
+        if not 0.0 <= self.crease_degrees <= 180.0:
+            raise ValueError(f"crease_degrees must be in [0, 180], got {self.crease_degrees}")
+        if not self.colours or any(len(c) != 3 or not all(0 <= v <= 255 for v in c) for c in self.colours):
+            raise ValueError("colours must be RGB triples of 0-255")
+
+
+@dataclass(frozen=True)
+class WebConfig:
+    """The web page of ``viewdb serve`` and the endpoints behind it (:mod:`viewdb.http.web`)."""
+
+    #: The photo and each result's overlay come back at most this many pixels on the
+    #: longer side (a phone's photo is shrunk; the query itself runs at full size)...
+    display_side: int = 1024
+    #: ... and at least this many (a small photo is enlarged, so the overlay is legible).
+    display_min_side: int = 512
+    #: JPEG quality of the photo sent back to draw the overlays on.
+    photo_quality: int = 85
+    #: Most results one query through the page may ask for.
+    max_k: int = 10
+    #: View PNGs (thumbnails, the turntable) kept rendered per worker.
+    view_cache: int = 512
+    #: The view ``(azimuth, elevation)`` that pictures each object in the catalogue.
+    picture_view: tuple[float, float] = (30.0, 20.0)
+
+    def __post_init__(self) -> None:
+        if not 64 <= self.display_min_side <= self.display_side:
+            raise ValueError("display_side and display_min_side must be at least 64, in that order, "
+                             f"got {self.display_side} and {self.display_min_side}")
+        if not 1 <= self.photo_quality <= 100:
+            raise ValueError(f"photo_quality must be in [1, 100], got {self.photo_quality}")
+        if self.max_k < 1 or self.view_cache < 1:
+            raise ValueError("max_k and view_cache must be at least 1")

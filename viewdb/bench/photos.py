@@ -1,11 +1,14 @@
-"""Synthetic photographs for the realistic query protocol.
+"""Synthetic photographs: for the realistic query protocol, and quick ones from a view.
 
-A photo is a stored object seen from a random direction off the grid through a
-**perspective** camera (random field of view and distance), lit by a random directional
-light plus ambient light (pyrender's physically based shader, not the views' head-light),
-on a plain background of a random colour, with Gaussian pixel noise and JPEG compression.
-Everything random is drawn into a :class:`PhotoSpec` first, so the same spec always gives
-the same image.
+:func:`composite_photo` stages a rendered view as a photo: turned in the image plane,
+scaled and shifted, on a plain background (``viewdb demo``'s query, and the tests').
+
+For the realistic query protocol a photo is a stored object seen from a random direction
+off the grid through a **perspective** camera (random field of view and distance), lit by
+a random directional light plus ambient light (pyrender's physically based shader, not
+the views' head-light), on a plain background of a random colour, with Gaussian pixel
+noise and JPEG compression.  Everything random is drawn into a :class:`PhotoSpec` first,
+so the same spec always gives the same image.
 """
 
 from __future__ import annotations
@@ -21,10 +24,10 @@ from numpy.typing import NDArray
 from ..camera import camera_pose
 from ..catalogue.gl import pyrender_module
 from ..catalogue.mesh import NormalisedMesh
-from ..catalogue.render import _offscreen, _reraise_interrupt, pyrender_mesh
+from ..catalogue.render import RenderedView, _offscreen, _reraise_interrupt, pyrender_mesh
 from ..errors import RenderError
 
-__all__ = ["PhotoSpec", "draw_photo_spec", "encode_jpeg", "render_photo"]
+__all__ = ["PhotoSpec", "composite_photo", "draw_photo_spec", "encode_jpeg", "render_photo"]
 
 
 @dataclass(frozen=True)
@@ -113,3 +116,28 @@ def encode_jpeg(rgb: NDArray[np.uint8], quality: int) -> bytes:
     if not ok:
         raise RenderError("JPEG encoding failed")
     return bytes(buf)
+
+
+def composite_photo(
+    view: RenderedView, *, turn: float = 0.0, scale: float = 1.0,
+    shift: tuple[float, float] = (0.0, 0.0), background: int | tuple[int, int, int] = 200,
+) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
+    """A view staged as a photo, and the object's mask in it.
+
+    The view's render is turned by ``turn`` degrees counter-clockwise (as seen on screen)
+    and scaled by ``scale`` about the image centre, shifted by ``shift`` pixels (x right,
+    y down), and pasted on a plain ``background`` (a grey level or an RGB triple) in an
+    image of the view's size: colours interpolated linearly, the mask by nearest
+    neighbour. Without a turn, scale or shift the render is pasted as it is.
+    """
+    size = view.mask.shape[0]
+    color, mask = view.color, view.mask
+    if turn != 0.0 or scale != 1.0 or any(shift):
+        m = cv2.getRotationMatrix2D((size / 2, size / 2), turn, scale)
+        m[:, 2] += shift
+        color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
+    photo = np.empty((size, size, 3), np.uint8)
+    photo[:] = background
+    photo[mask] = color[mask]
+    return photo, mask

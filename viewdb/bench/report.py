@@ -19,6 +19,7 @@ from .config import CONFIGURATIONS, BenchConfig
 from .log import ResultLog
 from .metrics import cmc, rank_of, timing_summary
 from .plots import plot_cmc, plot_time_split, plot_time_vs_gap
+from .tasks import plan_tasks
 
 __all__ = ["summarise", "write_report"]
 
@@ -223,8 +224,6 @@ def write_report(
 
 
 def _wanted_keys(config: BenchConfig) -> list[str]:
-    from .runner import plan_tasks
-
     return [t.key for t in plan_tasks(config)]
 
 

@@ -28,11 +28,13 @@ from ..api import open as open_db
 from ..catalogue.ingest import IngestProgress
 from ..errors import ViewDBError
 from .cache import CachedDb, client_db, full_db, index_row, select_models
-from .config import CONFIGURATIONS, BenchConfig
-from .log import ResultLog, record_key
+from .config import BenchConfig
+from .log import ResultLog
 from .queries import GridQuery, PhotoQuery, grid_queries, photo_queries
+from .report import write_report
+from .tasks import Task, plan_tasks
 
-__all__ = ["BenchProgress", "BenchRun", "Task", "plan_tasks", "run_bench"]
+__all__ = ["BenchProgress", "BenchRun", "run_bench"]
 
 
 @dataclass(frozen=True)
@@ -45,22 +47,6 @@ class BenchProgress:
     detail: str = ""
 
 
-@dataclass(frozen=True)
-class Task:
-    """One measurement: a query under one configuration."""
-
-    protocol: str
-    query: int
-    skim: bool
-    plan: str
-    client_gap: float | None
-    k: int
-
-    @property
-    def key(self) -> str:
-        return record_key(self.protocol, self.query, self.skim, self.plan, self.client_gap, self.k)
-
-
 @dataclass
 class BenchRun:
     """What a finished run wrote and measured."""
@@ -71,31 +57,6 @@ class BenchRun:
     #: Measurements made by this call (the rest came from the log).
     measured: int = 0
     skipped: int = 0
-
-
-def plan_tasks(config: BenchConfig) -> list[Task]:
-    """Every measurement of a run, in order, without duplicates."""
-    groups: list[tuple[str, bool, str, float | None, int]] = []
-    for protocol in config.protocols:
-        for c in CONFIGURATIONS:
-            groups.append((protocol, c.skim, c.plan,
-                           None if c.plan == "server" else config.client_gap, config.k))
-    for protocol in config.timing_protocols:
-        for skim in (True, False):
-            for k in range(1, config.k + 1):
-                groups.append((protocol, skim, "server", None, k))
-                for plan in ("cs1", "cs2"):
-                    for gap in config.gaps:
-                        groups.append((protocol, skim, plan, float(gap), k))
-    seen: set[str] = set()
-    tasks = []
-    for protocol, skim, plan, gap, k in groups:
-        for q in range(config.queries):
-            task = Task(protocol, q, skim, plan, gap, k)
-            if task.key not in seen:
-                seen.add(task.key)
-                tasks.append(task)
-    return tasks
 
 
 def _check_out(config: BenchConfig, names: list[str]) -> None:
@@ -152,8 +113,6 @@ def run_bench(
         measured, skipped = _measure(config, plan_tasks(config), queries, dbs, sides, log, tell)
         rows = [index_row(fulls[s]) for s in (True, False)] + \
                [index_row(clients[key]) for key in sorted(clients, key=lambda x: (not x[0], x[1]))]
-        from .report import write_report
-
         tell("report", 0, 1)
         files_out, summary = write_report(config, log, queries, rows, names)
         tell("report", 1, 1)

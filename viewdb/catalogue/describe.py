@@ -21,7 +21,8 @@ from .features import distance_curve, fourier_point
 from .mesh import NormalisedMesh
 from .render import RenderedView, Renderer, get_renderer
 from .sift import SiftFeatures, extract_sift, lift_points
-from .symmetry import SymmetryType, classify, plan_without_skimming, skim_plan
+from .skimming import plan_without_skimming, skim_plan
+from .symmetry import SymmetryType, classify
 
 __all__ = [
     "ObjectDescription",

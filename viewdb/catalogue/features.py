@@ -365,15 +365,16 @@ def mirror_curve(curve: np.ndarray) -> NDArray[np.float64]:
     Parameters
     ----------
     curve : numpy.ndarray
-        1-D centroid distance curve ``c`` of length ``N``.
+        Centroid distance curve ``c`` of length ``N``, ``(N,)``, or a stack of curves
+        ``(..., N)`` (each mirrored along the last axis).
 
     Returns
     -------
     numpy.ndarray
-        float64 ``(N,)`` with ``c'[i] = c[(-i) % N]``: same start, opposite direction.
-        Equal to ``distance_curve(mask[:, ::-1])`` when ``c = distance_curve(mask)``.
+        float64 of the same shape with ``c'[i] = c[(-i) % N]``: same start, opposite
+        direction. Equal to ``distance_curve(mask[:, ::-1])`` when ``c = distance_curve(mask)``.
     """
     x = np.asarray(curve, dtype=np.float64)
-    if x.ndim != 1:
-        raise ValueError(f"curve must be 1-D, got shape {x.shape}")
-    return np.roll(x[::-1], 1)
+    if x.ndim < 1:
+        raise ValueError(f"curve must be at least 1-D, got shape {x.shape}")
+    return np.roll(x[..., ::-1], 1, axis=-1)

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from ..errors import RenderError
 from ..interrupts import interrupts_held
+from ..typed import Intrinsics
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 from .render import _reraise_interrupt, render_depth
@@ -46,7 +47,7 @@ class Window:
         """Window pixels per photo pixel."""
         return self.size / self.side
 
-    def intrinsics(self, fx: float, fy: float, cx: float, cy: float) -> tuple[float, float, float, float]:
+    def intrinsics(self, fx: float, fy: float, cx: float, cy: float) -> Intrinsics:
         """The photo's intrinsics for this window (OpenCV pixel centres on integers)."""
         f = self.factor
         return (fx * f, fy * f, (cx - self.x0 + 0.5) * f - 0.5, (cy - self.y0 + 0.5) * f - 0.5)
@@ -102,7 +103,7 @@ class PinholeRenderer:
 
     def render(
         self, mesh: NormalisedMesh, rotation: NDArray[np.floating], translation: NDArray[np.floating],
-        intrinsics: tuple[float, float, float, float], size: int,
+        intrinsics: Intrinsics, size: int,
     ) -> tuple[NDArray[np.bool_], NDArray[np.float32]]:
         """Silhouette (bool) and depth (camera z, 0 off the object) of ``mesh`` at the
         OpenCV pose ``(rotation, translation)`` for a ``size × size`` image with

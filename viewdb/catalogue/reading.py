@@ -17,7 +17,8 @@ from numpy.typing import NDArray
 from ..config import BuildConfig
 from .mesh import NormalisedMesh
 from .render import RenderedView
-from .symmetry import SymmetryType, ViewClasses
+from .skimming import ViewClasses
+from .symmetry import SymmetryType
 
 __all__ = ["CandidatePose", "CatalogueReader", "ObjectInfo", "StoredView"]
 

@@ -13,6 +13,10 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
+``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
+                  the web page's endpoints: the whole query on the server, with pictures
+                  (:mod:`viewdb.http.web`)
+``GET /``         the web page (no token; not with ``ui=False``, ``viewdb serve --no-ui``)
 
 Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
 not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
@@ -40,7 +44,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-from fastapi import Depends, FastAPI, Request
+from fastapi import APIRouter, Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
@@ -50,9 +54,10 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
+from ..config import WebConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
-from . import models
+from . import models, web
 from .wire import (
     ColourReply,
     ColourRequest,
@@ -75,6 +80,8 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
+#: "0": no web page (``viewdb serve --no-ui``).
+ENV_UI = "VIEWDB_UI"
 
 T = TypeVar("T")
 
@@ -190,40 +197,62 @@ def create_app(
     token: str | None = None,
     max_body: int = DEFAULT_MAX_BODY,
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+    ui: bool = True,
+    web_config: WebConfig | None = None,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
-    ``token``: when given, every endpoint but ``/health`` and the schema needs the header
-    ``Authorization: Bearer <token>``.
+    ``token``: when given, every endpoint but ``/health``, the schema and the web page
+    needs the header ``Authorization: Bearer <token>``. ``ui``: serve the web page at
+    ``/`` (its endpoints are served either way).
     """
-    db_path = Path(db_path)
-    holder: dict[str, _State] = {}
+    server = _Server(Path(db_path), token, max_body, max_image_body)
+    app = FastAPI(
+        title="viewdb server",
+        version=__version__,
+        description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
+                    "estimation, over a full database opened read-only.",
+        lifespan=server.lifespan,
+    )
+    _add_error_handlers(app)
+    app.include_router(_routes(server))
+    app.include_router(web.web_router(server.run, [Depends(server.authorised)], web_config))
+    if ui:
+        web.add_page(app)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
+                                          "/query": max_image_body}, default=max_body)
+    return app
+
+
+class _Server:
+    """What the routes of one worker share: its open database and the thread that
+    answers on it, the token and the limits."""
+
+    def __init__(self, db_path: Path, token: str | None, max_body: int, max_image_body: int) -> None:
+        self.db_path, self.token = db_path, token
+        self.max_body, self.max_image_body = max_body, max_image_body
+        self._state: _State | None = None
 
     @asynccontextmanager
-    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+    async def lifespan(self, _app: FastAPI) -> AsyncIterator[None]:
         executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="viewdb")
         loop = asyncio.get_running_loop()
-        db = await loop.run_in_executor(executor, _open_for_serving, db_path)
-        holder["state"] = _State(db, executor, db.config.features.curve_samples, len(db.objects()))
+        db = await loop.run_in_executor(executor, _open_for_serving, self.db_path)
+        self._state = _State(db, executor, db.config.features.curve_samples, len(db.objects()))
         try:
             yield
         finally:
             await loop.run_in_executor(executor, db.close)
             executor.shutdown(wait=True)
 
-    app = FastAPI(
-        title="viewdb server",
-        version=__version__,
-        description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
-                    "estimation, over a full database opened read-only.",
-        lifespan=lifespan,
-    )
+    def state(self) -> _State:
+        assert self._state is not None
+        return self._state
 
-    def state() -> _State:
-        return holder["state"]
-
-    async def run(fn: Callable[[ViewDB], T]) -> tuple[T, float]:
-        s = state()
+    async def run(self, fn: Callable[[ViewDB], T]) -> tuple[T, float]:
+        """``fn(db)`` on the database's thread, and how long it took (ms)."""
+        s = self.state()
 
         def timed() -> tuple[T, float]:
             start = time.perf_counter()
@@ -232,17 +261,21 @@ def create_app(
 
         return await asyncio.get_running_loop().run_in_executor(s.executor, timed)
 
-    def authorised(request: Request) -> None:
-        if token is None:
+    def authorised(self, request: Request) -> None:
+        """A dependency: 401 unless the request carries the bearer token (if one is set)."""
+        if self.token is None:
             return
         given = request.headers.get("authorization", "")
         scheme, _, value = given.partition(" ")
-        if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), token.encode()):
+        if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), self.token.encode()):
             raise HTTPException(401, "missing or wrong bearer token" if given else
                                 "this server needs a bearer token (Authorization: Bearer ...)",
                                 headers={"WWW-Authenticate": "Bearer"})
 
-    guarded = [Depends(authorised)]
+
+def _add_error_handlers(app: FastAPI) -> None:
+    """Every error as ``{"error": "<one line>", "status": <code>}``: the library's errors
+    by kind (404, 503, 422), anything unexpected as a logged 500."""
 
     @app.exception_handler(HTTPException)
     async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
@@ -267,47 +300,62 @@ def create_app(
         log.exception("internal error")
         return _error(500, f"internal server error ({type(exc).__name__})")
 
-    def reply(r: ServerReply, ms: float) -> dict[str, Any]:
-        out = r.to_dict()
-        out["stats"]["server_ms"] = ms
-        return out
 
-    @app.get("/health", summary="Liveness: the worker is up and its database open")
+def _reply(r: ServerReply, ms: float) -> dict[str, Any]:
+    out = r.to_dict()
+    out["stats"]["server_ms"] = ms
+    return out
+
+
+def _routes(server: _Server) -> APIRouter:
+    """The endpoints (module docstring), answered by ``server``'s server tier."""
+    router = APIRouter()
+    guarded = [Depends(server.authorised)]
+    state, run = server.state, server.run
+
+    @router.get("/health", summary="Liveness: the worker is up and its database open")
     async def health() -> dict[str, Any]:
         return {"status": "ok", "pid": os.getpid(), "objects": state().objects}
 
-    @app.get("/info", dependencies=guarded, responses=_ERRORS,
-             summary="What the database holds, its build settings and this server's limits")
+    @router.get("/info", dependencies=guarded, responses=_ERRORS,
+                summary="What the database holds, its build settings and this server's limits")
     async def info() -> dict[str, Any]:
         data, _ = await run(lambda db: db.info().to_dict())
         data.pop("path", None)
         return {**data, "viewdb": __version__, "role": "full", "read_only": True,
-                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": max_body,
-                           "max_image_body": max_image_body,
+                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": server.max_body,
+                           "max_image_body": server.max_image_body,
                            "curve_samples": state().curve_samples},
-                "auth": token is not None}
+                "auth": server.token is not None}
 
-    @app.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
-              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-              summary="CS1: exact top-k refined from the client's candidates")
+    @router.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
+                 responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+                 summary="CS1: exact top-k refined from the client's candidates")
     async def refine(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
         found, ms = await run(lambda db: db.server_tier().refine(req)[0])
-        return reply(found, ms)
+        return _reply(found, ms)
 
-    @app.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
-              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-              summary="CS2: neighbour walk from the client's views")
+    @router.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
+                 responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+                 summary="CS2: neighbour walk from the client's views")
     async def walk(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))
         found, ms = await run(lambda db: db.server_tier().walk(req)[0])
-        return reply(found, ms)
+        return _reply(found, ms)
 
-    @app.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
-              responses={200: {"model": models.PoseReplyModel}, **_ERRORS},
-              summary="Pose of the given matches from the segmented query image")
+    _image_routes(router, guarded, run)
+    return router
+
+
+def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]) -> None:
+    """The endpoints that take the segmented query image or stored views' signatures."""
+
+    @router.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
+                 responses={200: {"model": models.PoseReplyModel}, **_ERRORS},
+                 summary="Pose of the given matches from the segmented query image")
     async def pose(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
@@ -316,18 +364,18 @@ def create_app(
             query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
 
-    @app.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
-              responses={200: {"model": models.ColourReplyModel}, **_ERRORS},
-              summary="Colour signatures of stored views, to re-rank results by colour")
+    @router.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
+                 responses={200: {"model": models.ColourReplyModel}, **_ERRORS},
+                 summary="Colour signatures of stored views, to re-rank results by colour")
     async def colours(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: ColourRequest.from_dict(data))
         signatures, ms = await run(lambda db: db.server_tier().colours(req.views)[0])
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
-    @app.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
-              responses={200: {"model": models.FitReplyModel}, **_ERRORS},
-              summary="Shape fits of stored views to the segmented query image, to re-rank results")
+    @router.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
+                 responses={200: {"model": models.FitReplyModel}, **_ERRORS},
+                 summary="Shape fits of stored views to the segmented query image, to re-rank results")
     async def fits(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
@@ -335,23 +383,21 @@ def create_app(
         found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
-    def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            schema = get_openapi(title=app.title, version=app.version, description=app.description,
-                                 routes=app.routes)
-            components = schema.setdefault("components", {}).setdefault("schemas", {})
-            for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel, models.FitRequestModel):
-                doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
-                components.update(doc.pop("$defs", {}))
-                components[model.__name__] = doc
-            app.openapi_schema = schema
-        return app.openapi_schema
 
-    app.openapi = openapi  # type: ignore[method-assign]
-    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body},
-                       default=max_body)
-    return app
+def _openapi(app: FastAPI) -> dict[str, Any]:
+    """The schema, with the request bodies' models (the routes only refer to them)."""
+    if app.openapi_schema is None:
+        schema = get_openapi(title=app.title, version=app.version, description=app.description,
+                             routes=app.routes)
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
+                      models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
+                      models.OverlayRequestModel):
+            doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
+            components.update(doc.pop("$defs", {}))
+            components[model.__name__] = doc
+        app.openapi_schema = schema
+    return app.openapi_schema
 
 
 def _open_for_serving(path: Path) -> ViewDB:
@@ -371,8 +417,8 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``): the factory each worker of
-    ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``): the factory each
+    worker of ``viewdb serve`` calls."""
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -380,4 +426,5 @@ def app_from_env() -> FastAPI:
         path, token=os.environ.get(ENV_TOKEN) or None,
         max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
+        ui=os.environ.get(ENV_UI, "1") != "0",
     )

@@ -25,6 +25,7 @@ from ..errors import QueryError, ServerError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.server_tier import Exchange
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from ..typed import Intrinsics
 from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 
 __all__ = ["RemoteServer"]
@@ -176,7 +177,7 @@ class RemoteServer:
 
     def poses(
         self, query: QueryView, matches: Sequence[Candidate],
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: Intrinsics | None = None,
         curves: Sequence[np.ndarray | None] | None = None, rerank: bool = False,
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         if not matches:

@@ -25,11 +25,12 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from ..config import ImageConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.colour import BINS
-from ..recognition.image import MAX_PIXELS, MIN_SIDE
 from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
+from ..typed import Intrinsics
 
 __all__ = [
     "ColourReply", "ColourRequest", "FitReply", "FitRequest", "PoseReply", "PoseRequest",
@@ -53,7 +54,10 @@ def encode_query(query: QueryView) -> bytes:
     return data.tobytes()
 
 
-def decode_query(data: bytes, max_pixels: int = MAX_PIXELS) -> QueryView:
+#: The query image limits (the same as the library's loader).
+_IMAGE = ImageConfig()
+
+def decode_query(data: bytes, max_pixels: int = _IMAGE.max_pixels) -> QueryView:
     """The inverse of :func:`encode_query`: an RGBA PNG (size checked before decoding)."""
     if not data.startswith(PNG_SIGNATURE):
         raise QueryError("image must be a PNG")
@@ -70,8 +74,8 @@ def decode_query(data: bytes, max_pixels: int = MAX_PIXELS) -> QueryView:
         raise QueryError(f"image is not a readable PNG ({type(exc).__name__})") from exc
     if width * height > max_pixels:
         raise QueryError(f"image too large: {width}x{height}, more than {max_pixels:,} pixels")
-    if min(width, height) < MIN_SIDE:
-        raise QueryError(f"image too small: {width}x{height}, at least {MIN_SIDE} on each side")
+    if min(width, height) < _IMAGE.min_side:
+        raise QueryError(f"image too small: {width}x{height}, at least {_IMAGE.min_side} on each side")
     if mode != "RGBA":
         raise QueryError(f"image must be RGBA (8 bits, alpha = object mask), not {mode}")
     arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
@@ -132,7 +136,7 @@ def pose_from_dict(data: Any) -> PoseEstimate:
         raise QueryError(f"malformed pose ({type(exc).__name__}: {exc})") from exc
 
 
-def _intrinsics(x: Any) -> tuple[float, float, float, float] | None:
+def _intrinsics(x: Any) -> Intrinsics | None:
     if x is None:
         return None
     if not isinstance(x, list) or len(x) != 4:
@@ -149,7 +153,7 @@ class PoseRequest:
 
     image: bytes = field(repr=False)
     matches: list[Candidate]
-    intrinsics: tuple[float, float, float, float] | None = None
+    intrinsics: Intrinsics | None = None
     #: Per match, the query's distance curve at the in-plane turn that matched (its
     #: nearest views add pose candidates, :class:`viewdb.config.PosingConfig`), or None.
     curves: list[np.ndarray | None] | None = field(default=None, repr=False)
@@ -159,7 +163,7 @@ class PoseRequest:
     @classmethod
     def from_query(
         cls, query: QueryView, matches: Sequence[Candidate],
-        intrinsics: tuple[float, float, float, float] | None = None,
+        intrinsics: Intrinsics | None = None,
         curves: Sequence[np.ndarray | None] | None = None, rerank: bool = False,
     ) -> PoseRequest:
         return cls(encode_query(query), list(matches), _intrinsics(

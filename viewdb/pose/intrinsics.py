@@ -20,10 +20,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import QueryError
+from ..typed import Intrinsics
 
 __all__ = ["Intrinsics", "parse_intrinsics"]
-
-Intrinsics = tuple[float, float, float, float]
 
 #: Keys a camera matrix may be stored under.
 MATRIX_KEYS = ("K", "k", "camera_matrix", "cameraMatrix", "intrinsics", "intrinsic_matrix")

@@ -24,21 +24,13 @@ from numpy.typing import NDArray
 from ..catalogue.pinhole import get_pinhole_renderer
 from ..catalogue.reading import CandidatePose, CatalogueReader
 from ..catalogue.render import get_renderer
-from ..config import PosingConfig
+from ..config import PosingConfig, SilhouetteConfig
 from ..errors import QueryError, ViewDBError
 from ..search.plans import Candidate
-from .estimate import (
-    GL_TO_CV,
-    CandidateView,
-    PoseConfig,
-    PoseEstimate,
-    QueryView,
-    estimate_pose,
-    inplane_angle,
-    rotation_to_view,
-)
+from .estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose
+from .frames import GL_TO_CV, inplane_angle, rotation_to_view
 from .intrinsics import Intrinsics
-from .silhouette import QUICK, SilhouetteConfig, search_silhouette_pose, to_mesh_units
+from .silhouette import QUICK, search_silhouette_pose, to_mesh_units
 
 __all__ = ["in_mesh_units", "pose_known", "pose_match", "pose_matches", "pose_silhouette", "refine_shape"]
 

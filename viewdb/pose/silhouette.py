@@ -6,9 +6,9 @@ more: a full perspective pose predicts exactly which pixels the object covers. T
 finds that pose in two steps.
 
 1. **Orthographic search.** The mesh's silhouette is rendered from evenly spread viewing
-   directions (a Fibonacci sphere, :data:`SEARCH_DIRECTIONS`) and each outline is aligned to
+   directions (a Fibonacci sphere, ``SilhouetteConfig.directions``) and each outline is aligned to
    the query's in the image plane (centroid, area, in-plane angle by the symmetric chamfer
-   distance of :mod:`viewdb.pose.estimate`), giving ranked weak-perspective hypotheses
+   distance of :mod:`viewdb.pose.shape_pose`), giving ranked weak-perspective hypotheses
    ``(h, v, inplane, magnification, origin pixel)``.
 2. **Lift and refine.** Each hypothesis is lifted to the pinhole camera (below), then the
    6-DoF pose is refined by a pattern search that maximises the silhouette IoU between the
@@ -43,19 +43,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.pinhole import Window
+from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
-from .estimate import (
-    GL_TO_CV,
-    CandidateView,
-    PoseConfig,
-    _align_shape,
-    _outline,
-    view_rotation,
-)
+from ..typed import Intrinsics
+from .frames import GL_TO_CV, rodrigues, view_rotation
+from .shape_pose import align_shape, outline_of
+from .views import CandidateView
 
 __all__ = [
     "QUICK",
-    "SilhouetteConfig",
     "SilhouetteFit",
     "fibonacci_directions",
     "lift_alignment",
@@ -64,47 +60,12 @@ __all__ = [
     "to_mesh_units",
 ]
 
-#: Viewing directions rendered for the orthographic search (about 20° apart).
-SEARCH_DIRECTIONS = 100
-#: Hypotheses (direction + in-plane alignment) lifted and refined coarsely ...
-COARSE_STARTS = 8
-#: ... and the best of them refined finely.
-FINE_STARTS = 2
-#: Window sizes (pixels) of the coarse and fine IoU refinement.
-COARSE_SIZE = 96
-FINE_SIZE = 160
-#: Pattern-search steps: rotation (radians), origin pixel (window pixels), log depth.
-START_STEPS = (0.12, 3.0, 0.06)
-COARSE_MIN_STEPS = (0.02, 0.75, 0.01)
-FINE_MIN_STEPS = (0.004, 0.2, 0.002)
-#: Most IoU evaluations (renders) per refinement.
-MAX_EVALUATIONS = 400
-
-@dataclass(frozen=True)
-class SilhouetteConfig:
-    """Tunables of :func:`search_silhouette_pose` (defaults: the module constants)."""
-
-    directions: int = SEARCH_DIRECTIONS
-    coarse_starts: int = COARSE_STARTS
-    fine_starts: int = FINE_STARTS
-    coarse_size: int = COARSE_SIZE
-    fine_size: int = FINE_SIZE
-    max_evaluations: int = MAX_EVALUATIONS
-
-    def __post_init__(self) -> None:
-        if not (self.directions >= 1 and self.coarse_starts >= 1 and self.fine_starts >= 0):
-            raise ValueError("need directions >= 1, coarse_starts >= 1, fine_starts >= 0")
-        if not (16 <= self.coarse_size <= 1024 and 16 <= self.fine_size <= 1024):
-            raise ValueError("window sizes must be in [16, 1024]")
-
-
 #: A quicker search, for checking many candidate objects (about 4x fewer renders).
 QUICK = SilhouetteConfig(directions=40, coarse_starts=3, fine_starts=0, coarse_size=80)
 
 
 OrthoRender = Callable[[float, float], NDArray[np.bool_]]
-PinholeRender = Callable[[NDArray[np.float64], NDArray[np.float64], tuple[float, float, float, float], int],
-                         NDArray[np.bool_]]
+PinholeRender = Callable[[NDArray[np.float64], NDArray[np.float64], Intrinsics, int], NDArray[np.bool_]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,15 +104,7 @@ def ray_rotation(u: float, w: float, k: NDArray[np.float64]) -> NDArray[np.float
     s, c = float(np.linalg.norm(axis)), float(d[2])
     if s < 1e-12:
         return np.eye(3)
-    return _rodrigues(axis / s * math.atan2(s, c))
-
-
-def _rodrigues(w: NDArray[np.float64]) -> NDArray[np.float64]:
-    theta = float(np.linalg.norm(w))
-    if theta < 1e-12:
-        return np.eye(3)
-    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]) / theta
-    return np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
+    return rodrigues(axis / s * math.atan2(s, c))
 
 
 def lift_alignment(
@@ -200,7 +153,7 @@ class _Objective:
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         r_rel, u0, w0, z0 = base
         u, w, z = u0 + p[3] / self.window.factor, w0 + p[4] / self.window.factor, z0 * math.exp(p[5])
-        rotation = ray_rotation(u, w, self.k) @ _rodrigues(p[:3]) @ r_rel
+        rotation = ray_rotation(u, w, self.k) @ rodrigues(p[:3]) @ r_rel
         k = self.k
         translation = z * np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
         return rotation, translation
@@ -227,8 +180,7 @@ def _base(rotation: NDArray[np.float64], translation: NDArray[np.float64], k: ND
 
 def _pattern_search(
     objective: _Objective, rotation: NDArray[np.float64], translation: NDArray[np.float64],
-    min_steps: Sequence[float], start_steps: Sequence[float] = START_STEPS,
-    max_evaluations: int = MAX_EVALUATIONS,
+    min_steps: Sequence[float], start_steps: Sequence[float], max_evaluations: int,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """Compass search over (ω, pixel, log depth) maximising the IoU; a step that improves is
     taken again along the same direction; steps halve when no direction improves."""
@@ -279,7 +231,7 @@ class _Start:
 
 def search_silhouette_pose(
     query: NDArray[np.bool_],
-    intrinsics: tuple[float, float, float, float],
+    intrinsics: Intrinsics,
     render_ortho: OrthoRender,
     render_pinhole: PinholeRender,
     image_size: int,
@@ -311,7 +263,7 @@ def search_silhouette_pose(
     fx, fy, cx, cy = (float(x) for x in intrinsics)
     k = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     try:
-        outline = _outline(mask, config.contour_samples)
+        outline = outline_of(mask, config.contour_samples)
     except FeatureError as exc:
         raise PoseError(f"the query silhouette has no usable contour: {exc}") from exc
     found: list[_Start] = []
@@ -319,12 +271,12 @@ def search_silhouette_pose(
     for h, v in directions if directions is not None else fibonacci_directions(search.directions):
         view = render_ortho(h, v)
         try:
-            view_outline = _outline(view, config.contour_samples)
+            view_outline = outline_of(view, config.contour_samples)
         except FeatureError:
             continue
         cand = CandidateView(h, v, False, empty, np.zeros((0, 128), np.uint8), np.zeros((0, 3), np.float32),
                              view, image_size, xmag)
-        for res in _align_shape(outline, view_outline, cand, config)[:2]:
+        for res in align_shape(outline, view_outline, cand, config)[:2]:
             rot, t = lift_alignment(h, v, res.angle, res.lam, res.origin_px, image_size, xmag, k)
             found.append(_Start(res.cost, h, v, res.angle, rot, t))
     if not found and not starts:
@@ -336,7 +288,8 @@ def search_silhouette_pose(
     coarse = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.coarse_size), k)
     refined = []
     for rot, t, origin in chosen:
-        r2, t2, iou = _pattern_search(coarse, rot, t, COARSE_MIN_STEPS, START_STEPS, search.max_evaluations)
+        r2, t2, iou = _pattern_search(coarse, rot, t, search.coarse_min_steps, search.start_steps,
+                                      search.max_evaluations)
         refined.append((iou, r2, t2, origin))
     refined.sort(key=lambda x: -x[0])
     if search.fine_starts == 0:
@@ -345,7 +298,7 @@ def search_silhouette_pose(
     fine = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.fine_size), k)
     best: SilhouetteFit | None = None
     for _, rot, t, origin in refined[:search.fine_starts]:
-        r2, t2, iou = _pattern_search(fine, rot, t, FINE_MIN_STEPS, COARSE_MIN_STEPS,
+        r2, t2, iou = _pattern_search(fine, rot, t, search.fine_min_steps, search.coarse_min_steps,
                                       search.max_evaluations)
         if best is None or iou > best.iou:
             best = SilhouetteFit(r2, t2, iou, origin, 0)

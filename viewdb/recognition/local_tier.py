@@ -19,9 +19,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import PoseError, QueryError, RenderError
-from ..pose.estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, shape_fit
+from ..pose.estimate import CandidateView, PoseConfig, PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
 from ..pose.matched import pose_matches
+from ..pose.shape_pose import shape_fit
 from ..search.plans import (
     Candidate,
     RefineRequest,

@@ -40,10 +40,11 @@ from ..search.plans import Candidate
 from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
 from .colour import colour_signature, has_colour, rerank
-from .image import LoadedImage, Segmentation, label_mask, load_image, segment
+from .image import LoadedImage, load_image
 from .options import QueryOptions
 from .results import QueryMatch, QueryResult
 from .retrieval import merge, recognise_curve
+from .segmentation import Segmentation, label_mask, segment
 from .server_tier import Exchange, ServerTier
 from .shapes import completed_mask, pose_mask, rotated_curves
 from .verify import physical_view, rerank_by_fit

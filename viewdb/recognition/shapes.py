@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from ..catalogue.features import distance_curve
 from ..config import RecognitionConfig
 from ..errors import FeatureError, ImageError, QueryError
-from .image import Segmentation
+from .segmentation import Segmentation
 
 __all__ = ["completed_mask", "pose_mask", "rotated_curves"]
 

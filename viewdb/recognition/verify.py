@@ -10,7 +10,7 @@ right one is in the top few. What is *inside* the outline tells them apart.
 So the query engine renders each of its best objects' matched view (for a match of the
 mirrored curve, the view from the opposite side: an orthographic silhouette seen from
 behind is the mirror image, :func:`physical_view`) and fits it to the photo as the
-pose's shape method does (:func:`viewdb.pose.estimate.shape_fit`: the outline aligned by
+pose's shape method does (:func:`viewdb.pose.shape_pose.shape_fit`: the outline aligned by
 centroid, area and in-plane angle, then the internal edges — creases, shading, texture
 — compared under that alignment; a fit in [0, 1]). The results are ranked by
 

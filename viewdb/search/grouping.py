@@ -20,7 +20,8 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.symmetry import SymmetryType, skim_plan
+from ..catalogue.skimming import skim_plan
+from ..catalogue.symmetry import SymmetryType
 from .bounds import fourier_coordinates
 
 __all__ = [

@@ -2,7 +2,7 @@
 
 The same best-first loop as :mod:`viewdb.search.refine` (read its module doc first: the
 candidate groups arrive sorted by key, the limits ``min(U, bound[o])``, the stop rule and
-the exactness argument are the same), over entries of five kinds, each keyed by a lower
+the exactness argument are the same), over entries of four kinds, each keyed by a lower
 bound of the distance of everything it stands for (:mod:`viewdb.search.shifts` proves each)
 and never below its parent's key:
 
@@ -81,6 +81,118 @@ def _group_block_key2(lo, hi, clo, chi, g, blo, bhi, wlo, whi):  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
+def _code(payload, m, kind):  # pragma: no cover - compiled
+    return ((payload << 1 | m) << 3) | kind
+
+
+@njit(cache=True, nogil=True)
+def _open_group(  # pragma: no cover - compiled
+    g, gk, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge_lo, wedge_hi,
+    hkey, hcode, size,
+):
+    # one GB entry per block and orientation still under the limit
+    n_blocks = wbox_lo.shape[1]
+    for b in range(n_blocks):
+        for m in range(2):
+            kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
+                                   wbox_hi[m, b], wedge_lo[m, b], wedge_hi[m, b])
+            if kb <= limit2:
+                size = _heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
+                                  _code(g * n_blocks + b, m, _GB))
+    return size
+
+
+@njit(cache=True, nogil=True)
+def _push_views(  # pragma: no cover - compiled
+    g, b, m, key, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo,
+    wseg_hi, widths, hkey, hcode, size,
+):
+    # a GB entry: the group's views against the block, by Fourier_Dist and LB_PAA
+    n_blocks = wbox_lo.shape[1]
+    for row in range(group_start[g], group_start[g] + group_count[g]):
+        fd = _fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
+        if fd > limit2:
+            continue
+        pd = _lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
+        if pd <= limit2:
+            size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), key),
+                              _code(row * n_blocks + b, m, _VB))
+    return size
+
+
+@njit(cache=True, nogil=True)
+def _push_curves(  # pragma: no cover - compiled
+    row, b, m, key, limit2, block_start, block_end, curves, env_lo, env_hi, n_curves,
+    hkey, hcode, size, stats,
+):
+    # a VBC entry: the view against each curve of the block, by the curve's LB_Keogh (a
+    # block of one curve: the wedge was that curve's envelope)
+    if block_end[b] - block_start[b] == 1:
+        return _heap_push(hkey, hcode, size, key, _code(row * n_curves + block_start[b], m, _VC))
+    for t in range(block_start[b], block_end[b]):
+        stats[2] += 1
+        lb = max(key * key, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
+        if lb <= limit2:
+            size = _heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_curves + t, m, _VC))
+    return size
+
+
+@njit(cache=True, nogil=True)
+def _view_block(  # pragma: no cover - compiled
+    fresh, row, b, m, top, limit2, block_start, block_end, curves, wedge_lo, wedge_hi, env_lo, env_hi,
+    n_curves, hkey, hcode, size, stats,
+):
+    # a VB entry (``fresh``): LB_Keogh against the block's wedge, queued again as a VBC if
+    # that is larger than its key; a VBC (or a VB no larger): its curves
+    if fresh:
+        stats[2] += 1
+        lb = _lb_keogh2(curves, row, wedge_lo[m, b], wedge_hi[m, b], limit2)
+        if lb > limit2:
+            return size
+        if math.sqrt(lb) > top:
+            n_blocks = wedge_lo.shape[1]
+            return _heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_blocks + b, m, _VBC))
+    return _push_curves(row, b, m, top, limit2, block_start, block_end, curves, env_lo, env_hi, n_curves,
+                        hkey, hcode, size, stats)
+
+
+@njit(cache=True, nogil=True)
+def _refine_view(  # pragma: no cover - compiled
+    Q, r, row, t, m, o, limit, curves, env_lo, env_hi, scratch,
+    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U,
+):
+    # a VC entry: the exact DTW (UCR cascade); the object's result and bound; returns U
+    _load_row(curves, row, m == 1, scratch)
+    dist = _cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
+    if dist > limit:
+        return U
+    if dist < exact[o] or (dist == exact[o] and _first(
+            row, m == 1, t, exact_row[o], exact_mirrored[o], exact_curve[o])):
+        exact[o] = dist
+        exact_row[o] = row
+        exact_mirrored[o] = m == 1
+        exact_curve[o] = t
+    if dist < bound[o]:
+        bound[o] = dist
+        if dist < U:
+            return _kth(bound, k, cap)
+    return U
+
+
+@njit(cache=True, nogil=True)
+def _room(block_start, block_end, group_count):  # pragma: no cover - compiled
+    # the most entries one step pushes
+    widest = 1
+    for b in range(block_start.shape[0]):
+        widest = max(widest, block_end[b] - block_start[b])
+    most = 0
+    for g in range(group_count.shape[0]):
+        most = max(most, group_count[g])
+    return max(2 * block_start.shape[0], most, widest) + 1
+
+
+# The loop of refine.py (module doc) over the entries above; each kind's work is a helper.
+@njit(cache=True, nogil=True)
 def _stack_kernel(  # pragma: no cover - compiled
     Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
     block_start, block_end, wedge_lo, wedge_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
@@ -89,17 +201,10 @@ def _stack_kernel(  # pragma: no cover - compiled
     mbr_lo, mbr_hi, range_lo, range_hi,
     bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize,
 ):
-    n_samples = Q.shape[1]
     n_curves = Q.shape[0]
     n_blocks = block_start.shape[0]
-    scratch = np.empty(n_samples)
-    widest = 1
-    for b in range(n_blocks):
-        widest = max(widest, block_end[b] - block_start[b])
-    most = 0
-    for g in range(group_count.shape[0]):
-        most = max(most, group_count[g])
-    room = max(2 * n_blocks, most, widest) + 1  # pushes of one step at most
+    scratch = np.empty(Q.shape[1])
+    room = _room(block_start, block_end, group_count)
     U = _kth(bound, k, cap)
     size = hsize[0]
     i = start_at
@@ -122,106 +227,43 @@ def _stack_kernel(  # pragma: no cover - compiled
         if min(gk, top) > _widen(U):
             status = DONE if _widen(U) <= stop_key else RADIUS
             break
-        if top <= gk:
-            if top > stop_key:
+        if top > gk:  # open the next group
+            if gk > stop_key:
                 status = RADIUS
                 break
-            code = hcode[0]
-            size = _heap_pop(hkey, hcode, size)
-            kind = code & 7
-            m = (code >> 3) & 1
-            payload = code >> 4
-            if kind == _GB:
-                g = payload // n_blocks
-                b = payload % n_blocks
-                o = group_owner[g]
-            elif kind == _VC:
-                row = payload // n_curves
-                t = payload % n_curves
-                o = row_owner[row]
-            else:
-                row = payload // n_blocks
-                b = payload % n_blocks
-                o = row_owner[row]
-            limit = _widen(min(U, bound[o]))
-            if top > limit:
-                continue
-            limit2 = limit * limit
-            if kind == _GB:  # the group's views against the block
-                s = group_start[g]
-                n = group_count[g]
-                stats[1] += n
-                for row in range(s, s + n):
-                    fd = _fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
-                    if fd > limit2:
-                        continue
-                    pd = _lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
-                    if pd > limit2:
-                        continue
-                    size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), top),
-                                      (((row * n_blocks + b) << 1 | m) << 3) | _VB)
-                continue
-            if kind == _VB:  # the view against the block's wedge
-                stats[2] += 1
-                lb = _lb_keogh2(curves, row, wedge_lo[m, b], wedge_hi[m, b], limit2)
-                if lb > limit2:
-                    continue
-                lb = math.sqrt(lb)
-                if lb > top:
-                    size = _heap_push(hkey, hcode, size, lb,
-                                      (((row * n_blocks + b) << 1 | m) << 3) | _VBC)
-                    continue
-            if kind == _VB or kind == _VBC:
-                # the view against each curve of the block (a block of one: its bound is
-                # the curve's own)
-                if block_end[b] - block_start[b] == 1:
-                    size = _heap_push(hkey, hcode, size, top,
-                                      (((row * n_curves + block_start[b]) << 1 | m) << 3) | _VC)
-                    continue
-                for t in range(block_start[b], block_end[b]):
-                    stats[2] += 1
-                    lb = max(top * top, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
-                    if lb > limit2:
-                        continue
-                    size = _heap_push(hkey, hcode, size, math.sqrt(lb),
-                                      (((row * n_curves + t) << 1 | m) << 3) | _VC)
-                continue
-            _load_row(curves, row, m == 1, scratch)  # a view against one curve: DTW
-            stats[3] += 1
-            dist = _cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
-            if dist > limit:
-                continue
-            if dist < exact[o] or (dist == exact[o] and _first(
-                    row, m == 1, t, exact_row[o], exact_mirrored[o], exact_curve[o])):
-                exact[o] = dist
-                exact_row[o] = row
-                exact_mirrored[o] = m == 1
-                exact_curve[o] = t
-            if dist < bound[o]:
-                bound[o] = dist
-                if dist < U:
-                    U = _kth(bound, k, cap)
+            g = order[i]
+            i += 1
+            limit = _widen(min(U, bound[group_owner[g]]))
+            if gk <= limit:
+                stats[0] += 1
+                size = _open_group(g, gk, limit * limit, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo,
+                                   wbox_hi, wedge_lo, wedge_hi, hkey, hcode, size)
             continue
-        # open the next group: one entry per block and orientation still under the limit
-        if gk > stop_key:
+        if top > stop_key:
             status = RADIUS
             break
-        g = order[i]
-        i += 1
-        o = group_owner[g]
+        code = hcode[0]
+        size = _heap_pop(hkey, hcode, size)
+        kind = code & 7
+        m = (code >> 3) & 1
+        payload = code >> 4
+        per = n_curves if kind == _VC else n_blocks
+        row, b = payload // per, payload % per  # (group, block) for a GB entry
+        o = group_owner[row] if kind == _GB else row_owner[row]
         limit = _widen(min(U, bound[o]))
-        if gk > limit:
+        if top > limit:
             continue
-        limit2 = limit * limit
-        stats[0] += 1
-        for b in range(n_blocks):
-            for m in range(2):
-                kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
-                                       wbox_hi[m, b], wedge_lo[m, b], wedge_hi[m, b])
-                if kb > limit2:
-                    continue
-                size = _heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
-                                  (((g * n_blocks + b) << 1 | m) << 3) | _GB)
+        if kind == _GB:
+            stats[1] += group_count[row]
+            size = _push_views(row, b, m, top, limit * limit, group_start, group_count, coords, means,
+                               wbox_lo, wbox_hi, wseg_lo, wseg_hi, widths, hkey, hcode, size)
+        elif kind != _VC:
+            size = _view_block(kind == _VB, row, b, m, top, limit * limit, block_start, block_end, curves,
+                               wedge_lo, wedge_hi, env_lo, env_hi, n_curves, hkey, hcode, size, stats)
+        else:
+            stats[3] += 1
+            U = _refine_view(Q, r, row, b, m, o, limit, curves, env_lo, env_hi, scratch, bound, exact,
+                             exact_row, exact_mirrored, exact_curve, k, cap, U)
     hsize[0] = size
     return i, status
 

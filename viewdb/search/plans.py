@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.features import mirror_curve
 from ..errors import QueryError
 from .bounds import dtw
 from .knn import Neighbour, SearchStats, TierSource, knn
@@ -323,7 +324,7 @@ def walk(
             else:
                 q = shifted(request.curve, shift)
                 d = dtw(q, curve, request.band)
-                dm = dtw(q, np.roll(curve[::-1], 1), request.band)
+                dm = dtw(q, mirror_curve(curve), request.band)
                 evaluated[key] = (dm, True) if dm < d else (d, False)
         return evaluated[key]
 

@@ -25,7 +25,8 @@ from ..catalogue.features import mirror_curve
 from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
 from ..catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from ..catalogue.render import RenderedView, get_renderer
-from ..catalogue.symmetry import SymmetryType, ViewClasses, plan_without_skimming, skim_plan
+from ..catalogue.skimming import ViewClasses, plan_without_skimming, skim_plan
+from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig
 from ..errors import FeatureError, NotFound, QueryError
 from ..search.knn import SearchStats, TierArrays, knn, objects_within
