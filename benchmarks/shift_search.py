@@ -45,7 +45,8 @@ import numpy as np
 import viewdb
 from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
 from viewdb.catalogue.features import distance_curve, sample_bearings
-from viewdb.recognition.image import load_image, segment
+from viewdb.recognition.image import load_image
+from viewdb.recognition.segmentation import segment
 from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.knn import Neighbour, SearchStats, TierSource, knn, knn_stack
 from viewdb.search.multirefine import scan_stack
