@@ -2,7 +2,7 @@
 
 The same best-first loop as :mod:`viewdb.search.refine` (read its module doc first: the
 candidate groups arrive sorted by key, the limits ``min(U, bound[o])``, the stop rule and
-the exactness argument are the same), over entries of four kinds, each keyed by a lower
+the exactness argument are the same), over entries of five kinds, each keyed by a lower
 bound of the distance of everything it stands for (:mod:`viewdb.search.shifts` proves each)
 and never below its parent's key:
 
@@ -11,13 +11,17 @@ entry     stands for                   key
 ========  ===========================  ============================================
 GB        a group against a block      group key, MINDIST of the block's union box,
                                        curve-box bound of the block's wedge
+GBC       (the same, bound known)      + the smallest curve-box bound of the block's
+                                       curves, each against its own envelope
 VB        a view against a block       + Fourier_Dist, LB_PAA of the block's wedge
 VBC       (the same, bound known)      + LB_Keogh of the block's wedge
 VC        a view against one curve     + LB_Keogh of the curve's envelope
 ========  ===========================  ============================================
 
 each for the view as stored or mirrored. Opening a group pushes its GB entries (one per
-block and orientation); a GB pops into VB entries of the group's views; a VB computes
+block and orientation); a GB of a block of several curves computes the group's curve-box
+bound against each of them and comes back as a GBC when the smallest is larger than its
+key (or goes on at once); a GB (GBC) pops into VB entries of the group's views; a VB computes
 its LB_Keogh against the wedge and comes back as a VBC (or goes on at once when that is
 no larger than the next key), which pops into VC entries, one per curve of the block
 whose own LB_Keogh is under the limit (for a block of one curve the wedge *is* the
@@ -53,7 +57,7 @@ __all__ = ["FULL", "refine_stack", "scan_stack"]
 FULL = 4
 
 # entry kinds (the low 3 bits of a code; bit 3 is "mirrored", the rest the payload)
-_GB, _VB, _VBC, _VC = 0, 1, 2, 3
+_GB, _VB, _VBC, _VC, _GBC = 0, 1, 2, 3, 4
 
 
 @njit(cache=True, nogil=True)
@@ -103,6 +107,22 @@ def _open_group(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _group_curves_key2(range_lo, range_hi, g, lo, hi, t0, t1, limit2):  # pragma: no cover - compiled
+    # the smallest over curves t0..t1-1 of the squared curve-box bound of group g against
+    # each curve's own envelope (each abandoned past limit2)
+    best = np.inf
+    for t in range(t0, t1):
+        a = 0.0
+        for j in range(range_lo.shape[1]):
+            e = max(range_lo[g, j] - hi[t, j], 0.0) + max(lo[t, j] - range_hi[g, j], 0.0)
+            a += e * e
+            if a > limit2 or a >= best:
+                break
+        best = min(best, a)
+    return best
+
+
+@njit(cache=True, nogil=True)
 def _push_views(  # pragma: no cover - compiled
     g, b, m, key, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo,
     wseg_hi, widths, hkey, hcode, size,
@@ -135,6 +155,28 @@ def _push_curves(  # pragma: no cover - compiled
         if lb <= limit2:
             size = _heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_curves + t, m, _VC))
     return size
+
+
+@njit(cache=True, nogil=True)
+def _group_block(  # pragma: no cover - compiled
+    fresh, g, b, m, top, limit2, block_start, block_end, range_lo, range_hi, env_lo, env_hi,
+    group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, widths,
+    hkey, hcode, size, stats,
+):
+    # a GB entry (``fresh``) of a block of several curves: the group against each of them,
+    # queued again as a GBC if the smallest bound is larger than its key; a GBC (or a GB
+    # no larger): the group's views
+    if fresh and block_end[b] - block_start[b] > 1:
+        kt = _group_curves_key2(range_lo, range_hi, g, env_lo[m], env_hi[m], block_start[b],
+                                block_end[b], limit2)
+        if kt > limit2:
+            return size
+        if math.sqrt(kt) > top:
+            n_blocks = wbox_lo.shape[1]
+            return _heap_push(hkey, hcode, size, math.sqrt(kt), _code(g * n_blocks + b, m, _GBC))
+    stats[1] += group_count[g]
+    return _push_views(g, b, m, top, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi,
+                       wseg_lo, wseg_hi, widths, hkey, hcode, size)
 
 
 @njit(cache=True, nogil=True)
@@ -249,14 +291,14 @@ def _stack_kernel(  # pragma: no cover - compiled
         payload = code >> 4
         per = n_curves if kind == _VC else n_blocks
         row, b = payload // per, payload % per  # (group, block) for a GB entry
-        o = group_owner[row] if kind == _GB else row_owner[row]
+        o = group_owner[row] if kind == _GB or kind == _GBC else row_owner[row]
         limit = _widen(min(U, bound[o]))
         if top > limit:
             continue
-        if kind == _GB:
-            stats[1] += group_count[row]
-            size = _push_views(row, b, m, top, limit * limit, group_start, group_count, coords, means,
-                               wbox_lo, wbox_hi, wseg_lo, wseg_hi, widths, hkey, hcode, size)
+        if kind == _GB or kind == _GBC:
+            size = _group_block(kind == _GB, row, b, m, top, limit * limit, block_start, block_end, range_lo,
+                                range_hi, env_lo, env_hi, group_start, group_count, coords, means, wbox_lo,
+                                wbox_hi, wseg_lo, wseg_hi, widths, hkey, hcode, size, stats)
         elif kind != _VC:
             size = _view_block(kind == _VB, row, b, m, top, limit * limit, block_start, block_end, curves,
                                wedge_lo, wedge_hi, env_lo, env_hi, n_curves, hkey, hcode, size, stats)
