@@ -40,6 +40,7 @@ from .errors import (
     SchemaMismatch,
     ServerError,
     StorageError,
+    UpgradeNeeded,
     ViewDBError,
 )
 from .http.client import RemoteServer
@@ -108,6 +109,7 @@ __all__ = [
     "StoredView",
     "SymmetryType",
     "TierArrays",
+    "UpgradeNeeded",
     "ViewClasses",
     "ViewDB",
     "ViewDBError",
