@@ -119,7 +119,6 @@ def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files,
                     assert there.bytes_sent > 0 and there.bytes_received > 0
 
 
-<<<<<<< HEAD
 def test_shift_searches_over_http_equal_the_local_ones(tiered_db, files, remote):
     _, client_path = files
     rng = np.random.default_rng(8)
@@ -138,7 +137,8 @@ def test_shift_searches_over_http_equal_the_local_ones(tiered_db, files, remote)
             there = client.query(img, server=remote, **kw)
             assert there.to_dict()["results"] == local.to_dict()["results"], options
             assert there.transfer["round_trips"] == 1  # one search, not one per turn
-=======
+
+
 def test_walk_names_each_object_once_however_often_the_client_does(server):
     cand = {"object": "car", "distance": 0.5, "azimuth": 30.0, "elevation": 30.0, "mirrored": False}
     other = {**cand, "object": "mug"}
@@ -206,7 +206,6 @@ def test_a_body_that_does_not_arrive_gets_408(server):
                 break
             reply += chunk
     assert reply.startswith(b"HTTP/1.1 408"), reply[:200]
->>>>>>> main
 
 
 def test_health_info_and_openapi(server, remote):

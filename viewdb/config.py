@@ -12,16 +12,10 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-<<<<<<< HEAD
-    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig",
-    "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig", "SearchConfig", "SegmentationConfig",
-    "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
-=======
     "LIMITS", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig", "InputLimits",
     "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig",
-    "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
-    "finite", "integer",
->>>>>>> main
+    "SearchConfig", "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig",
+    "default_client_gap", "finite", "integer",
 ]
 
 

@@ -73,20 +73,15 @@ class ShiftWindowModel(_Strict):
     """Circular shifts of the query curve: every ``step``-th from centre - half_width to
     centre + half_width (mod the curve's length), or all round (half_width null)."""
 
-<<<<<<< HEAD
     centre: int = Field(default=0, ge=0)
     half_width: int | None = Field(default=None, ge=0)
     step: int = Field(default=1, ge=1)
 
 
 class _CurveRequest(_Strict):
-    curve: list[float] = Field(description="the server's curve_samples numbers (see /info)",
-                               min_length=8)
-=======
     curve: list[Sample] = Field(description="the server's curve_samples numbers (see /info), each "
                                             "in [0, curve_samples] (a curve has mean 1)",
                                 min_length=8)
->>>>>>> main
     band: int = Field(ge=0, le=MAX_BAND, description="Sakoe-Chiba band in samples")
     k: int = Field(ge=1, le=MAX_K)
     client: list[CandidateModel] = Field(max_length=MAX_K)
