@@ -196,6 +196,8 @@ class WebQueryFormModel(BaseModel):
                          json_schema_extra={"format": "binary"})
     plan: str = Field(default="server", description="server, cs1 or cs2")
     k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
+    pose_top: int | None = Field(default=None, ge=0, description="how many of the best results to pose "
+                                                                 "(default all k: the page shows each pose)")
 
 
 class WebViewModel(BaseModel):
