@@ -26,6 +26,7 @@ from .config import (
     PosingConfig,
     RecognitionConfig,
     RenderConfig,
+    SearchConfig,
     SiftConfig,
     SkimConfig,
 )
@@ -66,6 +67,7 @@ _LAZY: dict[str, str] = {
     **dict.fromkeys(("Exchange", "ServerTier"), "recognition.server_tier"),
     **dict.fromkeys(("SearchStats", "TierArrays"), "search.knn"),
     "Candidate": "search.plans",
+    "ShiftWindow": "search.shifts",
     "SearchHit": "storage.catalogue",
     "CheckReport": "storage.integrity",
 }
@@ -89,6 +91,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .recognition.server_tier import Exchange, ServerTier
     from .search.knn import SearchStats, TierArrays
     from .search.plans import Candidate
+    from .search.shifts import ShiftWindow
     from .storage.catalogue import SearchHit
     from .storage.integrity import CheckReport
 
@@ -148,10 +151,12 @@ __all__ = [
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
+    "SearchConfig",
     "SearchHit",
     "SearchStats",
     "ServerError",
     "ServerTier",
+    "ShiftWindow",
     "SiftConfig",
     "SkimConfig",
     "StorageError",

@@ -240,6 +240,11 @@ class StoredTier:
             self._coords[rows] = indexed_coordinates(block)
             self._means[rows] = paa_means(block, self._edges)
         self._loaded[groups] = True
+    def group_boxes(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Every group's MBR and per-sample curve range (read when the tier was opened)."""
+        return self._lo, self._hi, self._curve_lo, self._curve_hi
 
     def view_id(self, row: int) -> int:
         return int(self._views[row])
