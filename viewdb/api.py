@@ -32,6 +32,7 @@ from .recognition.client_tier import ClientTier
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
 from .recognition.pipeline import run_query, segment_photo
+from .recognition.regions import Box, Point, Prompts
 from .recognition.results import QueryResult
 from .recognition.retrieval import Recognition, recognise_curve
 from .recognition.server_tier import ServerTier
@@ -187,6 +188,10 @@ class ViewDB:
         verify: bool = True,
         pose_top: int | None = None,
         options: QueryOptions | None = None,
+        boxes: Sequence[str | Sequence[float] | Box] | None = None,
+        points: Sequence[str | Sequence[float] | Point] | None = None,
+        every: bool = False,
+        max_objects: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses
         (:mod:`viewdb.recognition.pipeline`).
@@ -204,6 +209,15 @@ class ViewDB:
         IoU of their perspective silhouette fit. ``options`` gives all of these as one
         :class:`~viewdb.recognition.options.QueryOptions` instead.
 
+        A photo of several objects: ``boxes`` (``(x1, y1, x2, y2)`` or ``"x1,y1,x2,y2"``,
+        pixels) and ``points`` (``(x, y)`` or ``"x,y"``) each ask for one object, cut out
+        from the prompt; ``every=True`` asks for every object that stands out from the
+        background (or, with ``label_map`` and no ``label``, every label), the largest
+        ``max_objects`` (default 8). Each is recognised and posed as a single-object query
+        is; the answer's ``objects`` hold them, in the prompts' order (boxes, then points;
+        every object: largest first), and its ``results`` is empty
+        (:mod:`viewdb.recognition.regions`).
+
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
         server; the answer is the one the full file gives locally.
@@ -212,9 +226,10 @@ class ViewDB:
             options = QueryOptions(k=k, plan=plan, band=band, rotations=rotations, pose=pose,
                                    pose_top=pose_top, intrinsics=intrinsics, rerank=rerank,
                                    colour=colour, verify=verify)
+        prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
         return run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
-                         mask=mask, label_map=label_map, label=label)
+                         mask=mask, label_map=label_map, label=label, prompts=prompts)
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
