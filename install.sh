@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Install viewdb and everything it needs on a fresh Debian/Python 3.11 machine:
-# the system libraries for headless rendering (Mesa's EGL, software rasteriser), then the
-# package itself in editable mode with its dev extras. Safe to run again.
+# the system libraries for headless rendering (Mesa's EGL, software rasteriser) and the
+# headless browser the web page's tests use (chromium, chromium-driver), then the package
+# itself in editable mode with its dev extras. Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -9,8 +10,12 @@ need_apt=()
 for lib in libEGL.so.1 libEGL_mesa.so.0 libGL.so.1; do
   if ! ldconfig -p 2>/dev/null | grep -q "$lib"; then need_apt=(libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libglib2.0-0); break; fi
 done
+# the web page's tests drive Debian's headless Chromium through its chromedriver (never a
+# downloaded browser)
+[ -x /usr/bin/chromium ] || need_apt+=(chromium)
+[ -x /usr/bin/chromedriver ] || need_apt+=(chromium-driver)
 if [ ${#need_apt[@]} -gt 0 ]; then
-  echo "install.sh: installing rendering libraries: ${need_apt[*]}"
+  echo "install.sh: installing system packages: ${need_apt[*]}"
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}"

@@ -416,16 +416,18 @@ def serve(
         int, typer.Option(help="Largest /refine, /walk or /colours body in bytes.", min=1024)
     ] = 256 * 1024,
     max_image_body: Annotated[
-        int, typer.Option(help="Largest /pose or /fits body (the query image) in bytes.", min=1024)
+        int, typer.Option(help="Largest /pose, /fits or /query body (the photo) in bytes.", min=1024)
     ] = 32 * 1024 * 1024,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
     ] = "warning",
+    no_ui: Annotated[bool, typer.Option("--no-ui", help="Do not serve the web page at /.")] = False,
 ) -> None:
     """Serve the server tier of a full database over HTTP (read-only; OpenAPI at /openapi.json).
 
     POST /refine (CS1), /walk (CS2), /pose; GET /info, /health. Clients run
-    `viewdb query IMAGE --client CLIENT --server URL`.
+    `viewdb query IMAGE --client CLIENT --server URL`. A web page at / recognises
+    uploaded photos (POST /query) and shows the catalogue (GET /objects).
     """
     from viewdb.http.serve import run_server
 
@@ -434,12 +436,13 @@ def serve(
 
     def ready(url: str, objects: int) -> None:
         auth = ", bearer token required" if token else ""
+        page = "" if no_ui else f"; web page at {url}/"
         out.print(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
-                  f"worker{'s' if workers > 1 else ''}{auth}; Ctrl-C stops")
+                  f"worker{'s' if workers > 1 else ''}{auth}{page}; Ctrl-C stops")
         sys.stdout.flush()
 
     run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
-               max_image_body=max_image_body, log_level=log_level, ready=ready)
+               max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui)
 
 
 @app.command()

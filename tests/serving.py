@@ -138,3 +138,18 @@ def request(url: str, method: str, path: str, body: bytes | str | Any = None, *,
         return response.status, json.loads(raw)
     except ValueError:
         return response.status, raw
+
+
+def multipart(fields: dict[str, str], files: dict[str, tuple[str, bytes, str]]) -> tuple[bytes, dict[str, str]]:
+    """A multipart/form-data body and its headers: ``fields`` name → text, ``files``
+    name → (file name, bytes, content type), as a browser's form upload sends them."""
+    boundary = f"viewdb{os.urandom(12).hex()}"
+    parts = []
+    for name, value in fields.items():
+        parts.append(f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"\r\n\r\n{value}\r\n'.encode())
+    for name, (filename, data, kind) in files.items():
+        head = (f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"; filename="{filename}"\r\n'
+                f"Content-Type: {kind}\r\n\r\n").encode()
+        parts.append(head + data + b"\r\n")
+    parts.append(f"--{boundary}--\r\n".encode())
+    return b"".join(parts), {"Content-Type": f"multipart/form-data; boundary={boundary}"}

@@ -11,9 +11,9 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "PerspectiveConfig", "PoseConfig",
-    "PosingConfig", "RecognitionConfig", "RenderConfig", "SegmentationConfig", "SiftConfig",
-    "SilhouetteConfig", "SkimConfig", "default_client_gap",
+    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig",
+    "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig", "SegmentationConfig", "SiftConfig",
+    "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
 ]
 
 
@@ -478,3 +478,81 @@ class PosingConfig:
             raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0")
         if not (16 <= self.silhouette_search_size <= 4096 and self.shape_refine_step > 0):
             raise ValueError("need 16 <= silhouette_search_size <= 4096 and shape_refine_step > 0")
+
+
+@dataclass(frozen=True)
+class OverlayConfig:
+    """How a posed mesh is drawn over a photo (:mod:`viewdb.recognition.overlay`). Widths
+    and the label's size are per 1000 pixels of the drawn image's longer side, so an
+    overlay looks the same at any resolution (never thinner than one pixel)."""
+
+    #: Longest side of the drawn image in pixels (the photo is shrunk to it first);
+    #: None: the photo's own size.
+    max_side: int | None = None
+    #: A photo whose longer side is shorter than this is enlarged to it first (so that
+    #: lines and labels stay legible over a small photo); None: never enlarged.
+    min_side: int | None = None
+    #: Width of the outline (the posed mesh's silhouette, its holes included).
+    outline_width: float = 3.0
+    #: Width of the internal edges (creases and parts in front of others).
+    edge_width: float = 1.5
+    #: Faces whose normals differ by more than this (degrees) meet at a drawn crease.
+    crease_degrees: float = 35.0
+    #: Neighbouring visible surfaces further apart in depth than this share of the
+    #: model's bounding radius meet at a drawn edge (a part in front of another).
+    occlusion_depth: float = 0.1
+    #: Opacity of the shaded mesh drawn under the lines (0: lines only).
+    fill_opacity: float = 0.3
+    #: Length of the drawn model axes (x red, y green, z blue) in bounding radii; 0: none.
+    axis_length: float = 0.6
+    #: Height of the label's letters.
+    label_size: float = 22.0
+    #: Whether each result is labelled with its rank, name and score.
+    labels: bool = True
+    #: One colour (RGB) per result, best first; repeated when there are more results.
+    colours: tuple[tuple[int, int, int], ...] = (
+        (0, 230, 118), (41, 121, 255), (255, 145, 0), (213, 0, 249), (255, 23, 68), (0, 229, 255),
+    )
+
+    def __post_init__(self) -> None:
+        if self.max_side is not None and self.max_side < 16:
+            raise ValueError(f"max_side must be at least 16 pixels, got {self.max_side}")
+        if self.min_side is not None and not 16 <= self.min_side <= (self.max_side or self.min_side):
+            raise ValueError(f"min_side must be at least 16 pixels and at most max_side, got {self.min_side}")
+        for name in ("outline_width", "edge_width", "axis_length", "label_size", "occlusion_depth"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be at least 0, got {getattr(self, name)}")
+        if not 0.0 <= self.fill_opacity <= 1.0:
+            raise ValueError(f"fill_opacity must be in [0, 1], got {self.fill_opacity}")
+        if not 0.0 <= self.crease_degrees <= 180.0:
+            raise ValueError(f"crease_degrees must be in [0, 180], got {self.crease_degrees}")
+        if not self.colours or any(len(c) != 3 or not all(0 <= v <= 255 for v in c) for c in self.colours):
+            raise ValueError("colours must be RGB triples of 0-255")
+
+
+@dataclass(frozen=True)
+class WebConfig:
+    """The web page of ``viewdb serve`` and the endpoints behind it (:mod:`viewdb.http.web`)."""
+
+    #: The photo and each result's overlay come back at most this many pixels on the
+    #: longer side (a phone's photo is shrunk; the query itself runs at full size)...
+    display_side: int = 1024
+    #: ... and at least this many (a small photo is enlarged, so the overlay is legible).
+    display_min_side: int = 512
+    #: JPEG quality of the photo sent back to draw the overlays on.
+    photo_quality: int = 85
+    #: Most results one query through the page may ask for.
+    max_k: int = 10
+    #: View PNGs (thumbnails, the turntable) kept rendered per worker.
+    view_cache: int = 512
+    #: The view ``(azimuth, elevation)`` that pictures each object in the catalogue.
+    picture_view: tuple[float, float] = (30.0, 20.0)
+
+    def __post_init__(self) -> None:
+        if not 64 <= self.display_min_side <= self.display_side:
+            raise ValueError("display_side and display_min_side must be at least 64, in that order, "
+                             f"got {self.display_side} and {self.display_min_side}")
+        if not 1 <= self.photo_quality <= 100:
+            raise ValueError(f"photo_quality must be in [1, 100], got {self.photo_quality}")
+        if self.max_k < 1 or self.view_cache < 1:
+            raise ValueError("max_k and view_cache must be at least 1")

@@ -13,6 +13,10 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``GET /info``     what the database holds, its build settings and the server's limits
 ``GET /health``   liveness (no database access, no token)
 ``GET /openapi.json``  the schema
+``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
+                  the web page's endpoints: the whole query on the server, with pictures
+                  (:mod:`viewdb.http.web`)
+``GET /``         the web page (no token; not with ``ui=False``, ``viewdb serve --no-ui``)
 
 Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
 not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
@@ -50,9 +54,10 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
+from ..config import WebConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
-from . import models
+from . import models, web
 from .wire import (
     ColourReply,
     ColourRequest,
@@ -75,6 +80,8 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
+#: "0": no web page (``viewdb serve --no-ui``).
+ENV_UI = "VIEWDB_UI"
 
 T = TypeVar("T")
 
@@ -190,11 +197,14 @@ def create_app(
     token: str | None = None,
     max_body: int = DEFAULT_MAX_BODY,
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
+    ui: bool = True,
+    web_config: WebConfig | None = None,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
-    ``token``: when given, every endpoint but ``/health`` and the schema needs the header
-    ``Authorization: Bearer <token>``.
+    ``token``: when given, every endpoint but ``/health``, the schema and the web page
+    needs the header ``Authorization: Bearer <token>``. ``ui``: serve the web page at
+    ``/`` (its endpoints are served either way).
     """
     db_path = Path(db_path)
     holder: dict[str, _State] = {}
@@ -335,13 +345,18 @@ def create_app(
         found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
+    app.include_router(web.web_router(run, guarded, web_config))
+    if ui:
+        web.add_page(app)
+
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
             schema = get_openapi(title=app.title, version=app.version, description=app.description,
                                  routes=app.routes)
             components = schema.setdefault("components", {}).setdefault("schemas", {})
             for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel, models.FitRequestModel):
+                          models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
+                          models.OverlayRequestModel):
                 doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
                 components.update(doc.pop("$defs", {}))
                 components[model.__name__] = doc
@@ -349,8 +364,8 @@ def create_app(
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
-    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body},
-                       default=max_body)
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
+                                          "/query": max_image_body}, default=max_body)
     return app
 
 
@@ -371,8 +386,8 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``): the factory each worker of
-    ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``): the factory each
+    worker of ``viewdb serve`` calls."""
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -380,4 +395,5 @@ def app_from_env() -> FastAPI:
         path, token=os.environ.get(ENV_TOKEN) or None,
         max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
+        ui=os.environ.get(ENV_UI, "1") != "0",
     )

@@ -15,13 +15,20 @@ from ..search.plans import MAX_BAND, MAX_K
 __all__ = [
     "CandidateModel",
     "ErrorModel",
+    "ObjectsReplyModel",
+    "OverlayRequestModel",
     "PoseEntryModel",
     "PoseModel",
     "PoseReplyModel",
     "PoseRequestModel",
     "RefineRequestModel",
     "ServerReplyModel",
+    "ViewsReplyModel",
     "WalkRequestModel",
+    "WebQueryFormModel",
+    "WebQueryReplyModel",
+    "json_body",
+    "multipart_body",
 ]
 
 
@@ -148,3 +155,113 @@ class ErrorModel(_Strict):
 
     error: str = Field(description="one line saying what was wrong")
     status: int
+
+
+# ------------------------------------------------------------------ the web page's endpoints
+class WebQueryFormModel(BaseModel):
+    """``POST /query``: a multipart form."""
+
+    photo: bytes = Field(description="the photo (any format the query accepts: JPEG, PNG, WebP, ...)",
+                         json_schema_extra={"format": "binary"})
+    plan: str = Field(default="server", description="server, cs1 or cs2")
+    k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
+
+
+class WebViewModel(BaseModel):
+    azimuth: float
+    elevation: float
+    mirrored: bool
+    inplane: float
+    camera_distance: float | None = None
+
+
+class WebResultModel(BaseModel):
+    """One result of ``viewdb query --json``, plus how to show it."""
+
+    rank: int
+    object: str
+    distance: float
+    view: WebViewModel
+    colour_distance: float | None
+    shape_fit: float | None
+    score: float | None
+    pose: dict[str, object] | None = Field(description="as in viewdb query --json (null: not posed)")
+    pose_error: str | None = None
+    overlay: str | None = Field(description="data: URL of a transparent PNG of the posed mesh, as "
+                                            "large as `photo`, to lay over it: the best posed result's "
+                                            "(the others: POST /overlay; null: not drawn)")
+    thumbnail: str = Field(description="URL (relative to the server's root) of the matched view's "
+                                       "picture, from the side the photo shows")
+    colour: str = Field(description="the colour its overlay is drawn in, #rrggbb")
+
+
+class WebPhotoModel(BaseModel):
+    width: int
+    height: int
+    source_width: int = Field(description="the photo's own width (POST /overlay takes it)")
+    source_height: int
+    src: str = Field(description="data: URL of the photo as the server read it (upright, shrunk), JPEG")
+
+
+class WebQueryReplyModel(BaseModel):
+    """The ``viewdb query --json`` document, plus pictures to show it."""
+
+    image: str = Field(description="the uploaded file's name")
+    plan: str
+    k: int
+    results: list[WebResultModel]
+    timing_ms: dict[str, float] = Field(description="the query's stages, and `overlay`: drawing them")
+    segmentation: str
+    transfer: dict[str, int]
+    photo: WebPhotoModel
+
+
+class WebObjectModel(BaseModel):
+    name: str
+    content_hash: str
+    faces: int
+    vertices: int
+    h_type: str | None
+    v_type: str | None
+    views_stored: int
+    views_grid: int
+    thumbnail: str = Field(description="URL of a picture of the object")
+
+
+class ObjectsReplyModel(BaseModel):
+    gap: float
+    objects: list[WebObjectModel]
+
+
+class StoredViewModel(BaseModel):
+    azimuth: float
+    elevation: float
+    src: str = Field(description="URL of the view's picture")
+
+
+class ViewsReplyModel(BaseModel):
+    object: str
+    gap: float
+    views: list[StoredViewModel] = Field(description="by elevation, then azimuth")
+
+
+class OverlayRequestModel(BaseModel):
+    """``POST /overlay``: draw one result's pose."""
+
+    result: dict[str, object] = Field(description="one result of POST /query (its object, rank, score, pose)")
+    width: int = Field(ge=16, le=100_000, description="the photo's width in pixels (photo.source_width)")
+    height: int = Field(ge=16, le=100_000, description="the photo's height in pixels (photo.source_height)")
+
+
+def json_body(model: type[BaseModel]) -> dict[str, object]:
+    """``openapi_extra`` declaring a JSON request body of ``model`` (documented; the
+    endpoint reads and checks the body itself)."""
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
+
+
+def multipart_body(model: type[BaseModel]) -> dict[str, object]:
+    """``openapi_extra`` declaring a multipart/form-data request body of ``model``
+    (documented; the endpoint reads and checks the form itself)."""
+    return {"requestBody": {"required": True, "content": {"multipart/form-data": {
+        "schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}

@@ -24,6 +24,7 @@ from .app import (
     ENV_MAX_BODY,
     ENV_MAX_IMAGE_BODY,
     ENV_TOKEN,
+    ENV_UI,
 )
 
 __all__ = ["bind", "run_server"]
@@ -59,9 +60,11 @@ def run_server(
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
     log_level: str = "warning",
     ready: Callable[[str, int], None] | None = None,
+    ui: bool = True,
 ) -> None:
     """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
-    once the socket listens (before the workers start answering)."""
+    once the socket listens (before the workers start answering). ``ui``: serve the web
+    page at ``/``."""
     import uvicorn
     from uvicorn.supervisors import Multiprocess
 
@@ -74,6 +77,7 @@ def run_server(
     os.environ[ENV_DB] = str(Path(db).resolve())
     os.environ[ENV_MAX_BODY] = str(int(max_body))
     os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
+    os.environ[ENV_UI] = "1" if ui else "0"
     if token:
         os.environ[ENV_TOKEN] = token
     else:

@@ -1,0 +1,270 @@
+"""Overlays (viewdb.recognition.overlay): the posed mesh is drawn where the object is.
+
+The drawn silhouette is checked against the renderers (pyrender, orthographic and
+pinhole), the drawn outline against the true silhouette's edge, and a real query's
+overlay against the object in its photo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import viewdb
+from tests.conftest import TIERED_DB_MODELS
+from viewdb.catalogue.pinhole import get_pinhole_renderer
+from viewdb.catalogue.render import get_renderer
+from viewdb.config import OverlayConfig, RenderConfig
+from viewdb.errors import QueryError
+from viewdb.pose.estimate import GL_TO_CV, view_rotation
+from viewdb.pose.silhouette import to_mesh_units
+from viewdb.recognition.overlay import (
+    AXIS_COLOURS,
+    OverlayPose,
+    display_size,
+    draw_overlay,
+    overlay_layer,
+    poses_from_json,
+    project_silhouette,
+)
+
+#: Only the outline, one pixel wide.
+OUTLINE_ONLY = OverlayConfig(outline_width=1.0, edge_width=0, fill_opacity=0, axis_length=0, labels=False)
+#: Only the filled silhouette, opaque.
+FILL_ONLY = OverlayConfig(outline_width=0, edge_width=0, fill_opacity=1.0, axis_length=0, labels=False)
+
+names = st.sampled_from(TIERED_DB_MODELS)
+angles = st.floats(0, 360, exclude_max=True)
+
+
+@pytest.fixture(scope="module")
+def db(tiered_db):
+    with viewdb.open(tiered_db, read_only=True) as vdb:
+        yield vdb
+
+
+def ortho(name: str, h: float, v: float, inplane: float = 0.0, scale: float = 1.0,
+          shift: tuple[float, float] = (0.0, 0.0), width: int = 1) -> OverlayPose:
+    """The viewdb-frame pose of view (h, v) turned by ``inplane`` on screen, magnified by
+    ``scale``, with the model origin ``shift`` pixels from the centre of a photo ``width``
+    pixels wide (the pose's contract in viewdb.pose.estimate)."""
+    tx, ty = 2.0 * shift[0] / (width * scale), -2.0 * shift[1] / (width * scale)
+    return OverlayPose(name, view_rotation(h, v, inplane), np.array([tx, ty, -3.0]), scale=scale)
+
+
+def edge_distance(mask: np.ndarray) -> np.ndarray:
+    """Each pixel's distance to the nearest pixel of the silhouette's edge (its pixels
+    with a 4-neighbour outside it)."""
+    m = mask.astype(np.uint8)
+    edge = m & ~cv2.erode(m, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8),
+                          borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return cv2.distanceTransform((edge == 0).astype(np.uint8), cv2.DIST_L2, 5)
+
+
+def assert_same_silhouette(truth: np.ndarray, mine: np.ndarray) -> None:
+    """Equal to a GPU's rasterisation to within its precision: the masks differ only on
+    the edge (a pixel centre a hair from it lands on either side), and there on few pixels
+    (a half-pixel error of convention would flip most of an edge)."""
+    assert truth.any()
+    wrong = truth ^ mine
+    edge = edge_distance(truth) == 0
+    assert edge_distance(truth)[wrong].max(initial=0) <= 1.0, "differs away from the edge"
+    assert wrong.sum() <= max(4, 0.1 * edge.sum()), f"{wrong.sum()} of {edge.sum()} edge pixels differ"
+
+
+def drawn(image: np.ndarray) -> np.ndarray:
+    """Pixels an overlay on a black photo drew on (half covered or more)."""
+    return image.max(axis=2) >= 128
+
+
+# ------------------------------------------------------------------ silhouettes
+@settings(max_examples=20, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles)
+def test_silhouette_equals_the_orthographic_render(db, name, h, v):
+    size = 128
+    truth = get_renderer(RenderConfig(image_size=size)).render(db.mesh(name), h, v).mask
+    mine = project_silhouette(ortho(name, h, v), db.mesh(name), (size, size))
+    assert_same_silhouette(truth, mine)
+
+
+@settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, turn=st.floats(-180, 180), scale=st.floats(0.4, 0.9),
+       dx=st.integers(-20, 20), dy=st.integers(-20, 20))
+def test_turned_scaled_and_moved_pose_matches_the_warped_render(db, name, h, v, turn, scale, dx, dy):
+    """A photo made by turning the view counter-clockwise on screen, scaling and moving
+    it (as the demo photo is made) has the pose the contract describes; its drawn
+    silhouette is the photo's to within the warp's own resampling (a pixel)."""
+    size = 256
+    truth = get_renderer(RenderConfig(image_size=size)).render(db.mesh(name), h, v).mask
+    m = cv2.getRotationMatrix2D(((size - 1) / 2, (size - 1) / 2), turn, scale)
+    m[:, 2] += (dx, dy)
+    warped = cv2.warpAffine(truth.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
+    mine = project_silhouette(ortho(name, h, v, turn, scale, (dx, dy), size), db.mesh(name), (size, size))
+    wrong = warped ^ mine
+    assert edge_distance(warped)[wrong].max(initial=0) <= 1.5
+
+
+@settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, turn=angles, depth=st.floats(2.5, 6.0),
+       tx=st.floats(-0.3, 0.3), ty=st.floats(-0.3, 0.3))
+def test_pinhole_silhouette_equals_the_pinhole_render_in_both_units(db, name, h, v, turn, depth, tx, ty):
+    size, k = 128, (150.0, 160.0, 61.0, 66.5)
+    mesh = db.mesh(name)
+    r, t = GL_TO_CV @ view_rotation(h, v, turn), np.array([tx, ty, depth])
+    truth, _ = get_pinhole_renderer().render(mesh, r, t, k, size)
+    mine = project_silhouette(OverlayPose(name, r, t, frame="opencv"), mesh, (size, size), k)
+    assert_same_silhouette(truth, mine)
+    # the same pose in the mesh file's own units draws the same
+    info = db.object(name)
+    in_mesh = OverlayPose(name, r, to_mesh_units(r, t, info.centre, info.scale), frame="opencv", units="mesh")
+    placed = project_silhouette(in_mesh, mesh, (size, size), k, (info.centre, info.scale))
+    assert (placed ^ mine).sum() <= 2
+
+
+# ------------------------------------------------------------------ drawn outline
+@pytest.mark.parametrize("name, h, v", [("car", 37, 22), ("mug", 200, 300), ("chair", 120, 15)])
+def test_drawn_outline_lies_on_the_true_silhouette_edge(db, name, h, v):
+    """A photo wider than high: the pose's scale is relative to the width, so the
+    object looks as in a render as wide as the photo, cropped to its height."""
+    height, width = 200, 260
+    render = get_renderer(RenderConfig(image_size=width)).render(db.mesh(name), h, v).mask
+    top = (width - height) // 2
+    truth = render[top:top + height]
+    image = draw_overlay(np.zeros((height, width, 3), np.uint8), [ortho(name, h, v)], db.mesh,
+                         config=OUTLINE_ONLY)
+    lines = drawn(image)
+    off = edge_distance(truth)[lines]
+    assert np.mean(off <= 1.5) >= 0.99, f"drawn outline up to {off.max():.1f} px off the edge"
+    reach = cv2.distanceTransform((~lines).astype(np.uint8), cv2.DIST_L2, 5)
+    edge = edge_distance(truth) == 0
+    assert np.mean(reach[edge] <= 1.5) >= 0.98, "part of the silhouette's edge is not drawn"
+
+
+def _photo(db, name, h, v, turn, scale, shift):
+    """A query photo: view (h, v) turned, scaled and moved on a grey background, and
+    the object's true silhouette in it."""
+    view = db.render(name, h, v)
+    size = view.mask.shape[0]
+    m = cv2.getRotationMatrix2D(((size - 1) / 2, (size - 1) / 2), turn, scale)
+    m[:, 2] += shift
+    color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
+    photo = np.full((size, size, 3), 200, np.uint8)
+    photo[mask] = color[mask]
+    return photo, mask
+
+
+def _fit(image: np.ndarray, truth: np.ndarray, tolerance: float) -> tuple[float, float]:
+    """Share of the drawn outline within ``tolerance`` px of the true edge, and share of
+    the true edge within ``tolerance`` px of the drawn outline."""
+    lines = drawn(image)
+    near = float(np.mean(edge_distance(truth)[lines] <= tolerance))
+    reach = cv2.distanceTransform((~lines).astype(np.uint8), cv2.DIST_L2, 5)
+    covered = float(np.mean(reach[edge_distance(truth) == 0] <= tolerance))
+    return near, covered
+
+
+def test_a_query_overlay_fits_the_object_in_the_photo(db):
+    """The demo's photo (the mug off the grid, turned 20°, scaled 0.8, moved): query it,
+    draw the top result, and the outline lies on the mug's edge in the photo; the same
+    pose turned a further 20° does not (the check can tell)."""
+    photo, truth = _photo(db, "mug", 37.0, 22.0, 20.0, 0.8, (12, -8))
+    result = db.query(photo, k=1).to_dict()
+    assert result["results"][0]["object"] == "mug"
+    poses = poses_from_json(result)
+    assert len(poses) == 1
+    black = np.zeros_like(photo)
+    near, covered = _fit(draw_overlay(black, poses, db.mesh, config=OUTLINE_ONLY), truth, 2.5)
+    assert near >= 0.9 and covered >= 0.85, (near, covered)
+    p = poses[0]
+    turned = OverlayPose(p.name, view_rotation(0, 0, 20.0) @ p.rotation,
+                         view_rotation(0, 0, 20.0) @ p.translation, p.scale)
+    near_t, covered_t = _fit(draw_overlay(black, [turned], db.mesh, config=OUTLINE_ONLY), truth, 2.5)
+    assert near_t < 0.8 and covered_t < 0.8, (near_t, covered_t)
+
+
+# ------------------------------------------------------------------ size, layers, axes
+def test_a_shrunk_overlay_draws_what_a_smaller_photo_would(db):
+    pose = ortho("car", 37, 22, 30, 0.8, (10, -5), 400)
+    big = draw_overlay(np.zeros((300, 400, 3), np.uint8), [pose], db.mesh,
+                       config=replace(FILL_ONLY, max_side=200))
+    small = draw_overlay(np.zeros((150, 200, 3), np.uint8), [ortho("car", 37, 22, 30, 0.8, (5, -2.5), 200)],
+                         db.mesh, config=FILL_ONLY)
+    assert big.shape == small.shape == (150, 200, 3)
+    assert (drawn(big) ^ drawn(small)).sum() <= 4
+    assert display_size((3000, 4000, 3), OverlayConfig(max_side=1000)) == (750, 1000)
+    # a pinhole pose: the photo shrunk by half is the camera with half the focal length
+    r, t, k = GL_TO_CV @ view_rotation(10, 20, 5), np.array([0.05, 0.0, 4.0]), (300.0, 300.0, 199.5, 149.5)
+    half = ((k[0] / 2, k[1] / 2, (k[2] + 0.5) / 2 - 0.5, (k[3] + 0.5) / 2 - 0.5))
+    pin = OverlayPose("car", r, t, frame="opencv")
+    big = draw_overlay(np.zeros((300, 400, 3), np.uint8), [pin], db.mesh, intrinsics=k,
+                       config=replace(FILL_ONLY, max_side=200))
+    small = draw_overlay(np.zeros((150, 200, 3), np.uint8), [pin], db.mesh, intrinsics=half, config=FILL_ONLY)
+    assert (drawn(big) ^ drawn(small)).sum() <= 4
+
+
+def test_the_layer_over_the_photo_is_the_overlay(db):
+    photo, _ = _photo(db, "car", 40.0, 20.0, 0.0, 0.8, (0, 0))
+    poses = [ortho("car", 40, 20, 0, 0.8, (0, 0), photo.shape[1])]
+    layer = overlay_layer(photo.shape, poses, db.mesh)
+    image = draw_overlay(photo, poses, db.mesh)
+    a = layer[:, :, 3:].astype(np.float64) / 255
+    composed = layer[:, :, :3] * a + photo * (1 - a)
+    assert np.abs(composed - image).max() <= 2
+    assert layer[0, 0, 3] == 0 and layer[:, :, 3].max() == 255  # transparent where nothing is drawn
+    assert (image != photo).any(axis=2).sum() > 0.2 * photo.shape[0] * photo.shape[1]
+
+
+@pytest.mark.parametrize("h, right, up", [(0.0, 0, 1), (90.0, 2, 1)])
+def test_axes_point_along_the_model_axes(db, h, right, up):
+    """From the front (h = 0) model x points right and y up; from +X (h = 90, where
+    growing azimuth orbits) model z points left and y up."""
+    config = OverlayConfig(outline_width=4, edge_width=0, fill_opacity=0, axis_length=0.9, labels=False)
+    size = 200
+    image = draw_overlay(np.zeros((size, size, 3), np.uint8), [ortho("mug", h, 0.0)], db.mesh, config=config)
+    # the outline is drawn too: look at pixels of each axis colour only
+    centre = (size - 1) / 2
+
+    def centroid(colour):
+        hit = np.all(np.abs(image.astype(int) - colour) <= 40, axis=2)
+        ys, xs = np.nonzero(hit)
+        assert len(xs) > 20, f"axis colour {colour} not drawn"
+        return xs.mean() - centre, ys.mean() - centre
+
+    x, _ = centroid(AXIS_COLOURS[right])
+    sign = 1 if right == 0 else -1  # model x to the right at h=0; model z to the left at h=90
+    assert sign * x > 0.2 * size
+    _, y = centroid(AXIS_COLOURS[up])
+    assert y < -0.2 * size
+
+
+# ------------------------------------------------------------------ input
+def test_bad_poses_and_photos_are_refused(db):
+    pin = OverlayPose("car", np.eye(3), np.array([0.0, 0.0, 4.0]), frame="opencv")
+    with pytest.raises(QueryError, match="intrinsics"):
+        draw_overlay(np.zeros((64, 64, 3), np.uint8), [pin], db.mesh)
+    with pytest.raises(QueryError, match="frame"):
+        OverlayPose("car", np.eye(3), np.zeros(3), frame="opengl")
+    with pytest.raises(QueryError, match="finite"):
+        OverlayPose("car", np.full((3, 3), np.nan), np.zeros(3))
+    with pytest.raises(QueryError, match="8-bit"):
+        draw_overlay(np.zeros((64, 64, 3), np.float32), [], db.mesh)
+    # nothing to draw: the photo itself
+    photo = np.random.default_rng(0).integers(0, 255, (40, 50, 3), dtype=np.uint8)
+    assert np.array_equal(draw_overlay(photo, [], db.mesh), photo)
+
+
+def test_poses_from_json_reads_posed_results_in_order():
+    pose = {"rotation": np.eye(3).tolist(), "translation": [0.1, 0.0, -3.0], "scale": 0.5,
+            "frame": "viewdb", "units": "normalised"}
+    data = {"results": [{"rank": 1, "object": "a", "score": 0.2, "pose": pose},
+                        {"rank": 2, "object": "b", "score": 0.3, "pose": None}],
+            "objects": [{"region": {}, "results": [{"rank": 1, "object": "c", "score": 0.1, "pose": pose}]}]}
+    poses = poses_from_json(data)
+    assert [(p.name, p.rank, p.score, p.scale) for p in poses] == [("a", 1, 0.2, 0.5), ("c", 1, 0.1, 0.5)]
+    assert np.allclose(poses[0].translation, [0.1, 0.0, -3.0])

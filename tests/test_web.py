@@ -1,0 +1,430 @@
+"""The web page of ``viewdb serve`` and its endpoints, over real HTTP on loopback, and in a
+real browser (Debian's headless Chromium driven by Selenium).
+
+One server (a bearer token, a small photo limit) and one browser serve the whole module.
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import http.client
+import io
+import os
+import re
+import shutil
+import tempfile
+import time
+import urllib.parse
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+import viewdb
+from tests.serving import ServerProcess, multipart, request
+from viewdb.config import OverlayConfig
+from viewdb.http import models
+from viewdb.http.app import ENV_DB, ENV_UI, app_from_env
+from viewdb.recognition.overlay import OverlayPose, overlay_layer
+
+TOKEN = "web-s3cret"
+#: The server's limit on a photo's upload (bytes).
+LIMIT = 300_000
+#: A pose as the query's JSON gives it.
+POSE = {"rotation": np.eye(3).tolist(), "translation": [0.0, 0.0, -3.0], "scale": 1.0, "frame": "viewdb",
+        "units": "normalised"}
+
+
+@pytest.fixture(scope="module")
+def served(tiered_db, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("web")
+    copy = folder / "served.db"
+    shutil.copy(tiered_db, copy)
+    return copy
+
+
+@pytest.fixture(scope="module")
+def server(served):
+    srv = ServerProcess(served, workers=1, token=TOKEN, extra=("--max-image-body", str(LIMIT)))
+    with srv:
+        yield srv
+        assert srv.alive(), srv.log()
+        assert srv.worker_pids() <= srv.pids, "the worker was restarted (crashed)"
+
+
+@pytest.fixture(scope="module")
+def db(tiered_db):
+    with viewdb.open(tiered_db, read_only=True) as vdb:
+        yield vdb
+
+
+@pytest.fixture(scope="module")
+def demo_photo(tiered_db, tmp_path_factory) -> Path:
+    """The photo ``viewdb demo`` queries: the mug off the grid, turned, scaled and moved."""
+    from viewdb_cli.main import _demo_photo
+
+    path = tmp_path_factory.mktemp("photos") / "demo.png"
+    _demo_photo(tiered_db, "mug", path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def bad_files(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("bad")
+    notes = folder / "notes.txt"
+    notes.write_text("not a photo\n" * 20)
+    huge = folder / "huge.jpg"
+    huge.write_bytes(np.random.default_rng(1).integers(0, 256, LIMIT + 50_000, dtype=np.uint8).tobytes())
+    empty_scene = folder / "wall.png"
+    cv2.imwrite(str(empty_scene), np.full((160, 200, 3), 128, np.uint8))
+    return {"notes": notes, "huge": huge, "wall": empty_scene}
+
+
+def post_photo(url: str, path: Path, token: str | None = TOKEN, **fields: str) -> tuple[int, object]:
+    body, headers = multipart(fields, {"photo": (path.name, path.read_bytes(), "application/octet-stream")})
+    return request(url, "POST", "/query", body, headers=headers, token=token)
+
+
+def decode_data_url(url: str) -> np.ndarray:
+    head, _, data = url.partition(",")
+    assert head in ("data:image/png;base64", "data:image/jpeg;base64"), head
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(data))))
+
+
+# ====================================================================== HTTP
+def test_page_needs_no_token_but_every_endpoint_does(server):
+    status, page = request(server.url, "GET", "/")
+    assert status == 200 and b"<title>viewdb</title>" in page
+    status, script = request(server.url, "GET", "/static/app.js")
+    assert status == 200 and b"fetch(" in script
+    for method, path in [("GET", "/objects"), ("GET", "/objects/mug/views"), ("GET", "/info"),
+                         ("GET", "/objects/mug/views/30/20.png"), ("POST", "/query"), ("POST", "/overlay")]:
+        status, reply = request(server.url, method, path, b"" if method == "POST" else None)
+        assert status == 401 and "token" in reply["error"], (path, reply)
+        status, reply = request(server.url, method, path, b"" if method == "POST" else None, token="wrong")
+        assert status == 401, path
+
+
+def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_photo):
+    for plan in ("server", "cs1"):
+        status, answer = post_photo(server.url, demo_photo, plan=plan, k="2")
+        assert status == 200, answer
+        local = db.query(str(demo_photo), k=2, plan=plan).to_dict()
+        shown = [{k: v for k, v in r.items() if k not in ("overlay", "thumbnail", "colour")}
+                 for r in answer["results"]]
+        assert shown == local["results"], plan
+        assert answer["image"] == "demo.png" and answer["plan"] == plan and answer["k"] == 2
+        assert set(local["timing_ms"]) | {"overlay"} == set(answer["timing_ms"])
+    models.WebQueryReplyModel.model_validate(answer)
+    top = answer["results"][0]
+    assert top["object"] == "mug"
+    # the photo as the server read it, enlarged to be legible, and the mug's overlay on it
+    photo = decode_data_url(answer["photo"]["src"])
+    layer = decode_data_url(top["overlay"])
+    assert photo.shape[:2] == layer.shape[:2] == (answer["photo"]["height"], answer["photo"]["width"])
+    assert layer.shape[2] == 4 and min(photo.shape[:2]) >= 512
+    grey = np.asarray(Image.open(demo_photo).convert("RGB"))
+    mug = cv2.resize((np.abs(grey.astype(int) - 200).sum(axis=2) > 0).astype(np.uint8),
+                     photo.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 0
+    drawn = layer[:, :, 3] > 0
+    assert (drawn & mug).sum() > 0.9 * mug.sum()  # the overlay covers the mug
+    # the other results' overlays are drawn on request, as the library draws them
+    second = answer["results"][1]
+    assert second["overlay"] is None and second["pose"] is not None
+    size = {"width": answer["photo"]["source_width"], "height": answer["photo"]["source_height"]}
+    status, png = request(server.url, "POST", "/overlay", {"result": second, **size}, token=TOKEN)
+    assert status == 200
+    config = OverlayConfig(max_side=1024, min_side=512, colours=(OverlayConfig().colours[1],))
+    mine = overlay_layer(grey.shape, [OverlayPose.from_json(second)], db.mesh, config=config)
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(png))), mine)
+    # the thumbnail is the matched view (from the side the photo shows), rendered
+    status, png = request(server.url, "GET", "/" + top["thumbnail"], token=TOKEN)
+    assert status == 200
+    thumb = np.asarray(Image.open(io.BytesIO(png)))
+    h, v = (float(x) for x in re.fullmatch(r"objects/mug/views/([^/]+)/([^/]+)\.png\?v=\w+",
+                                           top["thumbnail"]).groups())
+    view = db.render("mug", h, v)
+    assert np.array_equal(thumb[:, :, :3], view.color) and np.array_equal(thumb[:, :, 3] > 0, view.mask)
+
+
+def test_view_pictures_are_cached_by_version(server, db):
+    path = "/objects/car/views/60/30.png"
+    version = db.object("car").content_hash[:12]
+    status, first = request(server.url, "GET", f"{path}?v={version}", token=TOKEN)
+    assert status == 200 and first[:8] == b"\x89PNG\r\n\x1a\n"
+    parts = urllib.parse.urlsplit(server.url)
+
+    def head(query: str, etag: str | None = None) -> http.client.HTTPResponse:
+        conn = http.client.HTTPConnection(parts.hostname, parts.port, timeout=60)
+        headers = {"Authorization": f"Bearer {TOKEN}", **({"If-None-Match": etag} if etag else {})}
+        conn.request("GET", path + query, headers=headers)
+        response = conn.getresponse()
+        response.read()
+        conn.close()
+        return response
+
+    fresh = head(f"?v={version}")
+    assert "immutable" in fresh.getheader("Cache-Control")
+    assert "no-cache" in head("?v=stale").getheader("Cache-Control")
+    assert head("", fresh.getheader("ETag")).status == 304
+    # any angle, normalised: -300 is 60
+    status, same = request(server.url, "GET", "/objects/car/views/-300/390.png", token=TOKEN)
+    assert status == 200 and same == first
+
+
+def test_objects_and_their_stored_views(server, db):
+    status, listing = request(server.url, "GET", "/objects", token=TOKEN)
+    assert status == 200
+    models.ObjectsReplyModel.model_validate(listing)
+    mine = {o.name: o for o in db.objects()}
+    assert [o["name"] for o in listing["objects"]] == sorted(mine)
+    for entry in listing["objects"]:
+        info = mine[entry["name"]]
+        assert (entry["h_type"], entry["v_type"]) == (info.symmetry.h_type, info.symmetry.v_type)
+        assert (entry["views_stored"], entry["views_grid"]) == (info.views_stored, info.views_grid)
+        assert "source" not in entry and entry["thumbnail"].endswith(f"?v={info.content_hash[:12]}")
+    status, views = request(server.url, "GET", "/objects/mug/views", token=TOKEN)
+    assert status == 200
+    models.ViewsReplyModel.model_validate(views)
+    assert sorted((v["azimuth"], v["elevation"]) for v in views["views"]) == sorted(db.views("mug"))
+    status, _ = request(server.url, "GET", "/" + views["views"][0]["src"], token=TOKEN)
+    assert status == 200
+
+
+def test_bad_input_gets_a_one_line_error_and_the_server_stays_up(server, demo_photo, bad_files):
+    cases = [
+        (post_photo(server.url, bad_files["notes"]), 422, "notes.txt: not an image file"),
+        (post_photo(server.url, bad_files["wall"]), 422, "wall.png: no object found"),
+        (post_photo(server.url, bad_files["huge"]), 413, "over this endpoint's limit of 300,000"),
+        (post_photo(server.url, demo_photo, plan="cs9"), 422, "plan must be server, cs1 or cs2"),
+        (post_photo(server.url, demo_photo, k="0"), 422, "k must be between 1 and 10"),
+        (post_photo(server.url, demo_photo, k="many"), 422, "k must be a whole number"),
+        (request(server.url, "POST", "/query", b"{}", token=TOKEN), 422, "no photo"),
+        (request(server.url, "GET", "/objects/nope/views", token=TOKEN), 404, "no object named 'nope'"),
+        (request(server.url, "GET", "/objects/nope/views/0/0.png", token=TOKEN), 404, "no object named"),
+        (request(server.url, "GET", "/objects/mug/views/east/0.png", token=TOKEN), 422, "azimuth must be"),
+        (request(server.url, "GET", "/objects/mug/views/0/nan.png", token=TOKEN), 422, "elevation must be"),
+        (request(server.url, "POST", "/overlay", b"{not json", token=TOKEN), 400, "not valid JSON"),
+        (request(server.url, "POST", "/overlay", {"result": {}, "width": 64}, token=TOKEN), 422, "height must be"),
+        (request(server.url, "POST", "/overlay", {"result": {"object": "mug", "pose": {"rotation": 1}},
+                                                  "width": 64, "height": 64}, token=TOKEN), 422, "not a pose"),
+        (request(server.url, "POST", "/overlay", {"result": {"object": "nope", "pose": POSE}, "width": 64,
+                                                  "height": 64}, token=TOKEN), 404, "no object named 'nope'"),
+    ]
+    for (status, reply), want_status, want in cases:
+        assert status == want_status and want in reply["error"], (status, reply, want)
+        assert "\n" not in reply["error"] and reply["status"] == status
+    status, health = request(server.url, "GET", "/health")
+    assert status == 200 and health["pid"] in server.pids
+
+
+def test_the_schema_documents_the_endpoints(server):
+    status, schema = request(server.url, "GET", "/openapi.json")
+    assert status == 200
+    paths = schema["paths"]
+    assert {"/query", "/overlay", "/objects", "/objects/{name}/views",
+            "/objects/{name}/views/{azimuth}/{elevation}.png"} <= set(paths)
+    assert "/" not in paths
+    body = paths["/query"]["post"]["requestBody"]["content"]["multipart/form-data"]["schema"]
+    form = schema["components"]["schemas"][body["$ref"].split("/")[-1]]
+    assert {"photo", "plan", "k"} <= set(form["properties"])
+
+
+def test_no_ui_leaves_out_the_page_only(served, monkeypatch):
+    def paths():
+        app = app_from_env()
+        return {getattr(r, "path", None) for r in app.routes} | set(app.openapi()["paths"])
+
+    monkeypatch.setenv(ENV_DB, str(served))
+    assert {"/", "/static", "/query", "/objects"} <= paths()
+    monkeypatch.setenv(ENV_UI, "0")
+    found = paths()
+    assert "/" not in found and "/static" not in found and {"/query", "/objects"} <= found
+
+
+# ====================================================================== browser
+CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+#: The machine has no internet: without these Chromium keeps calling home.
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
+WAIT = 180.0
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
+        why = "needs Debian's chromium and chromium-driver (./install.sh installs them)"
+        if os.environ.get("CI"):
+            pytest.fail(why)
+        pytest.skip(why)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={tmp_path_factory.mktemp('chromium')}",
+                 "--window-size=1200,900"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(options=options, service=Service(executable_path=str(CHROMEDRIVER)))
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+@contextlib.contextmanager
+def screenshot_on_failure(driver, name: str) -> Iterator[None]:
+    """Save what the browser shows when the block fails (``$VIEWDB_SCREENSHOTS``, default
+    a folder in the temp dir), and say where."""
+    try:
+        yield
+    except BaseException:
+        folder = Path(os.environ.get("VIEWDB_SCREENSHOTS", Path(tempfile.gettempdir()) / "viewdb-screenshots"))
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}.png"
+        driver.save_screenshot(str(path))
+        print(f"screenshot of the failed page: {path}")
+        raise
+
+
+def wait(driver, condition, timeout: float = WAIT):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    return WebDriverWait(driver, timeout, poll_frequency=0.2).until(lambda d: condition(d))
+
+
+def js(driver, script: str, *args):
+    return driver.execute_script(script, *args)
+
+
+def open_page(driver, url: str) -> None:
+    """Load the page, giving it the token if it asks."""
+    from selenium.webdriver.common.by import By
+
+    driver.get(url + "/")
+    wait(driver, lambda d: js(d, "return document.readyState") == "complete")
+    wait(driver, lambda d: d.find_element(By.ID, "server").text or d.find_element(By.ID, "token-panel").is_displayed())
+    if driver.find_element(By.ID, "token-panel").is_displayed():
+        driver.find_element(By.ID, "token").send_keys(TOKEN)
+        driver.find_element(By.CSS_SELECTOR, "#token-form button").click()
+        wait(driver, lambda d: d.find_element(By.ID, "server").text)
+
+
+def upload(driver, path: Path) -> None:
+    from selenium.webdriver.common.by import By
+
+    field = driver.find_element(By.ID, "photo")
+    field.clear()
+    field.send_keys(str(path))
+    driver.find_element(By.ID, "go").click()
+
+
+def message(driver) -> str:
+    """The page's error message, once it shows one."""
+    from selenium.webdriver.common.by import By
+
+    wait(driver, lambda d: d.find_element(By.ID, "message").is_displayed()
+         and "error" in d.find_element(By.ID, "message").get_attribute("class"))
+    return driver.find_element(By.ID, "message").text
+
+
+def no_horizontal_scroll(driver) -> None:
+    width, scroll, widest = js(driver, """
+        const root = document.documentElement;
+        let widest = 0;
+        for (const node of document.querySelectorAll('body *')) {
+          const box = node.getBoundingClientRect();
+          if (box.width > 0) widest = Math.max(widest, box.right);
+        }
+        return [root.clientWidth, root.scrollWidth, widest];""")
+    assert scroll <= width and widest <= width + 0.5, (width, scroll, widest)
+
+
+def test_the_page_asks_for_the_token_once(browser, server):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "token"):
+        browser.get(server.url + "/")
+        js(browser, "localStorage.clear()")
+        browser.refresh()
+        wait(browser, lambda d: d.find_element(By.ID, "token-panel").is_displayed())
+        browser.find_element(By.ID, "token").send_keys("wrong")
+        browser.find_element(By.CSS_SELECTOR, "#token-form button").click()
+        wait(browser, lambda d: "refused" in d.find_element(By.ID, "token-message").text)
+        browser.find_element(By.ID, "token").clear()
+        browser.find_element(By.ID, "token").send_keys(TOKEN)
+        browser.find_element(By.CSS_SELECTOR, "#token-form button").click()
+        wait(browser, lambda d: "6 objects" in d.find_element(By.ID, "server").text)
+        assert not browser.find_element(By.ID, "token-panel").is_displayed()
+        browser.refresh()  # kept: not asked again
+        wait(browser, lambda d: "6 objects" in d.find_element(By.ID, "server").text)
+        assert not browser.find_element(By.ID, "token-panel").is_displayed()
+
+
+def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "query"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        upload(browser, demo_photo)
+        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, "#ranking li"))
+        first = browser.find_element(By.CSS_SELECTOR, "#ranking li")
+        assert first.get_attribute("data-object") == "mug"
+        assert "1. mug" in first.text and "pose: azimuth" in first.text
+        wait(browser, lambda d: js(d, "return document.getElementById('overlay-img').naturalWidth") > 0)
+        wait(browser, lambda d: js(d, "return document.getElementById('photo-img').naturalWidth") > 0)
+        # every matched view's thumbnail arrived (fetched with the token)
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#ranking img')]"
+                                      ".every(i => i.naturalWidth > 0)"))
+        assert "round trip" in browser.find_element(By.ID, "timing").text
+        # choosing another result shows its overlay, drawn on request
+        second = browser.find_elements(By.CSS_SELECTOR, "#ranking li")[1]
+        second.click()
+        assert second.get_attribute("aria-selected") == "true"
+        wait(browser, lambda d: js(d, "const i = document.getElementById('overlay-img');"
+                                      "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))
+        browser.set_window_size(390, 844)
+        wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
+        no_horizontal_scroll(browser)
+
+
+def test_bad_photos_show_a_message_and_the_server_stays_up(browser, server, bad_files):
+    with screenshot_on_failure(browser, "bad-photos"):
+        browser.set_window_size(390, 844)
+        open_page(browser, server.url)
+        for name, wanted in (("notes", "not an image file"), ("huge", "too large"), ("wall", "no object found")):
+            upload(browser, bad_files[name])
+            text = message(browser)
+            assert wanted in text and bad_files[name].name in text, text
+            no_horizontal_scroll(browser)
+            status, health = request(server.url, "GET", "/health")
+            assert status == 200 and health["pid"] in server.pids
+            js(browser, "document.getElementById('message').className = ''")  # wait for the next one
+
+
+def test_the_catalogue_shows_every_object_and_turns_one(browser, server):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "catalogue"):
+        browser.set_window_size(390, 844)
+        open_page(browser, server.url)
+        browser.find_element(By.CSS_SELECTOR, '.tab[data-tab="catalogue"]').click()
+        wait(browser, lambda d: len(d.find_elements(By.CSS_SELECTOR, "#objects li")) == 6)
+        cards = {li.get_attribute("data-object"): li.text for li in browser.find_elements(By.CSS_SELECTOR, "#objects li")}
+        assert "H2 · V2" in cards["mug"] and "25 of 144 views stored" in cards["mug"]
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#objects img')]"
+                                      ".every(i => i.naturalWidth > 0)"))
+        no_horizontal_scroll(browser)
+        browser.find_element(By.CSS_SELECTOR, '#objects li[data-object="mug"] button').click()
+        wait(browser, lambda d: js(d, "return document.getElementById('turntable-img').naturalWidth") > 0)
+        first = browser.find_element(By.ID, "turntable-view").text
+        wait(browser, lambda d: d.find_element(By.ID, "turntable-view").text != first, 30)  # it turns
+        assert "mirror" in browser.find_element(By.ID, "turntable-symmetry").text
+        no_horizontal_scroll(browser)
+        browser.find_element(By.CSS_SELECTOR, "#turntable .dialog-head button").click()
