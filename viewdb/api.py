@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import BuildConfig, RenderConfig
+from .config import BuildConfig, OverlayConfig, RenderConfig
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -31,6 +32,7 @@ from .pose.matched import pose_known
 from .recognition.client_tier import ClientTier
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
+from .recognition.overlay import draw_result
 from .recognition.pipeline import run_query, segment_photo
 from .recognition.regions import Box, Point, Prompts
 from .recognition.results import QueryResult
@@ -228,8 +230,22 @@ class ViewDB:
                                    colour=colour, verify=verify)
         prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
-        return run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
-                         mask=mask, label_map=label_map, label=label, prompts=prompts)
+        result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
+                           mask=mask, label_map=label_map, label=label, prompts=prompts)
+        if server is not None or self.role != "full":
+            return result
+        return replace(result, drawer=partial(self._draw, intrinsics=options.camera))
+
+    def _draw(self, result: QueryResult, top: int, config: OverlayConfig | None, *,
+              intrinsics: Intrinsics | None) -> NDArray[np.uint8]:
+        """A result of a query on this file drawn over its photo (:meth:`QueryResult.overlay`)."""
+        assert result.photo is not None
+
+        def placement(name: str) -> tuple[NDArray[np.float64], float]:
+            info = self._catalogue.object(name)
+            return np.asarray(info.centre, dtype=np.float64), float(info.scale)
+
+        return draw_result(result.photo, result, self._catalogue.mesh, placement, intrinsics, top, config)
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",

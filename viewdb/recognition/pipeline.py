@@ -294,6 +294,7 @@ def run_query(
     return QueryResult(
         image=_image_name(image, shape.image), plan=options.plan, k=options.k, results=matches,
         timing_ms=timing, segmentation=shape.segmentation.method, transfer=_transfer(traffic),
+        photo=shape.image.rgb,
     )
 
 
@@ -327,5 +328,5 @@ def run_regions(
     method = "label" if label_map is not None else ("every" if prompts.every else "prompts")
     return QueryResult(
         image=_image_name(image, loaded), plan=options.plan, k=options.k, results=[], timing_ms=totals,
-        segmentation=method, transfer=_transfer(traffic), objects=objects,
+        segmentation=method, transfer=_transfer(traffic), objects=objects, photo=loaded.rgb,
     )

@@ -119,6 +119,8 @@ class QueryResult:
     transfer: dict[str, int] = field(default_factory=dict)
     #: Each object of a query of several, in the prompts' order (every object: largest first).
     objects: list[ObjectResult] | None = None
+    #: The photo (RGB) the query saw, for :meth:`overlay`.
+    photo: NDArray[np.uint8] | None = field(default=None, repr=False, compare=False)
     #: Draws the overlay (:meth:`overlay`); None when the meshes are not at hand.
     drawer: Drawer | None = field(default=None, repr=False, compare=False)
 
@@ -145,6 +147,7 @@ class QueryResult:
         """
         if top < 1:
             raise QueryError(f"top must be at least 1, got {top}")
-        if self.drawer is None:
-            raise QueryError("an overlay needs the meshes: query the full database file")
+        if self.drawer is None or self.photo is None:
+            raise QueryError("an overlay needs the meshes: query the full database file, not a client "
+                             "file with a server")
         return self.drawer(self, top, config)
