@@ -8,6 +8,8 @@ validate against them).
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..search.plans import MAX_BAND, MAX_K
@@ -165,6 +167,12 @@ class WebQueryFormModel(BaseModel):
                          json_schema_extra={"format": "binary"})
     plan: str = Field(default="server", description="server, cs1 or cs2")
     k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
+    box: list[str] = Field(default=[], description="an object's box `x1,y1,x2,y2` in the photo's pixels; "
+                                                     "repeat the field for several objects")
+    point: list[str] = Field(default=[], description="a pixel `x,y` on an object; repeatable")
+    all: bool = Field(default=False, description="every object that stands out from the background")
+    max_objects: int | None = Field(default=None, ge=1, description="with `all`: at most this many "
+                                                                     "objects, the largest")
 
 
 class WebViewModel(BaseModel):
@@ -203,6 +211,16 @@ class WebPhotoModel(BaseModel):
     src: str = Field(description="data: URL of the photo as the server read it (upright, shrunk), JPEG")
 
 
+class WebObjectResultModel(BaseModel):
+    """One object of a photo of several: where it is, and its results."""
+
+    region: dict[str, Any] = Field(description="`box` [x1, y1, x2, y2] (end exclusive), `area` in "
+                                               "pixels, and the `prompt` it was cut from")
+    segmentation: str
+    results: list[WebResultModel]
+    timing_ms: dict[str, float]
+
+
 class WebQueryReplyModel(BaseModel):
     """The ``viewdb query --json`` document, plus pictures to show it."""
 
@@ -214,6 +232,8 @@ class WebQueryReplyModel(BaseModel):
     segmentation: str
     transfer: dict[str, int]
     photo: WebPhotoModel
+    objects: list[WebObjectResultModel] | None = Field(
+        default=None, description="a query with prompts or `all`: each object (then `results` is empty)")
 
 
 class WebObjectModel(BaseModel):
