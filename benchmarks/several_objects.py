@@ -9,10 +9,13 @@ holding the YCB-Video meshes, as ``benchmarks/real_photos.py`` uses), YCB-Video 
 
 * **together**: one ``ViewDB.query`` with every object (one decode of the photo, one
   set of tier loads), on a freshly opened file;
-* **apart, fresh**: one query per object (its box, or its mask from the first run), each
-  on a freshly opened file, as N ``viewdb query`` runs would do (less the interpreter's
-  start);
+* **apart, fresh**: one query per object, each on a freshly opened file, as N ``viewdb
+  query`` runs would do (less the interpreter's start);
 * **apart, warm**: one query per object on one open file (tiers already loaded).
+
+So that both do the same work per object, the objects are first cut out once (``every``
+or the boxes), and then given as a label map: together with ``every=True``, apart with
+each ``label`` (each object then knows the others as possible occluders either way).
 
 Prints the wall-clock time of each (best of ``--repeat``) and the ratios apart / together.
 """
@@ -47,26 +50,32 @@ def _best(run: Callable[[], object], repeat: int) -> float:
     return min(times)
 
 
-def compare(name: str, db_path: Path, photo: object, together: dict, apart: list[dict], repeat: int,
-            options: dict) -> None:
+def compare(name: str, db_path: Path, photo: object, found: dict, repeat: int, options: dict) -> None:
+    """Time the objects ``found`` (the prompts that cut them out) together and apart."""
+    with viewdb.open(db_path, create=False) as db:
+        regions = db.query(photo, **found, pose=False, k=1).objects
+    labels = np.zeros(regions[0].region.mask.shape, np.uint16)
+    for i, entry in enumerate(regions, 1):
+        labels[entry.region.mask] = i
+
     def one_call() -> None:
         with viewdb.open(db_path, create=False) as db:
-            db.query(photo, **together, **options)
+            db.query(photo, label_map=labels, every=True, **options)
 
     def fresh() -> None:
-        for each in apart:
+        for i in range(1, len(regions) + 1):
             with viewdb.open(db_path, create=False) as db:
-                db.query(photo, **each, **options)
+                db.query(photo, label_map=labels, label=i, **options)
 
     with viewdb.open(db_path, create=False) as warm_db:
-        warm_db.query(photo, **apart[0], **options)  # load the tiers
+        warm_db.query(photo, label_map=labels, label=1, **options)  # load the tiers
 
         def warm() -> None:
-            for each in apart:
-                warm_db.query(photo, **each, **options)
+            for i in range(1, len(regions) + 1):
+                warm_db.query(photo, label_map=labels, label=i, **options)
 
         t_one, t_fresh, t_warm = _best(one_call, repeat), _best(fresh, repeat), _best(warm, repeat)
-    n = len(apart)
+    n = len(regions)
     print(f"{name}: {n} objects: together {t_one:.2f} s ({t_one / n:.2f} s per object); apart, fresh "
           f"{t_fresh:.2f} s ({t_fresh / t_one:.2f}x); apart, warm {t_warm:.2f} s ({t_warm / t_one:.2f}x)",
           flush=True)
@@ -94,18 +103,15 @@ def main() -> None:
     options = {"k": 3, "pose": not args.no_pose}
     with tempfile.TemporaryDirectory(prefix="viewdb-several-") as folder:
         db_path, photo = table_scene(Path(folder))
-        with viewdb.open(db_path, create=False) as db:
-            masks = [o.region.mask for o in db.query(photo, every=True, pose=False).objects]
-        compare("table, every object", db_path, photo, {"every": True}, [{"mask": m} for m in masks],
-                args.repeat, options)
+        compare("table, every object", db_path, photo, {"every": True}, args.repeat, options)
     if args.db is not None:
         gt = json.loads((YCB / "gt.json").read_text())["frames"]["000002"]
         k = np.asarray(gt["K"])
         intrinsics = (k[0, 0], k[1, 1], k[0, 2], k[1, 2])
         boxes = [[float(v) for v in line.split()[1:]]
                  for line in (YCB / "000002-box.txt").read_text().splitlines() if line.strip()]
-        compare("YCB-Video 000002, boxes", args.db, YCB / "000002-color.png", {"boxes": boxes},
-                [{"boxes": [b]} for b in boxes], args.repeat, {**options, "intrinsics": intrinsics})
+        compare("YCB-Video 000002, boxes", args.db, YCB / "000002-color.png", {"boxes": boxes}, args.repeat,
+                {**options, "intrinsics": intrinsics})
 
 
 if __name__ == "__main__":
