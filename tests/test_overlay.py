@@ -21,7 +21,7 @@ from viewdb.catalogue.pinhole import get_pinhole_renderer
 from viewdb.catalogue.render import get_renderer
 from viewdb.config import OverlayConfig, RenderConfig
 from viewdb.errors import QueryError
-from viewdb.pose.estimate import GL_TO_CV, view_rotation
+from viewdb.pose.frames import GL_TO_CV, view_rotation
 from viewdb.pose.silhouette import to_mesh_units
 from viewdb.recognition.overlay import (
     AXIS_COLOURS,
