@@ -123,7 +123,7 @@ def run(path: str, args: argparse.Namespace) -> None:
         n = len(tier.curves)
         print(f"{args.tier} tier: {len(tier.names)} objects, {n} views, {tier.n_groups} groups "
               f"(in-memory copy for the baselines loaded in {load:.2f} s)")
-        mirrored = np.ascontiguousarray(np.roll(tier.curves[:, ::-1], 1, axis=1))
+        mirrored = mirror_curve(tier.curves)
         sets = queries(db, tier, args.queries, args.seed)
         db.search(sets["noisy"][0], k=1, band=args.r, tier=args.tier)  # warm up (compile)
         for label, qs in sets.items():

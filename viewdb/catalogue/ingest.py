@@ -169,9 +169,23 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    grid = len(grid_views(config.gap))
-    perspective = len(perspective_grid(config))
     upgrade = write_perspective is not None and config.perspective.enabled
+    todo = _plan_jobs(paths, existing_hashes, lacking_perspective if upgrade else frozenset(), report)
+    run = _Run(report, todo, config, write, write_perspective, progress)
+    if jobs <= 1 or len(todo) <= 1:
+        run.serial(todo, skim, options)
+    else:
+        run.pooled(todo, jobs, skim, options)
+    report.seconds = time.perf_counter() - start
+    return report
+
+
+def _plan_jobs(
+    paths: Sequence[str | Path], existing_hashes: dict[str, str],
+    lacking_perspective: set[str] | frozenset[str], report: IngestReport,
+) -> list[_Job]:
+    """The files to describe (new, changed, or unchanged but in ``lacking_perspective``);
+    the others go in ``report`` as unchanged or failed."""
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -192,24 +206,45 @@ def run_ingest(
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
             continue
         if existing_hashes.get(name) == digest:
-            if upgrade and name in lacking_perspective:
+            if name in lacking_perspective:
                 todo.append(_Job(str(path), name, digest, True, perspective_only=True))
             else:
                 report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
         todo.append(_Job(str(path), name, digest, name in existing_hashes))
+    return todo
 
-    total_views = sum(job.views(grid, perspective) for job in todo)
-    done_views = 0
-    files_total = len(report.outcomes) + len(todo)
 
-    def notify(outcome: FileOutcome | None = None) -> None:
-        if progress is not None:
-            progress(IngestProgress(
-                done_views, total_views, len(report.outcomes), files_total, outcome
+class _Run:
+    """One ingest's progress and outcomes: the views done, and each finished file written
+    and reported."""
+
+    def __init__(
+        self, report: IngestReport, todo: list[_Job], config: BuildConfig,
+        write: Callable[[ObjectDescription], None],
+        write_perspective: Callable[[PerspectiveAddition], None] | None,
+        progress: Callable[[IngestProgress], None] | None,
+    ) -> None:
+        self.report, self.config = report, config
+        self.write, self.write_perspective, self.progress = write, write_perspective, progress
+        self.grid = len(grid_views(config.gap))
+        self.perspective = len(perspective_grid(config))
+        self.total_views = sum(job.views(self.grid, self.perspective) for job in todo)
+        self.done_views = 0
+        self.files_total = len(report.outcomes) + len(todo)
+
+    def notify(self, outcome: FileOutcome | None = None) -> None:
+        if self.progress is not None:
+            self.progress(IngestProgress(
+                self.done_views, self.total_views, len(self.report.outcomes), self.files_total, outcome
             ))
 
-    def finish(job: _Job, result: ObjectDescription | PerspectiveAddition | BaseException) -> None:
+    def tick(self, n: int) -> None:
+        self.done_views += n
+        self.notify()
+
+    def finish(self, job: _Job, result: ObjectDescription | PerspectiveAddition | BaseException) -> None:
+        """Write a described file (or record its failure) and report it."""
         if isinstance(result, ViewDBError):
             outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
         elif isinstance(result, BaseException):
@@ -218,40 +253,38 @@ def run_ingest(
                 error=f"{job.path}: unexpected {type(result).__name__}: {result}",
             )
         else:
-            try:
-                if isinstance(result, PerspectiveAddition):
-                    assert write_perspective is not None
-                    write_perspective(result)
-                else:
-                    write(result)
-            except ViewDBError as exc:
-                outcome = FileOutcome(job.path, job.name, "failed", error=str(exc))
+            outcome = self._write(job, result)
+        self.report.outcomes.append(outcome)
+        self.notify(outcome)
+
+    def _write(self, job: _Job, result: ObjectDescription | PerspectiveAddition) -> FileOutcome:
+        try:
+            if isinstance(result, PerspectiveAddition):
+                assert self.write_perspective is not None
+                self.write_perspective(result)
             else:
-                status = ("upgraded" if isinstance(result, PerspectiveAddition)
-                          else "replaced" if job.replaces else "added")
-                outcome = FileOutcome(job.path, job.name, status,
-                                      views=len(result.views), seconds=result.seconds)
-        report.outcomes.append(outcome)
-        notify(outcome)
+                self.write(result)
+        except ViewDBError as exc:
+            return FileOutcome(job.path, job.name, "failed", error=str(exc))
+        status = ("upgraded" if isinstance(result, PerspectiveAddition)
+                  else "replaced" if job.replaces else "added")
+        return FileOutcome(job.path, job.name, status, views=len(result.views), seconds=result.seconds)
 
-    if jobs <= 1 or len(todo) <= 1:
+    def serial(self, todo: list[_Job], skim: bool, options: LoadOptions) -> None:
+        """Describe the files one after the other in this process."""
         for job in todo:
-            expected_done = done_views + job.views(grid, perspective)
-
-            def tick(n: int) -> None:
-                nonlocal done_views
-                done_views += n
-                notify()
-
+            expected_done = self.done_views + job.views(self.grid, self.perspective)
             try:
                 result: ObjectDescription | PerspectiveAddition | BaseException = _describe(
-                    job, config, skim, options, tick
+                    job, self.config, skim, options, self.tick
                 )
             except ViewDBError as exc:
                 result = exc
-            done_views = expected_done  # a failed file counts as dealt with
-            finish(job, result)
-    else:
+            self.done_views = expected_done  # a failed file counts as dealt with
+            self.finish(job, result)
+
+    def pooled(self, todo: list[_Job], jobs: int, skim: bool, options: LoadOptions) -> None:
+        """Describe the files in ``jobs`` spawned worker processes; write them here."""
         ctx = mp.get_context("spawn")
         ticks = ctx.Queue()
         pool = ProcessPoolExecutor(
@@ -261,22 +294,16 @@ def run_ingest(
         futures: dict[Future[ObjectDescription | PerspectiveAddition], _Job] = {}
         try:
             for job in todo:
-                futures[pool.submit(_describe_file, job, config, skim, options)] = job
+                futures[pool.submit(_describe_file, job, self.config, skim, options)] = job
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                drained = 0
-                while True:
-                    try:
-                        drained += ticks.get_nowait()
-                    except queue_module.Empty:
-                        break
+                drained = _drain(ticks)
                 if drained:
-                    done_views += drained
-                    notify()
+                    self.tick(drained)
                 for fut in finished:
                     exc = fut.exception()
-                    finish(futures[fut], exc if exc is not None else fut.result())
+                    self.finish(futures[fut], exc if exc is not None else fut.result())
         except BaseException:
             workers = list((getattr(pool, "_processes", None) or {}).values())
             pool.shutdown(wait=False, cancel_futures=True)
@@ -284,8 +311,16 @@ def run_ingest(
                 proc.terminate()
             raise
         pool.shutdown(wait=True)
-        if done_views != total_views:  # files that failed part-way
-            done_views = total_views
-            notify()
-    report.seconds = time.perf_counter() - start
-    return report
+        if self.done_views != self.total_views:  # files that failed part-way
+            self.done_views = self.total_views
+            self.notify()
+
+
+def _drain(ticks: Any) -> int:
+    """The views the workers reported since the last call."""
+    drained = 0
+    while True:
+        try:
+            drained += ticks.get_nowait()
+        except queue_module.Empty:
+            return drained

@@ -573,65 +573,15 @@ def classify(
     h_ring = [cache.get(k, 0) for k in range(n)]
     h_props, h_bis = _ring_proposals(h_ring, gap, sigma, vertical=False)
     verifier = _Verifier(cache, gap, sigma)
-
-    def ensure(b: float) -> None:
-        b = math.floor(b / gap + 1e-9) * gap  # a mirror half-way between views: the view below
-        for h, v in _ring_views(gap, b) + _ring_views(gap, b + 90.0) + _sample_views(gap, b):
-            cache.view(h, v)
-
-    h_hyp: _Hypothesis | None = None
-    tried: set[tuple[Generator, ...]] = set()
-    for hyp in _h_hypotheses(h_props, gap):
-        key = tuple(sorted(canonical_generator(g) for g in hyp.generators))
-        if key in tried:
-            continue
-        tried.add(key)
-        ensure(hyp.base)
-        ok, _ = verifier.try_hypothesis(hyp)
-        if ok:
-            h_hyp = hyp
-            break
-    if h_hyp is None:
-        k_best = int(np.argmin(h_bis))
-        b = k_best * gap if h_bis[k_best] <= sigma else 0.0
-        h_hyp = _Hypothesis("H4", "H4", 180.0, b, [])
-        ensure(b)
+    h_hyp = _horizontal_type(h_props, h_bis, cache, verifier)
     b = h_hyp.base
     kb = math.floor(b / gap + 1e-9)  # the vertical ring: through b, or the view below it
     h_diff = np.sqrt(np.mean((np.array(h_ring) - h_ring[kb % n]) ** 2, axis=1))
 
     v_ring = [cache.get(kb, k) for k in range(n)]
     v_props, _ = _ring_proposals(v_ring, gap, sigma, vertical=True)
-    v_hyp = _Hypothesis("V4", "V4", 180.0, kb * gap, [], 0.0)
-    v_base_index = 0
-    tried = set()
-    for hyp, prop in _v_with_props(v_props, gap, kb * gap):
-        key = tuple(sorted(canonical_generator(g) for g in hyp.generators))
-        if key in tried:
-            continue
-        tried.add(key)
-        ok, added = verifier.try_hypothesis(hyp)
-        if ok and added:
-            v_hyp, v_base_index = hyp, prop.base
-            break
-        # a proposal that holds but adds nothing (all implied by the horizontal group, e.g.
-        # the vertical plane of a cone) is not vertical symmetry: keep looking
-    # Beyond the types: half turns without a mirror plane (a 2-fold vertical axis, or one
-    # along the horizontal axes of the vertical rings), proposed when the ring repeats
-    # after 180 degrees and verified like the rest; they do not change the type labels.
-    if n % 2 == 0:
-        half = n // 2
-        extras: list[tuple[list[NDArray[np.float64]], Generator]] = [(h_ring, ("rot_y", 180.0))]
-        extras.append((v_ring, ("rot_horizontal", 180.0, kb * gap)))
-        if _on_grid(kb * gap + 90.0, gap):
-            k90 = round((kb * gap + 90.0) / gap)
-            extras.append(([cache.get(k90, k) for k in range(n)], ("rot_horizontal", 180.0, k90 * gap)))
-        for ring, gen in extras:
-            arr = np.array(ring)
-            if float(np.sqrt(np.mean((arr - np.roll(arr, -half, axis=0)) ** 2, axis=1)).max()) <= sigma:
-                verifier.try_hypothesis(_Hypothesis("2-fold", "", 0.0, b, [gen]))
-    elif float(h_bis.max()) <= sigma:  # odd grid: the vertical half turn gives (h, v) =~ (h, -v)
-        verifier.try_hypothesis(_Hypothesis("2-fold", "", 0.0, b, [("rot_y", 180.0)]))
+    v_hyp, v_base_index = _vertical_type(v_props, kb * gap, verifier)
+    _try_half_turns(h_ring, v_ring, h_bis, kb, b, cache, verifier)
     v_diff = np.sqrt(np.mean((np.array(v_ring) - v_ring[v_base_index]) ** 2, axis=1))
     return SymmetryType(
         h_type=h_hyp.label,
@@ -648,6 +598,77 @@ def classify(
         verification=tuple(verifier.records),
         views_rendered=cache.calls,
     )
+
+
+def _ensure_around(cache: _CurveCache, b: float) -> None:
+    """Render the rings through ``b`` and ``b + 90`` and the verification sample around
+    ``b`` (a mirror half-way between views: around the view below it)."""
+    gap = cache.gap
+    b = math.floor(b / gap + 1e-9) * gap
+    for h, v in _ring_views(gap, b) + _ring_views(gap, b + 90.0) + _sample_views(gap, b):
+        cache.view(h, v)
+
+
+def _horizontal_type(
+    props: list[_Proposal], bis: NDArray[np.float64], cache: _CurveCache, verifier: _Verifier
+) -> _Hypothesis:
+    """The first horizontal proposal whose generators all verify, else H4 (based on the
+    most bisymmetric ring view, if it is bisymmetric within sigma)."""
+    gap, sigma = cache.gap, verifier.sigma
+    tried: set[tuple[Generator, ...]] = set()
+    for hyp in _h_hypotheses(props, gap):
+        key = tuple(sorted(canonical_generator(g) for g in hyp.generators))
+        if key in tried:
+            continue
+        tried.add(key)
+        _ensure_around(cache, hyp.base)
+        ok, _ = verifier.try_hypothesis(hyp)
+        if ok:
+            return hyp
+    k_best = int(np.argmin(bis))
+    b = k_best * gap if bis[k_best] <= sigma else 0.0
+    _ensure_around(cache, b)
+    return _Hypothesis("H4", "H4", 180.0, b, [])
+
+
+def _vertical_type(props: list[_Proposal], b: float, verifier: _Verifier) -> tuple[_Hypothesis, int]:
+    """The first vertical proposal whose generators verify and add something to the
+    horizontal group, with its base's ring index; else V4."""
+    tried: set[tuple[Generator, ...]] = set()
+    for hyp, prop in _v_with_props(props, verifier.gap, b):
+        key = tuple(sorted(canonical_generator(g) for g in hyp.generators))
+        if key in tried:
+            continue
+        tried.add(key)
+        ok, added = verifier.try_hypothesis(hyp)
+        if ok and added:
+            return hyp, prop.base
+        # a proposal that holds but adds nothing (all implied by the horizontal group, e.g.
+        # the vertical plane of a cone) is not vertical symmetry: keep looking
+    return _Hypothesis("V4", "V4", 180.0, b, [], 0.0), 0
+
+
+def _try_half_turns(
+    h_ring: list[NDArray[np.float64]], v_ring: list[NDArray[np.float64]], h_bis: NDArray[np.float64],
+    kb: int, b: float, cache: _CurveCache, verifier: _Verifier,
+) -> None:
+    """Beyond the types: half turns without a mirror plane (a 2-fold vertical axis, or one
+    along the horizontal axes of the vertical rings), proposed when the ring repeats
+    after 180 degrees and verified like the rest; they do not change the type labels."""
+    gap, sigma, n = cache.gap, verifier.sigma, cache.n
+    if n % 2 == 0:
+        half = n // 2
+        extras: list[tuple[list[NDArray[np.float64]], Generator]] = [(h_ring, ("rot_y", 180.0))]
+        extras.append((v_ring, ("rot_horizontal", 180.0, kb * gap)))
+        if _on_grid(kb * gap + 90.0, gap):
+            k90 = round((kb * gap + 90.0) / gap)
+            extras.append(([cache.get(k90, k) for k in range(n)], ("rot_horizontal", 180.0, k90 * gap)))
+        for ring, gen in extras:
+            arr = np.array(ring)
+            if float(np.sqrt(np.mean((arr - np.roll(arr, -half, axis=0)) ** 2, axis=1)).max()) <= sigma:
+                verifier.try_hypothesis(_Hypothesis("2-fold", "", 0.0, b, [gen]))
+    elif float(h_bis.max()) <= sigma:  # odd grid: the vertical half turn gives (h, v) =~ (h, -v)
+        verifier.try_hypothesis(_Hypothesis("2-fold", "", 0.0, b, [("rot_y", 180.0)]))
 
 
 def _v_with_props(props: list[_Proposal], gap: float, b: float) -> list[tuple[_Hypothesis, _Proposal]]:

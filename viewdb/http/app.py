@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-from fastapi import Depends, FastAPI, Request
+from fastapi import APIRouter, Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
@@ -206,34 +206,53 @@ def create_app(
     needs the header ``Authorization: Bearer <token>``. ``ui``: serve the web page at
     ``/`` (its endpoints are served either way).
     """
-    db_path = Path(db_path)
-    holder: dict[str, _State] = {}
+    server = _Server(Path(db_path), token, max_body, max_image_body)
+    app = FastAPI(
+        title="viewdb server",
+        version=__version__,
+        description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
+                    "estimation, over a full database opened read-only.",
+        lifespan=server.lifespan,
+    )
+    _add_error_handlers(app)
+    app.include_router(_routes(server))
+    app.include_router(web.web_router(server.run, [Depends(server.authorised)], web_config))
+    if ui:
+        web.add_page(app)
+    app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
+    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
+                                          "/query": max_image_body}, default=max_body)
+    return app
+
+
+class _Server:
+    """What the routes of one worker share: its open database and the thread that
+    answers on it, the token and the limits."""
+
+    def __init__(self, db_path: Path, token: str | None, max_body: int, max_image_body: int) -> None:
+        self.db_path, self.token = db_path, token
+        self.max_body, self.max_image_body = max_body, max_image_body
+        self._state: _State | None = None
 
     @asynccontextmanager
-    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+    async def lifespan(self, _app: FastAPI) -> AsyncIterator[None]:
         executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="viewdb")
         loop = asyncio.get_running_loop()
-        db = await loop.run_in_executor(executor, _open_for_serving, db_path)
-        holder["state"] = _State(db, executor, db.config.features.curve_samples, len(db.objects()))
+        db = await loop.run_in_executor(executor, _open_for_serving, self.db_path)
+        self._state = _State(db, executor, db.config.features.curve_samples, len(db.objects()))
         try:
             yield
         finally:
             await loop.run_in_executor(executor, db.close)
             executor.shutdown(wait=True)
 
-    app = FastAPI(
-        title="viewdb server",
-        version=__version__,
-        description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
-                    "estimation, over a full database opened read-only.",
-        lifespan=lifespan,
-    )
+    def state(self) -> _State:
+        assert self._state is not None
+        return self._state
 
-    def state() -> _State:
-        return holder["state"]
-
-    async def run(fn: Callable[[ViewDB], T]) -> tuple[T, float]:
-        s = state()
+    async def run(self, fn: Callable[[ViewDB], T]) -> tuple[T, float]:
+        """``fn(db)`` on the database's thread, and how long it took (ms)."""
+        s = self.state()
 
         def timed() -> tuple[T, float]:
             start = time.perf_counter()
@@ -242,17 +261,21 @@ def create_app(
 
         return await asyncio.get_running_loop().run_in_executor(s.executor, timed)
 
-    def authorised(request: Request) -> None:
-        if token is None:
+    def authorised(self, request: Request) -> None:
+        """A dependency: 401 unless the request carries the bearer token (if one is set)."""
+        if self.token is None:
             return
         given = request.headers.get("authorization", "")
         scheme, _, value = given.partition(" ")
-        if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), token.encode()):
+        if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), self.token.encode()):
             raise HTTPException(401, "missing or wrong bearer token" if given else
                                 "this server needs a bearer token (Authorization: Bearer ...)",
                                 headers={"WWW-Authenticate": "Bearer"})
 
-    guarded = [Depends(authorised)]
+
+def _add_error_handlers(app: FastAPI) -> None:
+    """Every error as ``{"error": "<one line>", "status": <code>}``: the library's errors
+    by kind (404, 503, 422), anything unexpected as a logged 500."""
 
     @app.exception_handler(HTTPException)
     async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
@@ -277,47 +300,62 @@ def create_app(
         log.exception("internal error")
         return _error(500, f"internal server error ({type(exc).__name__})")
 
-    def reply(r: ServerReply, ms: float) -> dict[str, Any]:
-        out = r.to_dict()
-        out["stats"]["server_ms"] = ms
-        return out
 
-    @app.get("/health", summary="Liveness: the worker is up and its database open")
+def _reply(r: ServerReply, ms: float) -> dict[str, Any]:
+    out = r.to_dict()
+    out["stats"]["server_ms"] = ms
+    return out
+
+
+def _routes(server: _Server) -> APIRouter:
+    """The endpoints (module docstring), answered by ``server``'s server tier."""
+    router = APIRouter()
+    guarded = [Depends(server.authorised)]
+    state, run = server.state, server.run
+
+    @router.get("/health", summary="Liveness: the worker is up and its database open")
     async def health() -> dict[str, Any]:
         return {"status": "ok", "pid": os.getpid(), "objects": state().objects}
 
-    @app.get("/info", dependencies=guarded, responses=_ERRORS,
-             summary="What the database holds, its build settings and this server's limits")
+    @router.get("/info", dependencies=guarded, responses=_ERRORS,
+                summary="What the database holds, its build settings and this server's limits")
     async def info() -> dict[str, Any]:
         data, _ = await run(lambda db: db.info().to_dict())
         data.pop("path", None)
         return {**data, "viewdb": __version__, "role": "full", "read_only": True,
-                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": max_body,
-                           "max_image_body": max_image_body,
+                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": server.max_body,
+                           "max_image_body": server.max_image_body,
                            "curve_samples": state().curve_samples},
-                "auth": token is not None}
+                "auth": server.token is not None}
 
-    @app.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
-              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-              summary="CS1: exact top-k refined from the client's candidates")
+    @router.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
+                 responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+                 summary="CS1: exact top-k refined from the client's candidates")
     async def refine(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
         found, ms = await run(lambda db: db.server_tier().refine(req)[0])
-        return reply(found, ms)
+        return _reply(found, ms)
 
-    @app.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
-              responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-              summary="CS2: neighbour walk from the client's views")
+    @router.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
+                 responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
+                 summary="CS2: neighbour walk from the client's views")
     async def walk(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))
         found, ms = await run(lambda db: db.server_tier().walk(req)[0])
-        return reply(found, ms)
+        return _reply(found, ms)
 
-    @app.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
-              responses={200: {"model": models.PoseReplyModel}, **_ERRORS},
-              summary="Pose of the given matches from the segmented query image")
+    _image_routes(router, guarded, run)
+    return router
+
+
+def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]) -> None:
+    """The endpoints that take the segmented query image or stored views' signatures."""
+
+    @router.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
+                 responses={200: {"model": models.PoseReplyModel}, **_ERRORS},
+                 summary="Pose of the given matches from the segmented query image")
     async def pose(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
@@ -326,18 +364,18 @@ def create_app(
             query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
 
-    @app.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
-              responses={200: {"model": models.ColourReplyModel}, **_ERRORS},
-              summary="Colour signatures of stored views, to re-rank results by colour")
+    @router.post("/colours", dependencies=guarded, openapi_extra=_body(models.ColourRequestModel),
+                 responses={200: {"model": models.ColourReplyModel}, **_ERRORS},
+                 summary="Colour signatures of stored views, to re-rank results by colour")
     async def colours(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: ColourRequest.from_dict(data))
         signatures, ms = await run(lambda db: db.server_tier().colours(req.views)[0])
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
-    @app.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
-              responses={200: {"model": models.FitReplyModel}, **_ERRORS},
-              summary="Shape fits of stored views to the segmented query image, to re-rank results")
+    @router.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
+                 responses={200: {"model": models.FitReplyModel}, **_ERRORS},
+                 summary="Shape fits of stored views to the segmented query image, to re-rank results")
     async def fits(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
@@ -345,28 +383,21 @@ def create_app(
         found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
-    app.include_router(web.web_router(run, guarded, web_config))
-    if ui:
-        web.add_page(app)
 
-    def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            schema = get_openapi(title=app.title, version=app.version, description=app.description,
-                                 routes=app.routes)
-            components = schema.setdefault("components", {}).setdefault("schemas", {})
-            for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                          models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
-                          models.OverlayRequestModel):
-                doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
-                components.update(doc.pop("$defs", {}))
-                components[model.__name__] = doc
-            app.openapi_schema = schema
-        return app.openapi_schema
-
-    app.openapi = openapi  # type: ignore[method-assign]
-    app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
-                                          "/query": max_image_body}, default=max_body)
-    return app
+def _openapi(app: FastAPI) -> dict[str, Any]:
+    """The schema, with the request bodies' models (the routes only refer to them)."""
+    if app.openapi_schema is None:
+        schema = get_openapi(title=app.title, version=app.version, description=app.description,
+                             routes=app.routes)
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
+                      models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
+                      models.OverlayRequestModel):
+            doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
+            components.update(doc.pop("$defs", {}))
+            components[model.__name__] = doc
+        app.openapi_schema = schema
+    return app.openapi_schema
 
 
 def _open_for_serving(path: Path) -> ViewDB:

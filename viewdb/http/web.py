@@ -52,7 +52,7 @@ from ..api import ViewDB
 from ..camera import normalise_angle
 from ..config import OverlayConfig, SegmentationConfig, WebConfig
 from ..errors import ImageError, QueryError, ViewDBError
-from ..recognition.image import DEFAULTS as IMAGE_DEFAULTS
+from ..recognition.image import DEFAULTS as IMAGE_LIMITS
 from ..recognition.image import load_image
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.regions import Prompts
@@ -249,7 +249,7 @@ def _overlay_request(data: Any) -> tuple[dict[str, Any], tuple[int, int]]:
             raise HTTPException(422, f"{key} must be the photo's {key} in pixels (16 to 100000), "
                                      f"got {value!r}")
         size.append(value)
-    if size[0] * size[1] > IMAGE_DEFAULTS.max_pixels:
+    if size[0] * size[1] > IMAGE_LIMITS.max_pixels:
         raise HTTPException(422, f"a photo of {size[1]}x{size[0]} pixels is larger than any query accepts")
     result = data["result"]
     if not isinstance(result.get("object"), str) or not isinstance(result.get("pose"), dict):
@@ -266,12 +266,18 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
     """The endpoints of the page (see the module doc), behind ``guarded`` (the token)."""
     config = config or WebConfig()
     router = APIRouter(dependencies=guarded)
-    pictures: OrderedDict[tuple[str, str, float, float], bytes] = OrderedDict()
     errors = {code: {"model": models.ErrorModel, "description": what} for code, what in (
         (400, "the body is not JSON"), (401, "missing or wrong bearer token"), (404, "no such object"),
         (413, "the photo is over the server's limit"),
         (422, "the photo is not an image, shows no object, or an option is out of range"),
     )}
+    _photo_routes(router, run, config, errors)
+    _object_routes(router, run, config, errors)
+    return router
+
+
+def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any]) -> None:
+    """``POST /query`` and ``POST /overlay``: a photo's answer and one result's overlay."""
 
     @router.post("/query", responses={200: {"model": models.WebQueryReplyModel}, **errors},
                  openapi_extra=models.multipart_body(models.WebQueryFormModel),
@@ -311,6 +317,11 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         result, shape = _overlay_request(data)
         png, _ = await run(lambda db: draw_layer(db, result, shape, config))
         return Response(png, media_type="image/png")
+
+
+def _object_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any]) -> None:
+    """``GET /objects``, an object's stored views, and a view's picture (cached)."""
+    pictures: OrderedDict[tuple[str, str, float, float], bytes] = OrderedDict()
 
     @router.get("/objects", responses={200: {"model": models.ObjectsReplyModel}, **errors},
                 summary="Every object, with its symmetry, views stored and a picture")
@@ -367,5 +378,3 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         if request.headers.get("if-none-match") == tag:
             return Response(status_code=304, headers=headers)
         return Response(png, media_type="image/png", headers=headers)
-
-    return router

@@ -42,6 +42,7 @@ from ..catalogue.mesh import NormalisedMesh
 from ..config import OverlayConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate
+from ..typed import Intrinsics
 from .results import QueryMatch, QueryResult
 
 __all__ = [
@@ -179,7 +180,7 @@ Placement = tuple[Sequence[float], float]
 
 def _project(pose: OverlayPose, place: Placement, points: NDArray[np.float64],
              photo_shape: tuple[int, int], drawn_shape: tuple[int, int],
-             intrinsics: tuple[float, float, float, float] | None) -> _Projection:
+             intrinsics: Intrinsics | None) -> _Projection:
     """``points`` (normalised model space) in the drawn image's pixels."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     unit = 1.0
@@ -292,7 +293,7 @@ def _planes(tri: NDArray[np.float64], depth: NDArray[np.float64]) -> NDArray[np.
 
 def project_silhouette(
     pose: OverlayPose, mesh: NormalisedMesh, shape: Sequence[int],
-    intrinsics: tuple[float, float, float, float] | None = None, placement: Placement | None = None,
+    intrinsics: Intrinsics | None = None, placement: Placement | None = None,
 ) -> NDArray[np.bool_]:
     """The silhouette (bool, H × W) of ``mesh`` at ``pose`` in a photo of ``shape``.
     ``placement``: ``(centre, scale)`` of the mesh in its file, for a pose in the mesh's
@@ -387,7 +388,7 @@ def _lighter(colour: Sequence[int]) -> tuple[float, ...]:
 
 def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, place: Placement,
               colour: Sequence[int], photo_shape: tuple[int, int],
-              intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
+              intrinsics: Intrinsics | None, config: OverlayConfig) -> None:
     shape = canvas.alpha.shape
     geometry = mesh.geometry
     faces = np.asarray(geometry.faces, dtype=np.int64)
@@ -420,7 +421,7 @@ def _draw_one(canvas: _Canvas, pose: OverlayPose, mesh: NormalisedMesh, place: P
 
 
 def _draw_axes(canvas: _Canvas, pose: OverlayPose, place: Placement, photo_shape: tuple[int, int],
-               intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
+               intrinsics: Intrinsics | None, config: OverlayConfig) -> None:
     shape = canvas.alpha.shape
     ends = np.vstack([np.zeros(3), np.eye(3) * config.axis_length])
     proj = _project(pose, place, ends, photo_shape, shape, intrinsics)
@@ -471,7 +472,7 @@ def _draw_label(canvas: _Canvas, pose: OverlayPose, seen: NDArray[np.bool_], col
 # ------------------------------------------------------------------------ public
 def _paint_all(canvas: _Canvas, photo_shape: tuple[int, int], poses: Sequence[OverlayPose],
                mesh_of: Callable[[str], NormalisedMesh], placement: Callable[[str], Placement] | None,
-               intrinsics: tuple[float, float, float, float] | None, config: OverlayConfig) -> None:
+               intrinsics: Intrinsics | None, config: OverlayConfig) -> None:
     if any(p.frame == "opencv" for p in poses) and intrinsics is None:
         raise QueryError("a pinhole (OpenCV frame) pose is drawn with the camera intrinsics: give them")
     for i in reversed(range(len(poses))):  # the best last, on top
@@ -486,7 +487,7 @@ def overlay_layer(
     poses: Sequence[OverlayPose],
     mesh_of: Callable[[str], NormalisedMesh],
     *,
-    intrinsics: tuple[float, float, float, float] | None = None,
+    intrinsics: Intrinsics | None = None,
     placement: Callable[[str], Placement] | None = None,
     config: OverlayConfig | None = None,
 ) -> NDArray[np.uint8]:
@@ -505,7 +506,7 @@ def draw_overlay(
     poses: Sequence[OverlayPose],
     mesh_of: Callable[[str], NormalisedMesh],
     *,
-    intrinsics: tuple[float, float, float, float] | None = None,
+    intrinsics: Intrinsics | None = None,
     placement: Callable[[str], Placement] | None = None,
     config: OverlayConfig | None = None,
 ) -> NDArray[np.uint8]:
@@ -545,7 +546,7 @@ def result_poses(result: QueryResult, top: int = 1) -> list[OverlayPose]:
 
 def draw_result(
     photo: NDArray[np.uint8], result: QueryResult, mesh_of: Callable[[str], NormalisedMesh],
-    placement: Callable[[str], Placement], intrinsics: tuple[float, float, float, float] | None,
+    placement: Callable[[str], Placement], intrinsics: Intrinsics | None,
     top: int = 1, config: OverlayConfig | None = None,
 ) -> NDArray[np.uint8]:
     """A query's answer drawn over its photo (:func:`draw_overlay` of :func:`result_poses`):

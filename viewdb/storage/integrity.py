@@ -175,27 +175,7 @@ def _check_views(conn, config, report: CheckReport, progress, client) -> None:  
 
 
 def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
-    n = config.features.curve_samples
-    curves = {}
-    for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
-        try:
-            curves[int(vid)] = decode_array(blob, np.float32, (n,))
-        except StorageError:
-            continue  # reported with the views
-    views: dict[int, list[tuple[int, float, float]]] = {}
-    for vid, oid, az, el in raw.execute(
-        "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
-    ):
-        views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
-    # perspective views: full tier only, named by their negated id (schema.perspective_group_id)
-    perspective: dict[int, set[int]] = {}
-    for pid, oid, blob in raw.execute("SELECT id, object_id, samples FROM perspective_views"):
-        gid = s.perspective_group_id(int(pid))
-        perspective.setdefault(int(oid), set()).add(gid)
-        try:
-            curves[gid] = decode_array(blob, np.float32, (n,))
-        except StorageError as exc:
-            report.add(f"perspective view {pid}: {exc.message}")
+    stored = _StoredViews(raw, config.features.curve_samples, report)
     objects = raw.execute("SELECT id, name, skimmed, symmetry FROM objects").fetchall()
     for tier in TIERS:
         try:
@@ -212,64 +192,115 @@ def _check_tiers(raw, config, report: CheckReport, client: bool) -> None:  # typ
             ids, los, his = index.intersection_boxes(-everything, everything)
             for gid, lo, hi in zip(ids.tolist(), los, his, strict=True):
                 entries[gid] = (lo, hi)
-            in_tier: dict[int, set[int]] = {}
             rows = raw.execute(
                 "SELECT id, object_id, view_ids, curves, lo, hi FROM index_groups WHERE tier = ?",
                 (tier,),
             ).fetchall()
-            for gid, oid, blob_ids, blob_curves, blob_lo, blob_hi in rows:
-                where = f"{tier} tier group {gid}"
-                try:
-                    ids_g = decode_array(blob_ids, np.int64, (None,))
-                    curves_g = decode_array(blob_curves, np.float32, (len(ids_g), n))
-                    lo = decode_array(blob_lo, np.float64, (DIMENSION,))
-                    hi = decode_array(blob_hi, np.float64, (DIMENSION,))
-                except StorageError as exc:
-                    report.add(f"{where}: {exc.message}")
-                    continue
-                entry = entries.pop(gid, None)
-                if entry is None:
-                    report.add(f"{where}: not in the R-tree")
-                elif not (np.array_equal(entry[0], lo) and np.array_equal(entry[1], hi)):
-                    report.add(f"{where}: R-tree box differs from the stored box")
-                coords = indexed_coordinates(curves_g)
-                if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
-                    report.add(f"{where}: views lie outside its box")
-                owned = {vid for vid, _, _ in views.get(int(oid), [])}
-                if tier == "full":
-                    owned |= perspective.get(int(oid), set())
-                mine = in_tier.setdefault(int(oid), set())
-                for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
-                    if vid not in owned:
-                        report.add(f"{where}: view {vid} is not a view of its object")
-                    elif vid in curves and not np.array_equal(curves[vid], curve):
-                        report.add(f"{where}: curve of view {vid} differs from the stored curve")
-                    if vid in mine:
-                        report.add(f"{where}: view {vid} is in the tier twice")
-                    mine.add(vid)
+            in_tier = _check_groups(tier, rows, entries, stored, report)
             for gid in sorted(entries):
                 report.add(f"{tier} tier: R-tree entry {gid} has no group row")
-            for oid, name, skimmed, symmetry in objects:
-                stored = views.get(int(oid), [])
-                sym = None
-                if symmetry is not None:
-                    try:
-                        sym = SymmetryType.from_dict(json.loads(symmetry))
-                    except (ValueError, KeyError, TypeError):
-                        continue  # reported with the objects
-                if client:  # the client file holds the sparse tier's views only
-                    members = range(len(stored)) if tier == "sparse" else range(0)
-                else:
-                    members = tier_members([(a, e) for _, a, e in stored], config.gap,
-                                           config.client_gap, sym, bool(skimmed))[tier]
-                expected = {stored[i][0] for i in members}
-                if tier == "full":
-                    expected |= perspective.get(int(oid), set())
-                if in_tier.get(int(oid), set()) != expected:
-                    report.add(
-                        f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "
-                        f"views, expected {len(expected)}"
-                    )
+            _check_members(tier, objects, in_tier, stored, config, client, report)
             report.checked[f"{tier}_groups"] = len(rows)
         finally:
             index.discard()
+
+
+class _StoredViews:
+    """Every stored view's curve (perspective views by their group id,
+    :func:`~viewdb.storage.schema.perspective_group_id`), each object's views, and its
+    perspective views (full tier only)."""
+
+    def __init__(self, raw, n: int, report: CheckReport) -> None:  # type: ignore[no-untyped-def]
+        self.n = n
+        self.curves: dict[int, np.ndarray] = {}
+        for vid, blob in raw.execute("SELECT view_id, samples FROM curves"):
+            try:
+                self.curves[int(vid)] = decode_array(blob, np.float32, (n,))
+            except StorageError:
+                continue  # reported with the views
+        self.views: dict[int, list[tuple[int, float, float]]] = {}
+        for vid, oid, az, el in raw.execute(
+            "SELECT id, object_id, azimuth, elevation FROM views ORDER BY id"
+        ):
+            self.views.setdefault(int(oid), []).append((int(vid), float(az), float(el)))
+        self.perspective: dict[int, set[int]] = {}
+        for pid, oid, blob in raw.execute("SELECT id, object_id, samples FROM perspective_views"):
+            gid = s.perspective_group_id(int(pid))
+            self.perspective.setdefault(int(oid), set()).add(gid)
+            try:
+                self.curves[gid] = decode_array(blob, np.float32, (n,))
+            except StorageError as exc:
+                report.add(f"perspective view {pid}: {exc.message}")
+
+    def owned(self, oid: int, tier: str) -> set[int]:
+        """The ids object ``oid``'s groups in ``tier`` may name."""
+        out = {vid for vid, _, _ in self.views.get(oid, [])}
+        return out | self.perspective.get(oid, set()) if tier == "full" else out
+
+
+def _check_groups(  # type: ignore[no-untyped-def]
+    tier: str, rows, entries: dict[int, tuple[np.ndarray, np.ndarray]], stored: _StoredViews,
+    report: CheckReport,
+) -> dict[int, set[int]]:
+    """Check each group row of ``tier`` against its R-tree entry (taken out of
+    ``entries``), its box and its object's stored views; the views each object has in
+    the tier."""
+    n = stored.n
+    in_tier: dict[int, set[int]] = {}
+    for gid, oid, blob_ids, blob_curves, blob_lo, blob_hi in rows:
+        where = f"{tier} tier group {gid}"
+        try:
+            ids_g = decode_array(blob_ids, np.int64, (None,))
+            curves_g = decode_array(blob_curves, np.float32, (len(ids_g), n))
+            lo = decode_array(blob_lo, np.float64, (DIMENSION,))
+            hi = decode_array(blob_hi, np.float64, (DIMENSION,))
+        except StorageError as exc:
+            report.add(f"{where}: {exc.message}")
+            continue
+        entry = entries.pop(gid, None)
+        if entry is None:
+            report.add(f"{where}: not in the R-tree")
+        elif not (np.array_equal(entry[0], lo) and np.array_equal(entry[1], hi)):
+            report.add(f"{where}: R-tree box differs from the stored box")
+        coords = indexed_coordinates(curves_g)
+        if np.any(coords < lo - MBR_PADDING) or np.any(coords > hi + MBR_PADDING):
+            report.add(f"{where}: views lie outside its box")
+        owned = stored.owned(int(oid), tier)
+        mine = in_tier.setdefault(int(oid), set())
+        for vid, curve in zip(ids_g.tolist(), curves_g, strict=True):
+            if vid not in owned:
+                report.add(f"{where}: view {vid} is not a view of its object")
+            elif vid in stored.curves and not np.array_equal(stored.curves[vid], curve):
+                report.add(f"{where}: curve of view {vid} differs from the stored curve")
+            if vid in mine:
+                report.add(f"{where}: view {vid} is in the tier twice")
+            mine.add(vid)
+    return in_tier
+
+
+def _check_members(  # type: ignore[no-untyped-def]
+    tier: str, objects, in_tier: dict[int, set[int]], stored: _StoredViews, config,
+    client: bool, report: CheckReport,
+) -> None:
+    """Each object's views in ``tier`` are exactly the ones its plan puts there."""
+    for oid, name, skimmed, symmetry in objects:
+        views = stored.views.get(int(oid), [])
+        sym = None
+        if symmetry is not None:
+            try:
+                sym = SymmetryType.from_dict(json.loads(symmetry))
+            except (ValueError, KeyError, TypeError):
+                continue  # reported with the objects
+        if client:  # the client file holds the sparse tier's views only
+            members = range(len(views)) if tier == "sparse" else range(0)
+        else:
+            members = tier_members([(a, e) for _, a, e in views], config.gap,
+                                   config.client_gap, sym, bool(skimmed))[tier]
+        expected = {views[i][0] for i in members}
+        if tier == "full":
+            expected |= stored.perspective.get(int(oid), set())
+        if in_tier.get(int(oid), set()) != expected:
+            report.add(
+                f"object {name!r}: {tier} tier holds {len(in_tier.get(int(oid), ()))} "
+                f"views, expected {len(expected)}"
+            )
