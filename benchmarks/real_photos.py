@@ -12,13 +12,14 @@ meshes, the ViSP tea box and cube, the phone box and ``../shared/models``). Then
 * **YCB-Video**: each frame is queried once with the boxes of its box file
   (``*-box.txt``: ``name x1 y1 x2 y2``) as prompts, no label map, with the ``gt.json``
   intrinsics and ``--rerank`` (the top k fitted in the calibrated camera and re-ranked by
-  silhouette IoU). Per object: the rank of the exact mesh and of the first copy of the
-  same object (the catalogue holds a second copy of every one of these 7 scans, from
-  another source and in another frame: :data:`TWINS`), the IoU of the box's cut-out with
-  the label map's object, the symmetry-aware rotation and translation errors (below) of
-  the exact mesh's pose among the results, and of :meth:`viewdb.ViewDB.estimate_pose`
-  from the box's cut-out (the object given), and the time per object (the call's wall
-  and CPU time over its objects).
+  silhouette IoU; with ``--no-rerank`` not, and only the best result is posed). Per
+  object: the rank of the exact mesh and of the first copy of the same object (the
+  catalogue holds a second copy of every one of these 7 scans, from another source and
+  in another frame: :data:`TWINS`), the IoU of the box's cut-out with the label map's
+  object, the symmetry-aware rotation and translation errors (below) of the exact mesh's
+  pose among the results, and of :meth:`viewdb.ViewDB.estimate_pose` from the box's
+  cut-out (the object given), and the time per object (the call's wall and CPU time over
+  its objects).
 * **Without ground truth**: the tea box (two frames), the cube and the phone box, each
   queried with the box of ``benchmarks/data/real_boxes.json`` drawn around it: the rank
   of its mesh, the top result and the IoU of its pose's silhouette.
@@ -201,7 +202,7 @@ def _timed_query(db: viewdb.ViewDB, photo: Path, **kwargs) -> tuple[viewdb.Query
 
 
 def run_ycb(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, objects: list[str] | None = None,
-            progress=print) -> list[dict]:
+            progress=print, rerank: bool = True) -> list[dict]:
     gt = json.loads((YCB / "gt.json").read_text())
     rows = []
     for frame_id, frame in gt["frames"].items():
@@ -215,7 +216,7 @@ def run_ycb(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, objects: list[
         if not chosen:
             continue
         result, wall, cpu = _timed_query(db, color, k=k, plan=plan, boxes=[boxes[o["name"]] for o in chosen],
-                                         intrinsics=intr, rerank=True)
+                                         intrinsics=intr, rerank=rerank, pose_top=None if rerank else 1)
         _write_overlay(result, overlays / f"ycb_{frame_id}.png")
         for obj, entry in zip(chosen, result.objects, strict=True):
             name = obj["name"]
@@ -248,7 +249,8 @@ def run_ycb(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, objects: list[
     return rows
 
 
-def run_extras(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, progress=print) -> list[dict]:
+def run_extras(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, progress=print,
+               rerank: bool = True) -> list[dict]:
     rows = []
     for case, entry in _boxes().items():
         name = Path(entry["mesh"]).stem
@@ -256,8 +258,9 @@ def run_extras(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, progress=pr
             path = REAL / case / photo_name
             row: dict = {"case": case, "photo": photo_name, "object": name, "box": box}
             try:
-                result, wall, cpu = _timed_query(db, path, k=k, plan=plan, boxes=[box],
-                                                 intrinsics=tuple(entry["intrinsics"]), rerank=True)
+                result, wall, cpu = _timed_query(db, path, k=k, plan=plan, boxes=[box], rerank=rerank,
+                                                 intrinsics=tuple(entry["intrinsics"]),
+                                                 pose_top=None if rerank else 1)
                 found = result.objects[0]
                 row.update(rank=_rank(found.results, (name,)), top=found.results[0].object,
                            seconds=wall, cpu_seconds=cpu, area=found.region.area)
@@ -284,9 +287,10 @@ def _pose_cells(pose: dict | None) -> str:
 
 
 def markdown(summary: dict) -> str:
+    ranking = ("re-ranked by perspective silhouette IoU" if summary.get("rerank", True)
+               else "not re-ranked by silhouette IoU, the best posed")
     lines = [f"Catalogue: {summary['objects']} objects, gap {summary['gap']:g}°; plan {summary['plan']}, "
-             f"k = {summary['k']} re-ranked by perspective silhouette IoU. Rank: exact mesh / first copy of "
-             "the same object.", "",
+             f"k = {summary['k']} {ranking}. Rank: exact mesh / first copy of the same object.", "",
              "| frame | object | symmetry | box IoU | rank | top result | rot. err (°) | trans. err (mm) | "
              "IoU | object given: rot. (°) | trans. (mm) | IoU | s per object |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -345,6 +349,8 @@ def main() -> None:
     parser.add_argument("--objects", default=None, help="comma-separated YCB objects (default: all)")
     parser.add_argument("--no-extras", action="store_true", help="skip the ViSP and phone-box cases")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--no-rerank", action="store_true",
+                        help="no re-ranking by silhouette fit; only the best result is posed")
     args = parser.parse_args()
     if not YCB.is_dir():
         sys.exit(f"real_photos: {YCB} not found")
@@ -359,10 +365,12 @@ def main() -> None:
     objects = args.objects.split(",") if args.objects else None
     with viewdb.open(db_path, create=False) as db:
         n_objects, gap = len(db.objects()), db.config.gap
-        ycb = run_ycb(db, args.k, args.plan, overlays, objects, progress=lambda m: print(m, flush=True))
+        ycb = run_ycb(db, args.k, args.plan, overlays, objects, lambda m: print(m, flush=True),
+                      not args.no_rerank)
         extras = [] if args.no_extras else run_extras(db, args.k, args.plan, overlays,
-                                                      lambda m: print(m, flush=True))
-    summary = {"gap": gap, "k": args.k, "plan": args.plan, "objects": n_objects, "catalogue": str(db_path),
+                                                      lambda m: print(m, flush=True), not args.no_rerank)
+    summary = {"gap": gap, "k": args.k, "plan": args.plan, "rerank": not args.no_rerank, "objects": n_objects,
+               "catalogue": str(db_path),
                "build_seconds": build_s, "ycb": ycb, "extras": extras, "totals": _totals(ycb)}
     (args.out / "real_photos.json").write_text(json.dumps(summary, indent=1))
     table = markdown(summary)
