@@ -138,7 +138,8 @@ class QueryResult:
     def overlay(self, *, top: int = 1, config: Any = None) -> NDArray[np.uint8]:
         """The photo (RGB uint8) with the posed mesh of each object's best ``top`` results
         drawn over it (:mod:`viewdb.recognition.overlay`; ``config`` an
-        :class:`~viewdb.config.OverlayConfig`).
+        :class:`~viewdb.config.OverlayConfig`). The meshes are read from the file the query
+        ran on: draw while it is open.
 
         Raises
         ------
