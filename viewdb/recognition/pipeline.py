@@ -19,6 +19,11 @@ CS2 runs on a :class:`~viewdb.recognition.client_tier.ClientTier`.
 5. **pose** (:mod:`viewdb.pose.matched`): the top results' poses, chosen among their
    candidate same-shape views by SIFT or by outline; with ``rerank`` and intrinsics the
    results are re-ranked by the IoU of their perspective silhouette fit.
+
+A photo of several objects (box or point prompts, every object, every label:
+:mod:`viewdb.recognition.regions`) is decoded once and cut into regions; each region then
+goes through stages 2–5 over the same tiers (:func:`run_regions`), the other regions
+counting as what may hide it.
 """
 
 from __future__ import annotations
@@ -288,9 +293,10 @@ def run_query(
     shape = segment_query(image, samples, options.rotations, mask=mask, label_map=label_map, label=label,
                           hidden_min_share=options.recognition.hidden_min_share)
     segmented = time.perf_counter()
-    matches, timing = _recognise(shape, options, server, client, traffic)
+    matches, stages = _recognise(shape, options, server, client, traffic)
     end = time.perf_counter()
-    timing.update(segment=(segmented - start) * 1e3, total=(end - start) * 1e3, **_remote(server, traffic))
+    timing = {"segment": (segmented - start) * 1e3, **stages, "total": (end - start) * 1e3,
+              **_remote(server, traffic)}
     return QueryResult(
         image=_image_name(image, shape.image), plan=options.plan, k=options.k, results=matches,
         timing_ms=timing, segmentation=shape.segmentation.method, transfer=_transfer(traffic),
