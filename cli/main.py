@@ -294,7 +294,8 @@ def query(
     ] = None,
     label_map: Annotated[
         Path | None, typer.Option(help="Label image (one integer label per pixel, 0 = background); "
-                                       "with --label picks one object.", dir_okay=False)
+                                       "with --label picks one object, with --all every labelled one.",
+                                  dir_okay=False)
     ] = None,
     label: Annotated[int | None, typer.Option(help="The object's label in --label-map.", min=1)] = None,
     rerank: Annotated[bool, typer.Option(

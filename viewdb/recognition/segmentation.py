@@ -3,7 +3,7 @@
 :func:`segment` finds the object's silhouette in a :class:`~viewdb.recognition.image.LoadedImage`;
 :func:`query_curve` reduces it to the centroid distance curve the database is searched with;
 :func:`label_mask` picks one object out of a label image (a prompt for a photo of several).
-Photos of several objects (box and point prompts, every object) are
+Photos of several objects (box and point prompts, every object) are cut out by
 :mod:`viewdb.recognition.regions`, which builds on :func:`colour_foreground` (what stands
 out from the border's colours, every region of it) and :func:`grabcut_from`.
 Every tunable named below is a field of :class:`~viewdb.config.SegmentationConfig`.
