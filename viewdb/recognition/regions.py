@@ -13,9 +13,9 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   pixels), scaled to at most ``box_work_side`` pixels, for ``box_iterations``
   iterations. The alternative ``box_method="border"`` cuts the crop's object out
   with the colour model of its border (:func:`~viewdb.recognition.segmentation.segment`'s
-  way), then keeps what lies in the box. Measured on the YCB-Video frames against their
-  label maps (``docs/query.md``, photos of several objects): GrabCut from the box, mean
-  IoU 0.88; the border model fails in clutter (the crop's border crosses other objects).
+  way), then keeps what lies in the box. ``python benchmarks/prompts.py`` measures both
+  on the YCB-Video frames against their label maps: GrabCut from the box, mean IoU 0.88;
+  the border model fails in clutter (the crop's border crosses other objects).
 * **point**: a square of ``point_start`` of the photo's shorter side around the point is
   cut as a box; while the object reaches a side of the square that is not the photo's
   edge, that side moves out by ``point_growth`` of the square's side (at most
