@@ -8,6 +8,8 @@ Exit codes (public contract): 0 success; 1 a reported error (bad input, failed c
 from __future__ import annotations
 
 import json
+import math
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -29,7 +31,10 @@ from rich.text import Text
 
 import viewdb
 import viewdb.bench as viewdb_bench
+import viewdb.config as viewdb_config
 from viewdb.typed import Intrinsics
+
+LIMITS = viewdb_config.LIMITS
 
 app = typer.Typer(
     name="viewdb",
@@ -67,7 +72,58 @@ def _progress() -> Progress:
 
 
 def _echo_json(data: Any) -> None:
-    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    sys.stdout.write(json.dumps(data, indent=2) + "\n")  # ensure_ascii: control characters escaped
+
+
+#: Characters that would act on a terminal instead of showing: C0 and C1 controls (ESC
+#: among them), DEL, and the bidirectional overrides that reorder what is shown.
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+
+
+def _shown(value: object) -> str:
+    """``str(value)`` with every control character written as an escape (``\\x1b``), so
+    an object name (a file stem) or a path cannot move the cursor, clear the screen or
+    retitle the terminal."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}" if ord(m.group()) < 256
+                        else f"\\u{ord(m.group()):04x}", str(value))
+
+
+def _say(text: str, console: Console | None = None) -> None:
+    """One line of output, its control characters escaped, never read as markup."""
+    (console or out).print(_shown(text), markup=False)
+
+
+def _table(columns: list[str], rows: list[list[str]]) -> None:
+    """A table: drawn by rich on a terminal wide enough for every whole value; otherwise
+    (a pipe, a file, a narrow terminal) as plain columns of whole values, never cut to
+    "obje…"."""
+    cells = [[_shown(c) for c in row] for row in rows]
+    widths = [max([len(h), *(len(r[i]) for r in cells)]) for i, h in enumerate(columns)]
+    if out.is_terminal and sum(widths) + 3 * len(widths) + 1 <= out.width:
+        table = Table(*columns)
+        for column, width in zip(table.columns, widths, strict=True):
+            column.min_width, column.overflow = width, "fold"
+        for row in cells:
+            table.add_row(*(Text(c) for c in row))
+        out.print(table)
+        return
+    for row in [columns, *cells]:
+        sys.stdout.write("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() + "\n")
+    sys.stdout.flush()
+
+
+def _number(low: float | None = None, high: float | None = None) -> Any:
+    """A typer callback refusing a float option that is not finite or not in [low, high]
+    (click's ranges let NaN through) as a usage error."""
+    def check(ctx: typer.Context, param: typer.CallbackParam, value: float | None) -> float | None:
+        if value is None or ctx.resilient_parsing:
+            return value
+        try:
+            return viewdb_config.finite(value, "value", -math.inf if low is None else low,
+                                        math.inf if high is None else high)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc).removeprefix("value ")) from None
+    return check
 
 
 DbOption = Annotated[Path, typer.Option("--db", help="Database file.", dir_okay=False)]
@@ -77,10 +133,17 @@ def _parse_distances(text: str) -> tuple[float, ...]:
     if text.strip().lower() == "none":
         return ()
     try:
-        return tuple(float(x) for x in text.split(","))
-    except ValueError:
-        raise typer.BadParameter(f"expected numbers separated by commas or 'none', got {text!r}",
+        values = tuple(float(x) for x in text.split(","))
+        viewdb_config.PerspectiveConfig(distances=values)  # the library's own check
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc) if "perspective" in str(exc) else
+                                 f"expected numbers separated by commas or 'none', got {text!r}",
                                  param_hint="--perspective") from None
+    return values
+
+
+GAP_RANGE = (LIMITS.min_gap, 180.0)
+SIZE_RANGE = {"min": LIMITS.min_image_size, "max": LIMITS.max_image_size}
 
 
 @app.command()
@@ -89,18 +152,21 @@ def ingest(
         list[Path], typer.Argument(help="Mesh files (OBJ, PLY, STL, OFF, GLB, glTF) or folders.")
     ],
     db: DbOption,
-    gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).")] = None,
-    image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).")] = None,
+    gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).",
+                                              callback=_number(*GAP_RANGE))] = None,
+    image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).",
+                                                   **SIZE_RANGE)] = None,
     client_gap: Annotated[
         float | None,
-        typer.Option(help="Sparse (client) tier grid gap, a multiple of --gap (new db; default 30)."),
+        typer.Option(help="Sparse (client) tier grid gap, a multiple of --gap (new db; default 30).",
+                     callback=_number(*GAP_RANGE)),
     ] = None,
     perspective: Annotated[
         str | None,
         typer.Option(help="Perspective views' camera distances in bounding radii, e.g. 3,4,6, "
                           "or 'none' (new db; default 3,4,6)."),
     ] = None,
-    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 1,
+    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,
     no_skim: Annotated[
         bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
     ] = False,
@@ -130,7 +196,7 @@ def ingest(
             bar.update(task, total=p.views_total, completed=p.views_done,
                        description=f"ingest {p.files_done}/{p.files_total} files")
             if p.outcome is not None and p.outcome.status == "failed":
-                err.print(f"viewdb: {p.outcome.error}", markup=False)
+                _say(f"viewdb: {p.outcome.error}", err)
 
         report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
                             max_faces=max_faces or None,
@@ -156,18 +222,32 @@ def ingest(
         raise typer.Exit(1)
 
 
+def _open_read(db: Path) -> viewdb.ViewDB:
+    """Open a database for a command that only reads it: read-only, so a file on read-only
+    storage (a prebuilt file shipped to a device) works and nothing is written; only a
+    file whose schema is too old to read as it is gets opened normally, which upgrades it
+    in place (as any open did before), when its storage allows."""
+    try:
+        return viewdb.open(db, read_only=True)
+    except viewdb.UpgradeNeeded as too_old:
+        try:
+            return viewdb.open(db, create=False)
+        except viewdb.StorageError:
+            raise too_old from None
+
+
 @app.command()
 def info(
     db: DbOption,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
     """Objects, views, file size and schema version of a database."""
-    with viewdb.open(db, create=False) as vdb:
+    with _open_read(db) as vdb:
         data = vdb.info()
     if as_json:
         _echo_json(data.to_dict())
         return
-    out.print(
+    _say(
         f"{data.path}: {len(data.objects)} objects, {data.rows['views']} views, "
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
@@ -183,70 +263,60 @@ def info(
     for tier, t in data.tiers.items():
         out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
                   f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")
-    table = Table("object", "faces", "type", "periods", "views", "grid", "no silhouette",
-                  "perspective", "ingest s")
+    rows = []
     for o in data.objects:
         sym = o.symmetry
         kind = f"{sym.h_type}/{sym.v_type}" if sym else "-"
         periods = f"{sym.h_period:g}/{sym.v_period:g}" if sym else "-"
-        table.add_row(o.name, str(o.n_faces), kind, periods, str(o.views_stored),
-                      str(o.views_grid), str(o.empty_views), str(o.perspective_views),
-                      f"{o.ingest_seconds:.1f}")
-    if data.objects:
-        out.print(table)
+        rows.append([o.name, str(o.n_faces), kind, periods, str(o.views_stored),
+                     str(o.views_grid), str(o.empty_views), str(o.perspective_views),
+                     f"{o.ingest_seconds:.1f}"])
+    if rows:
+        _table(["object", "faces", "type", "periods", "views", "grid", "no silhouette",
+                "perspective", "ingest s"], rows)
 
 
 @app.command()
 def check(db: DbOption) -> None:
     """Verify a database: schema version, SQLite integrity, rows and blobs. Exit 0 or 1."""
-    with viewdb.open(db, create=False) as vdb:
+    with _open_read(db) as vdb:
         report = vdb.check()
     counts = ", ".join(f"{n} {what}" for what, n in report.checked.items())
     if report.ok:
-        out.print(f"{db}: ok ({counts})")
+        _say(f"{db}: ok ({counts})")
         return
     for problem in report.problems:
-        out.print(f"{db}: {problem}", markup=False)
+        _say(f"{db}: {problem}")
     if report.more_problems:
-        out.print(f"{db}: ... and {report.more_problems} more problems")
-    out.print(f"{db}: FAILED ({len(report.problems) + report.more_problems} problems; checked {counts})")
+        _say(f"{db}: ... and {report.more_problems} more problems")
+    _say(f"{db}: FAILED ({len(report.problems) + report.more_problems} problems; checked {counts})")
     raise typer.Exit(1)
 
 
 @app.command()
 def render(
     model_or_object: Annotated[str, typer.Argument(help="A mesh file, or an object name with --db.")],
-    azimuth: Annotated[float, typer.Option(help="Azimuth h in degrees.")],
-    elevation: Annotated[float, typer.Option(help="Elevation v in degrees.")],
-    out_path: Annotated[Path, typer.Option("--out", help="PNG to write.", dir_okay=False)],
+    azimuth: Annotated[float, typer.Option(help="Azimuth h in degrees.", callback=_number())],
+    elevation: Annotated[float, typer.Option(help="Elevation v in degrees.", callback=_number())],
+    out_path: Annotated[Path, typer.Option("--out", help="Image to write (.png; depth: .png or .tif).",
+                                           dir_okay=False)],
     db: Annotated[Path | None, typer.Option("--db", help="Render a stored object.")] = None,
-    image_size: Annotated[int, typer.Option(help="Size in pixels (mesh files only).")] = 256,
+    image_size: Annotated[int, typer.Option(help="Size in pixels (mesh files only).", **SIZE_RANGE)] = 256,
     what: Annotated[str, typer.Option(help="color, mask or depth.")] = "color",
 ) -> None:
     """Render one view in the documented camera convention."""
-    import cv2
-    import numpy as np
+    from viewdb.catalogue.snapshot import KINDS, check_output, write_view
 
-    if what not in ("color", "mask", "depth"):
+    if what not in KINDS:
         raise typer.BadParameter("must be color, mask or depth", param_hint="--what")
+    check_output(out_path, what)  # before the render: an unwritable type is refused at once
     if db is not None:
-        with viewdb.open(db, create=False) as vdb:
+        with _open_read(db) as vdb:
             view = vdb.render(model_or_object, azimuth, elevation)
     else:
         view = viewdb.render_model(model_or_object, azimuth, elevation, image_size=image_size)
-    if what == "color":
-        image = cv2.cvtColor(view.color, cv2.COLOR_RGB2BGR)
-    elif what == "mask":
-        image = view.mask.astype(np.uint8) * 255
-    else:
-        d = view.depth
-        image = np.zeros(d.shape, np.uint16)
-        if view.mask.any():
-            lo, hi = d[view.mask].min(), d[view.mask].max()
-            image[view.mask] = (65535 - (d[view.mask] - lo) / max(hi - lo, 1e-9) * 60000).astype(np.uint16)
-    if not cv2.imwrite(str(out_path), image):
-        raise viewdb.ViewDBError("cannot write the image", out_path)
-    out.print(f"wrote {out_path}")
+    write_view(view, out_path, what)
+    _say(f"wrote {out_path}")
 
 
 def _intrinsics(text: str | None) -> Intrinsics | None:
@@ -314,6 +384,10 @@ def query(
     token: Annotated[
         str | None, typer.Option(help="Bearer token for --server.", envvar="VIEWDB_TOKEN")
     ] = None,
+    timeout: Annotated[float, typer.Option(
+        help="With --server: seconds each exchange with the server may take in all (connecting "
+             "and each read are bounded by it too).", callback=_number(0.001, 86400))
+    ] = viewdb_config.HttpConfig().total_timeout,
     box: Annotated[list[str] | None, typer.Option(
         "--box", help="An object's box x1,y1,x2,y2 in pixels (repeatable: one object each).",
         metavar="X1,Y1,X2,Y2")] = None,
@@ -351,8 +425,8 @@ def query(
                                      param_hint="--server")
         if rerank:
             raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
-        with viewdb.open(client, read_only=True) as side, \
-                viewdb.RemoteServer(server, token=token) as remote:
+        with _open_read(client) as side, \
+                viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
                                 label_map=label_map, label=label, colour=not no_colour,
@@ -360,8 +434,8 @@ def query(
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
-        with viewdb.open(db, create=False) as vdb:
-            side = viewdb.open(client, create=False) if client is not None else None
+        with _open_read(db) as vdb:
+            side = _open_read(client) if client is not None else None
             try:
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
@@ -434,37 +508,45 @@ def _write_png(path: Path, rgb: Any) -> None:
 def _print_result(result: viewdb.QueryResult) -> None:
     t = result.timing_ms
     network = f", network {t['network']:.0f}" if "network" in t else ""
-    out.print(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
-              f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
-              f"server {t['server']:.0f}, colour {t['colour']:.0f}, verify {t['verify']:.0f}, "
-              f"pose {t['pose']:.0f}{network})")
+    _say(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
+         f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
+         f"server {t['server']:.0f}, colour {t['colour']:.0f}, verify {t['verify']:.0f}, "
+         f"pose {t['pose']:.0f}{network})")
     if result.objects is None:
-        out.print(_table(result.results))
+        _results_table(result.results)
         return
     for i, o in enumerate(result.objects, 1):
         region = o.region
         prompt = f" from {region.prompt}" if region.prompt is not None else (
             f" (label {region.label})" if region.label is not None else "")
         x1, y1, x2, y2 = region.box
-        out.print(f"object {i}{prompt}: box {x1},{y1},{x2},{y2}, {region.area} pixels, segmented by "
-                  f"{region.segmentation.method}; {o.timing_ms.get('total', 0.0):.0f} ms")
-        out.print(_table(o.results))
+        _say(f"object {i}{prompt}: box {x1},{y1},{x2},{y2}, {region.area} pixels, segmented by "
+             f"{region.segmentation.method}; {o.timing_ms.get('total', 0.0):.0f} ms")
+        _results_table(o.results)
 
 
-def _table(results: list[viewdb.QueryMatch]) -> Table:
-    table = Table("rank", "object", "distance", "colour", "fit", "score", "view h/v", "pose h/v/in-plane",
-                  "method", "inliers")
+def _results_table(results: list[viewdb.QueryMatch]) -> None:
+    rows = []
     for r in results:
         p = r.pose
-        table.add_row(
+        rows.append([
             str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
             "-" if r.shape_fit is None else f"{r.shape_fit:.3f}", f"{r.score:.3f}",
             f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}"
             + ("" if r.camera_distance is None else f" at {r.camera_distance:g} r"),
             f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
             p.method if p else "-", str(p.inliers) if p else "-",
-        )
-    return table
+        ])
+    _table(["rank", "object", "distance", "colour", "fit", "score", "view h/v", "pose h/v/in-plane",
+            "method", "inliers"], rows)
+
+
+def _client_limits(total: float) -> viewdb_config.HttpConfig:
+    """The remote client's limits for a total timeout of ``total`` seconds."""
+    base = viewdb_config.HttpConfig()
+    return viewdb_config.HttpConfig(
+        connect_timeout=min(base.connect_timeout, total), read_timeout=min(base.read_timeout, total),
+        total_timeout=total)
 
 
 @app.command("export-client")
@@ -474,18 +556,19 @@ def export_client(
                                            dir_okay=False)],
     gap: Annotated[
         float | None,
-        typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap)."),
+        typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap).",
+                     callback=_number(*GAP_RANGE)),
     ] = None,
 ) -> None:
     """Write the small file that ships to devices: the sparse tier only (no meshes, no SIFT)."""
-    with viewdb.open(db, create=False) as vdb, _progress() as bar:
+    with _open_read(db) as vdb, _progress() as bar:
         task = bar.add_task("export", total=None)
         config = vdb.export_client(out_path, client_gap=gap,
                                    progress=lambda done, total: bar.update(task, completed=done, total=total))
         full = vdb.info()
-    with viewdb.open(out_path, create=False) as client:
+    with _open_read(out_path) as client:
         small = client.info()
-    out.print(
+    _say(
         f"wrote {out_path}: {len(small.objects)} objects, {small.rows['views']} views on the "
         f"{config.client_gap:g}° client grid, {small.file_bytes / 1e6:.2f} MB "
         f"({small.file_bytes / max(full.file_bytes, 1):.1%} of {full.file_bytes / 1e6:.1f} MB)"
@@ -504,11 +587,22 @@ def serve(
                                  envvar="VIEWDB_TOKEN")
     ] = None,
     max_body: Annotated[
-        int, typer.Option(help="Largest /refine, /walk or /colours body in bytes.", min=1024)
+        int, typer.Option(help="Largest /refine, /walk or /colours body in bytes.", min=1024, max=1 << 30)
     ] = 256 * 1024,
     max_image_body: Annotated[
-        int, typer.Option(help="Largest /pose, /fits or /query body (the photo) in bytes.", min=1024)
+        int, typer.Option(help="Largest /pose, /fits or /query body (the photo) in bytes.",
+                          min=1024, max=1 << 30)
     ] = 32 * 1024 * 1024,
+    header_timeout: Annotated[float, typer.Option(
+        help="Seconds a connection has to send each request's header (slow senders are cut off).",
+        callback=_number(0.001, 86400))] = viewdb_config.HttpConfig().header_timeout,
+    body_timeout: Annotated[float, typer.Option(
+        help="Seconds a request's body may take to arrive (then 408).",
+        callback=_number(0.001, 86400))] = viewdb_config.HttpConfig().body_timeout,
+    max_pixels: Annotated[int, typer.Option(
+        help="Largest image decoded (/pose, /fits, /query), in pixels; larger ones are refused "
+             "from their header.", min=256, max=viewdb_config.ImageConfig().max_pixels)
+    ] = viewdb_config.HttpConfig().max_pixels,
     log_level: Annotated[
         str, typer.Option(help="critical, error, warning, info (logs every request) or debug.")
     ] = "warning",
@@ -528,12 +622,14 @@ def serve(
     def ready(url: str, objects: int) -> None:
         auth = ", bearer token required" if token else ""
         page = "" if no_ui else f"; web page at {url}/"
-        out.print(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
-                  f"worker{'s' if workers > 1 else ''}{auth}{page}; Ctrl-C stops")
+        _say(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
+             f"worker{'s' if workers > 1 else ''}{auth}{page}; Ctrl-C stops")
         sys.stdout.flush()
 
     run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
-               max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui)
+               max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui,
+               http=viewdb_config.HttpConfig(header_timeout=header_timeout, body_timeout=body_timeout,
+                                             max_pixels=max_pixels))
 
 
 @app.command()
@@ -541,8 +637,8 @@ def demo(
     out_dir: Annotated[
         Path | None, typer.Option("--out", help="Folder for the demo db (default: a temp folder).")
     ] = None,
-    gap: Annotated[float, typer.Option(help="Grid gap in degrees.")] = 30.0,
-    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 2,
+    gap: Annotated[float, typer.Option(help="Grid gap in degrees.", callback=_number(*GAP_RANGE))] = 30.0,
+    jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 2,
 ) -> None:
     """Build a database from the bundled sample models and show what is in it."""
     models = sorted(p for p in SAMPLE_MODELS.iterdir() if p.suffix.lower() in
@@ -551,9 +647,12 @@ def demo(
         raise viewdb.ViewDBError("no sample models found; run python sample_models/make_samples.py",
                                  SAMPLE_MODELS)
     folder = out_dir or Path(tempfile.mkdtemp(prefix="viewdb-demo-"))
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise viewdb.ViewDBError(f"cannot be made a folder: {exc.strerror or exc}", folder) from exc
     db_path = folder / "demo.db"
-    out.print(f"viewdb demo: ingesting {len(models)} sample models into {db_path} (gap {gap:g}°)")
+    _say(f"viewdb demo: ingesting {len(models)} sample models into {db_path} (gap {gap:g}°)")
     ingest(models, db_path, gap=gap, image_size=None, jobs=jobs, no_skim=False, as_json=False)
     info(db_path, as_json=False)
     first = models[0].stem
@@ -561,7 +660,7 @@ def demo(
     render(first, 30.0, 20.0, png, db=db_path, image_size=256, what="color")
     photo = folder / "query.png"
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
-    out.print(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
+    _say(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
           no_pose=False, pose_top=None, intrinsics=None, label_map=None, label=None, rerank=False,
           as_json=False)
@@ -585,7 +684,9 @@ def _floats(text: str, option: str) -> tuple[float, ...]:
     try:
         values = tuple(float(x) for x in text.split(",") if x.strip())
     except ValueError:
-        raise typer.BadParameter(f"expected numbers separated by commas, got {text!r}",
+        values = (math.nan,)
+    if not all(math.isfinite(v) for v in values):
+        raise typer.BadParameter(f"expected finite numbers separated by commas, got {_shown(text)!r}",
                                  param_hint=option) from None
     if not values:
         raise typer.BadParameter("needs at least one value", param_hint=option)
@@ -603,15 +704,16 @@ def bench(
     gaps: Annotated[str, typer.Option(help="Client grid gaps of the time experiment.")] = "20,30,40,50",
     k: Annotated[int, typer.Option("--k", "-k", help="Largest k (CMC ranks, time for k = 1..k).",
                                    min=1, max=100)] = 5,
-    jobs: Annotated[int, typer.Option(help="Worker processes for ingest.", min=1)] = 1,
+    jobs: Annotated[int, typer.Option(help="Worker processes for ingest.", min=1, max=LIMITS.max_jobs)] = 1,
     subset: Annotated[int | None, typer.Option(help="Use only N models, evenly spaced by name.",
                                                min=1)] = None,
     cache: Annotated[Path | None, typer.Option(
         help="Folder of built databases (default OUT/cache); a full db built elsewhere with "
              "the same gap and image size can be put here.", file_okay=False)] = None,
-    gap: Annotated[float, typer.Option(help="Server grid gap.")] = 10.0,
-    client_gap: Annotated[float, typer.Option(help="Client grid gap of the accuracy run.")] = 30.0,
-    image_size: Annotated[int, typer.Option(help="View size in pixels.")] = 256,
+    gap: Annotated[float, typer.Option(help="Server grid gap.", callback=_number(*GAP_RANGE))] = 10.0,
+    client_gap: Annotated[float, typer.Option(help="Client grid gap of the accuracy run.",
+                                              callback=_number(*GAP_RANGE))] = 30.0,
+    image_size: Annotated[int, typer.Option(help="View size in pixels.", **SIZE_RANGE)] = 256,
     protocols: Annotated[str, typer.Option(help="Accuracy query protocols: grid, photo.")] = "grid,photo",
 ) -> None:
     """Reproduce the paper's experiments: S1–S6 CMC curves, time against the client gap
@@ -632,12 +734,12 @@ def bench(
                        description=f"{p.stage} {p.detail}".strip())
 
         run = viewdb_bench.run_bench(config, on_progress)
-    out.print(f"viewdb bench: {run.measured} measurements made, {run.skipped} read from "
-              f"{out_dir / 'results.jsonl'}")
+    _say(f"viewdb bench: {run.measured} measurements made, {run.skipped} read from "
+         f"{out_dir / 'results.jsonl'}")
     for protocol, rows in run.summary["accuracy"].items():
         out.print(f"{protocol} queries, rank-1 / rank-{k}: " + ", ".join(
             f"{label} {r['cmc'][0]:.1%}/{r['cmc'][-1]:.1%}" for label, r in rows.items()))
-    out.print("wrote " + ", ".join(str(p) for p in run.files.values()))
+    _say("wrote " + ", ".join(str(p) for p in run.files.values()))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -656,7 +758,7 @@ def main(argv: list[str] | None = None) -> int:
     except viewdb.ViewDBError as exc:
         if _STATE["debug"]:
             raise
-        err.print(f"viewdb: {exc}", markup=False)
+        _say(f"viewdb: {exc}", err)
         return 1
     code = code if isinstance(code, int) else 0
     if code == 130:  # typer turns KeyboardInterrupt into Exit(130), returned or raised

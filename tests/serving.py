@@ -74,7 +74,8 @@ class ServerProcess:
         """Worker pids answering /health on a few parallel fresh connections."""
         n = max(2, 4 * self.workers)
         with ThreadPoolExecutor(n) as pool:
-            replies = list(pool.map(lambda _: request(self.url, "GET", "/health", timeout=5), range(n)))
+            replies = list(pool.map(lambda _: request(self.url, "GET", "/health", token=self.token,
+                                                      timeout=5), range(n)))
         return {r["pid"] for status, r in replies if status == 200}
 
     def worker_pids(self) -> set[int]:

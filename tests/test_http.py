@@ -16,21 +16,23 @@ import zlib
 import cv2
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
 import viewdb
 from tests.conftest import mixed_query_curves
-from tests.serving import ServerProcess, request
+from tests.serving import ServerProcess, multipart, request
 from viewdb.bench.photos import composite_photo
 from viewdb.http import models
-from viewdb.http.wire import FitReply, PoseRequest, decode_query, encode_query
+from viewdb.http.wire import ColourReply, FitReply, PoseReply, PoseRequest, decode_query, encode_query
 from viewdb.pose.estimate import QueryView
 from viewdb.search.plans import MAX_K
 from viewdb_cli.main import main
 
 TOKEN = "s3cret-token"
+#: Short header and body deadlines for the slow-client tests.
+HEADER_TIMEOUT, BODY_TIMEOUT = 2.0, 3.0
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +51,8 @@ def files(tiered_db, tmp_path_factory):
 def server(files):
     served, _ = files
     before = served.read_bytes(), served.stat().st_mtime_ns
-    srv = ServerProcess(served, workers=2, token=TOKEN)
+    srv = ServerProcess(served, workers=2, token=TOKEN,
+                        extra=("--header-timeout", str(HEADER_TIMEOUT), "--body-timeout", str(BODY_TIMEOUT)))
     with srv:
         yield srv
         assert srv.alive(), srv.log()
@@ -114,6 +117,75 @@ def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files,
                 if plan != "server":
                     assert there.client_results == local.client_results
                     assert there.bytes_sent > 0 and there.bytes_received > 0
+
+
+def test_walk_names_each_object_once_however_often_the_client_does(server):
+    cand = {"object": "car", "distance": 0.5, "azimuth": 30.0, "elevation": 30.0, "mirrored": False}
+    other = {**cand, "object": "mug"}
+    body = {**_valid("walk"), "k": 5, "client": [cand, {**cand, "azimuth": 120.0}, cand, other, cand]}
+    got, reply = request(server.url, "POST", "/walk", body, token=TOKEN)
+    assert got == 200, reply
+    names = [r["object"] for r in reply["results"]]
+    assert sorted(names) == ["car", "mug"]
+
+
+def test_health_shows_the_pid_only_to_a_caller_with_the_token(server):
+    got, anonymous = request(server.url, "GET", "/health")
+    assert got == 200 and anonymous["status"] == "ok" and "pid" not in anonymous
+    got, known = request(server.url, "GET", "/health", token=TOKEN)
+    assert got == 200 and isinstance(known["pid"], int)
+
+
+@pytest.mark.parametrize("path", ["/openapi.json", "/docs", "/redoc"])
+def test_the_schema_pages_are_public_by_design(server, path):
+    """Documented (viewdb.http.app, docs/reliability.md): they describe the API, hold no data."""
+    got, _ = request(server.url, "GET", path)
+    assert got == 200
+
+
+def test_a_client_trickling_its_header_is_cut_off_and_others_are_served(server):
+    import socket
+    import time
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(server.url)
+    start = time.monotonic()
+    with socket.create_connection((parts.hostname, parts.port), timeout=HEADER_TIMEOUT + 10) as sock:
+        sock.sendall(b"POST /refine HTTP/1.1\r\nHost: x\r\n")
+        closed = False
+        for i in range(int((HEADER_TIMEOUT + 6) / 0.25)):
+            try:
+                sock.sendall(f"X-Slow-{i}: yes\r\n".encode())
+            except (BrokenPipeError, ConnectionResetError):
+                closed = True
+                break
+            sock.settimeout(0.25)
+            try:
+                if sock.recv(1024) == b"":
+                    closed = True
+                    break
+            except TimeoutError:
+                pass
+            assert request(server.url, "GET", "/health", timeout=5)[0] == 200 if i == 2 else True
+    assert closed, "the server kept a connection whose header never ended"
+    assert time.monotonic() - start < HEADER_TIMEOUT + 4
+
+
+def test_a_body_that_does_not_arrive_gets_408(server):
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(server.url)
+    with socket.create_connection((parts.hostname, parts.port), timeout=BODY_TIMEOUT + 10) as sock:
+        sock.sendall(f"POST /refine HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+                     "Content-Type: application/json\r\nContent-Length: 5000\r\n\r\n{".encode())
+        reply = b""
+        while b"\r\n\r\n" not in reply:
+            chunk = sock.recv(4096)
+            if not chunk:
+                break
+            reply += chunk
+    assert reply.startswith(b"HTTP/1.1 408"), reply[:200]
 
 
 def test_health_info_and_openapi(server, remote):
@@ -187,8 +259,8 @@ def _fit_body(image):
     ("/refine", [1, 2, 3], 422, "must be an object"),
     ("/refine", {**_valid(), "curve": [1.0] * 127}, 422, "128 samples"),
     ("/refine", {**_valid(), "curve": [1.0] * 129}, 422, "128 samples"),
-    ("/refine", {**_valid(), "curve": [[1.0] * 128]}, 422, "128 samples"),
-    ("/refine", {**_valid(), "curve": [1.0] * 127 + ["NaN"]}, 422, "finite"),
+    ("/refine", {**_valid(), "curve": [[1.0] * 128]}, 422, "list of numbers"),
+    ("/refine", {**_valid(), "curve": [1.0] * 127 + ["NaN"]}, 422, "list of numbers"),
     ("/refine", json.dumps(_valid()).replace("1.0]", "1e400]"), 422, "finite"),
     ("/refine", {**_valid(), "curve": ["a"] * 128}, 422, "list of numbers"),
     ("/refine", {**_valid(), "k": 0}, 422, "k must be in"),
@@ -202,7 +274,7 @@ def _fit_body(image):
     ("/refine", {"curve": [1.0] * 128}, 422, "lacks 'band'"),
     ("/walk", _valid(), 422, "lacks 'client_gap'"),
     ("/walk", {**_valid("walk"), "client_gap": 0}, 422, "client_gap must be in"),
-    ("/walk", {**_valid("walk"), "client_gap": "NaN"}, 422, "finite"),
+    ("/walk", {**_valid("walk"), "client_gap": "NaN"}, 422, "must be a number"),
     ("/pose", {"matches": []}, 422, "lacks 'image'"),
     ("/pose", _pose_body("!!!not base64!!!"), 422, "not valid base64"),
     ("/pose", _pose_body(base64.b64encode(b"GIF89a....").decode()), 422, "must be a PNG"),
@@ -212,13 +284,33 @@ def _fit_body(image):
     ("/pose", _pose_body(_png(np.zeros((4, 4, 4), np.uint8))), 422, "too small"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "matches": []}, 422, "must not be empty"),
     ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [1, 2, 3]}, 422, "intrinsics"),
-    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "positive"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [0, 1, 2, 3]}, 422, "fx must be a finite number"),
+    # numbers a pose would divide or overflow with: refused, never a 500
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [1e20, 1e20, 128, 128]},
+     422, "fx must be a finite number in"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [5e-324, 5e-324, 128, 128]},
+     422, "fx must be a finite number in"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": [500, 500, 1e300, 0]},
+     422, "cx must be a finite number in"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "intrinsics": ["500", 500, 1, 0]},
+     422, "fx must be a number"),
+    ("/pose", {**_pose_body(_png(np.full((32, 32, 4), 255, np.uint8))), "curves": [[1e308] * 128]},
+     422, "curve samples must be in [0, 128]"),
+    # strings, booleans and absurd values are not curve samples
+    ("/refine", {**_valid(), "curve": ["1_0"] * 128}, 422, "list of numbers"),
+    ("/refine", {**_valid(), "curve": [True] * 128}, 422, "list of numbers"),
+    ("/refine", {**_valid(), "curve": [1e308] * 128}, 422, "curve samples must be in [0, 128]"),
+    ("/refine", {**_valid(), "curve": [-1.0] + [1.0] * 127}, 422, "curve samples must be in [0, 128]"),
+    ("/refine", {**_valid(), "curve": [10**400] + [1.0] * 127}, 422, "finite"),
+    ("/refine", {**_valid(), "client": [{**_valid()["client"][0], "azimuth": "30"}]}, 422, "must be a number"),
+    ("/refine", {**_valid(), "client": [{**_valid()["client"][0], "distance": True}]}, 422, "must be a number"),
+    ("/walk", {**_valid("walk"), "client_gap": True}, 422, "must be a number"),
     ("/fits", {"views": []}, 422, "lacks 'image'"),
     ("/fits", _fit_body("!!!not base64!!!"), 422, "not valid base64"),
     ("/fits", _fit_body(_png(np.zeros((32, 32, 3), np.uint8))), 422, "must be RGBA"),
     ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))), "views": []}, 422, "1 to 100"),
     ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))),
-               "views": [{"object": "mug", "azimuth": "NaN", "elevation": 0}]}, 422, "finite"),
+               "views": [{"object": "mug", "azimuth": "NaN", "elevation": 0}]}, 422, "must be a number"),
     ("/fits", {**_fit_body(_png(np.full((32, 32, 4), 255, np.uint8))),
                "views": [{"object": "nope", "azimuth": 0, "elevation": 0}]}, 404, "no object named 'nope'"),
 ])
@@ -239,6 +331,23 @@ def test_an_image_too_large_is_refused_from_its_header(server):
            + _chunk(b"IDAT", zlib.compress(b"\x00" * 1000)) + _chunk(b"IEND", b""))
     got, reply = request(server.url, "POST", "/pose", _pose_body(base64.b64encode(png).decode()), token=TOKEN)
     assert got == 422 and "too large" in reply["error"]
+
+
+def test_the_server_caps_decoded_pixels_below_the_library(server):
+    """A 20-megapixel PNG is refused from its header (the server's cap is 16 million, the
+    library's for local files 40 million): a 170 KB file of 40 million pixels took a
+    worker from 439 to 1,093 MB."""
+    header = struct.pack(">IIBBBBB", 5000, 4000, 8, 6, 0, 0, 0)
+    png = (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
+           + _chunk(b"IDAT", zlib.compress(b"\x00" * 1000)) + _chunk(b"IEND", b""))
+    body = _pose_body(base64.b64encode(png).decode())
+    for path, payload in (("/pose", body), ("/fits", {**_fit_body(body["image"])})):
+        got, reply = request(server.url, "POST", path, payload, token=TOKEN)
+        assert got == 422 and "image too large: 5000x4000, more than 16,000,000 pixels" in reply["error"]
+    form, headers = multipart({}, {"photo": ("big.png", png, "image/png")})
+    got, reply = request(server.url, "POST", "/query", form, headers=headers, token=TOKEN)
+    assert got == 422 and "too large" in reply["error"] and "big.png" in reply["error"]
+    assert request(server.url, "GET", "/info", token=TOKEN)[1]["limits"]["max_pixels"] == 16_000_000
 
 
 @pytest.mark.parametrize("chunked", [False, True])
@@ -408,6 +517,190 @@ def test_fuzz_long_arbitrary_bodies(server, path, data):
 @given(case=mutated())
 def test_fuzz_long_mutated_requests(server, case):
     _fuzz_one(server.url, *case)
+
+
+# ------------------------------------------------------------- fuzz: every body model
+#: Numbers a careless or hostile client sends where the models say "number".
+NASTY_FLOATS = (st.floats(allow_nan=False, allow_infinity=False)
+                | st.sampled_from([0.0, -0.0, 5e-324, -5e-324, 1e-300, 1e308, -1e308, 1.7976931348623157e308,
+                                   1e20, 1e-20, 360.0, -360.0, 720.5, 128.0, 128.0001, 1.0])
+                | st.integers(-10**30, 10**30) | st.sampled_from([10**400, -10**400]))
+ANGLES = st.floats(-720, 720) | st.sampled_from([0.0, 30.0, 90.0, 180.0, 359.999999]) | NASTY_FLOATS
+OBJECTS = ("car", "mug", "chair", "arrow", "l_bracket", "marked_cube")
+NAMES = st.sampled_from(OBJECTS) | st.sampled_from(["nope", "", "\x1b[2J", "é" * 200])
+
+
+def _plausible_or(plausible, nasty=NASTY_FLOATS):
+    """Mostly a plausible value (so the deep code paths run), sometimes a nasty one."""
+    return st.one_of(plausible, plausible, plausible, nasty)
+
+
+def _candidate():
+    return st.fixed_dictionaries(
+        {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES),
+         "distance": _plausible_or(st.floats(0, 5)), "azimuth": _plausible_or(ANGLES),
+         "elevation": _plausible_or(ANGLES)},
+        optional={"mirrored": st.booleans(), "version": st.text(max_size=140),
+                  "camera_distance": _plausible_or(st.sampled_from([3.0, 4.0, 6.0, 1000.0]))})
+
+
+def _curve():
+    good = st.lists(st.floats(0, 3) | st.sampled_from([0.0, 128.0]), min_size=128, max_size=128)
+    nasty = st.lists(st.sampled_from([0.0, 0.5, 1.0, 1.5, 128.0]) | NASTY_FLOATS, min_size=8, max_size=130)
+    return _plausible_or(good, nasty)
+
+
+@st.composite
+def _query_png(draw):
+    h, w = draw(st.integers(8, 64)), draw(st.integers(8, 64))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    rgba = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    fill = draw(st.sampled_from(["blob", "blob", "blob", "random", "empty", "full"]))
+    if fill != "random":
+        rgba[:, :, 3] = 255 if fill == "full" else 0
+        if fill == "blob":
+            cv2.ellipse(rgba, (w // 2, h // 2), (max(2, w // 3), max(2, h // 4)),
+                        draw(st.floats(0, 180)), 0, 360, (30, 60, 90, 255), -1)
+    return _png(rgba)
+
+
+INTRINSICS = st.none() | st.tuples(st.floats(1, 1e7), st.floats(1, 1e7), st.floats(-1e7, 1e7),
+                                   st.floats(-1e7, 1e7)).map(list) \
+    | st.tuples(st.floats(50, 2000), st.floats(50, 2000), st.floats(0, 64), st.floats(0, 64)).map(list) \
+    | st.lists(NASTY_FLOATS, min_size=4, max_size=4)
+
+
+BODY_MODELS = {
+    "/refine": st.fixed_dictionaries({
+        "curve": _curve(), "band": _plausible_or(st.integers(0, 64), st.integers(-3, 70) | NASTY_FLOATS),
+        "k": _plausible_or(st.integers(1, 100), st.integers(-3, 110)), "client": st.lists(_candidate(), max_size=6)}),
+    "/walk": st.fixed_dictionaries({
+        "curve": _curve(), "band": _plausible_or(st.integers(0, 64), st.integers(-3, 70)),
+        "k": _plausible_or(st.integers(1, 100), st.integers(-3, 110)), "client": st.lists(_candidate(), max_size=6),
+        "client_gap": _plausible_or(st.sampled_from([30.0, 60.0, 90.0, 180.0]) | st.floats(0.001, 180))}),
+    "/pose": st.fixed_dictionaries({
+        "image": _query_png(), "matches": st.lists(_candidate(), min_size=1, max_size=2),
+        "intrinsics": INTRINSICS,
+        "curves": st.none() | st.lists(st.none() | _curve(), min_size=1, max_size=2)}),
+    "/colours": st.fixed_dictionaries({"views": st.lists(st.fixed_dictionaries(
+        {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
+         "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=4)}),
+    "/fits": st.fixed_dictionaries({"image": _query_png(), "views": st.lists(st.fixed_dictionaries(
+        {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
+         "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=3)}),
+}
+
+
+@st.composite
+def _overlay_body(draw):
+    pose = {"rotation": draw(st.one_of(st.just(np.eye(3).tolist()), st.lists(
+                st.lists(_plausible_or(st.floats(-1, 1)), min_size=3, max_size=3), min_size=3, max_size=3),
+                st.lists(NASTY_FLOATS, max_size=4))),
+            "translation": draw(st.lists(_plausible_or(st.floats(-5, 5)), min_size=3, max_size=3)
+                                | st.lists(NASTY_FLOATS, max_size=4)),
+            "scale": draw(_plausible_or(st.floats(0.01, 10)) | st.none()),
+            "frame": draw(st.sampled_from(["viewdb", "viewdb", "opencv", "nope"])),
+            "units": draw(st.sampled_from(["normalised", "normalised", "mesh", "feet"]))}
+    result = {"object": draw(_plausible_or(st.sampled_from(OBJECTS), NAMES)), "pose": pose,
+              "rank": draw(_plausible_or(st.integers(1, 10)) | st.none()),
+              "score": draw(_plausible_or(st.floats(0, 10)) | st.none())}
+    return {"result": result, "width": draw(_plausible_or(st.integers(16, 2000), st.integers(-5, 200_000))),
+            "height": draw(_plausible_or(st.integers(16, 2000), st.integers(-5, 200_000)))}
+
+
+@st.composite
+def _query_form(draw):
+    """A multipart ``POST /query`` body: a photo (a real one of an object, noise, or bytes
+    that are no image) and the options, some of them nonsense."""
+    kind = draw(st.sampled_from(["photo", "photo", "noise", "bytes"]))
+    if kind == "bytes":
+        data = draw(st.binary(min_size=1, max_size=300))
+    else:
+        h, w = draw(st.integers(16, 96)), draw(st.integers(16, 96))
+        rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+        image = (rng.integers(0, 256, (h, w, 3), dtype=np.uint8) if kind == "noise"
+                 else np.full((h, w, 3), 200, np.uint8))
+        if kind == "photo":
+            cv2.ellipse(image, (w // 2, h // 2), (max(3, w // 3), max(3, h // 4)), draw(st.floats(0, 180)),
+                        0, 360, (30, 60, 90), -1)
+        data = cv2.imencode(draw(st.sampled_from([".png", ".jpg", ".webp", ".bmp"])), image)[1].tobytes()
+    fields = {}
+    if draw(st.booleans()):
+        fields["plan"] = draw(_plausible_or(st.sampled_from(["server", "cs1", "cs2"]), st.text(max_size=20)))
+    if draw(st.booleans()):
+        fields["k"] = draw(_plausible_or(st.integers(1, 10).map(str),
+                                         st.integers(-10**30, 10**30).map(str) | st.text(max_size=12)))
+    name = draw(st.sampled_from(["photo.png", "p.jpg", "x", "é\x1b[2J.png", "../../etc/passwd"]))
+    return {"fields": fields, "photo": (name, data)}
+
+
+BODY_MODELS["/overlay"] = _overlay_body()
+BODY_MODELS["/query"] = _query_form()
+
+#: The documented model of each endpoint's body: every one is fuzzed.
+DOCUMENTED = {"/refine": models.RefineRequestModel, "/walk": models.WalkRequestModel,
+              "/pose": models.PoseRequestModel, "/colours": models.ColourRequestModel,
+              "/fits": models.FitRequestModel, "/overlay": models.OverlayRequestModel,
+              "/query": models.WebQueryFormModel}
+
+
+def test_every_body_model_is_fuzzed(server):
+    status, schema = request(server.url, "GET", "/openapi.json")
+    posts = {path for path, ops in schema["paths"].items() if "post" in ops}
+    assert posts == set(BODY_MODELS) == set(DOCUMENTED)
+
+
+def _body_json(body):
+    """JSON as a client would send it (Python's json writes 10**400 as a big integer)."""
+    return json.dumps(body, allow_nan=False)
+
+
+MODEL_FUZZ = settings(max_examples=30, suppress_health_check=[
+    HealthCheck.function_scoped_fixture, HealthCheck.too_slow, HealthCheck.large_base_example,
+    HealthCheck.data_too_large])
+
+
+@MODEL_FUZZ
+@given(data=st.data())
+@pytest.mark.parametrize("path", sorted(BODY_MODELS))
+def test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500(server, path, data):
+    body = data.draw(BODY_MODELS[path])
+    if path == "/query":
+        form, headers = multipart(body["fields"], {"photo": (*body["photo"], "application/octet-stream")})
+        got, reply = request(server.url, "POST", path, form, headers=headers, token=TOKEN)
+    else:
+        got, reply = request(server.url, "POST", path, _body_json(body), token=TOKEN)
+    event(f"status {got}")
+    assert got < 500, (got, reply)
+    if path == "/overlay" and got == 200:
+        assert isinstance(reply, bytes) and reply.startswith(b"\x89PNG")
+        return
+    assert isinstance(reply, dict), reply
+    if got != 200:
+        assert 400 <= got < 500 and reply["status"] == got
+        assert isinstance(reply["error"], str) and "\n" not in reply["error"] and reply["error"]
+        return
+    if path in ("/refine", "/walk"):
+        parsed = viewdb.http.ServerReply.from_dict(reply)
+        names = [c.object for c in parsed.results]
+        assert len(names) == len(set(names)) and len(names) <= body["k"]
+        assert all(c.distance >= 0 for c in parsed.results)
+    elif path == "/pose":
+        assert len(PoseReply.from_dict(reply).poses) == len(body["matches"])
+    elif path == "/colours":
+        assert len(ColourReply.from_dict(reply).signatures) == len(body["views"])
+    elif path == "/query":
+        assert 1 <= len(reply["results"]) and reply["image"] and "\x1b" not in reply["image"]
+    else:
+        assert len(FitReply.from_dict(reply).fits) == len(body["views"])
+
+
+@pytest.mark.slow
+@settings(MODEL_FUZZ, max_examples=400)
+@given(data=st.data())
+@pytest.mark.parametrize("path", sorted(BODY_MODELS))
+def test_fuzz_every_body_model_long(server, path, data):
+    test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500.hypothesis.inner_test(server, path, data)
 
 
 def test_the_server_is_still_up_after_all_of_it(server):

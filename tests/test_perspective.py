@@ -304,7 +304,7 @@ def test_the_cli_sets_the_perspective_distances_of_a_new_file_and_refuses_anothe
                  "--image-size", "64", "--perspective", "none"]) == 0
     with viewdb.open(none, create=False) as db:
         assert not db.config.perspective.enabled and db.object("cone").perspective_views == 0
-    for bad, code in (("3,x", 2), ("0.5", 1), ("3,3", 1)):
+    for bad, code in (("3,x", 2), ("0.5", 2), ("3,3", 2)):  # out of range: usage errors, as --gap
         assert main(["ingest", str(sample("cone")), "--db", str(tmp_path / "bad.db"),
                      "--perspective", bad]) == code
         assert not (tmp_path / "bad.db").exists()

@@ -244,7 +244,7 @@ def test_bad_input_gets_a_one_line_error_and_the_server_stays_up(server, demo_ph
     for (status, reply), want_status, want in cases:
         assert status == want_status and want in reply["error"], (status, reply, want)
         assert "\n" not in reply["error"] and reply["status"] == status
-    status, health = request(server.url, "GET", "/health")
+    status, health = request(server.url, "GET", "/health", token=TOKEN)
     assert status == 200 and health["pid"] in server.pids
 
 
@@ -429,7 +429,7 @@ def test_bad_photos_show_a_message_and_the_server_stays_up(browser, server, bad_
             text = message(browser)
             assert wanted in text and bad_files[name].name in text, text
             no_horizontal_scroll(browser)
-            status, health = request(server.url, "GET", "/health")
+            status, health = request(server.url, "GET", "/health", token=TOKEN)
             assert status == 200 and health["pid"] in server.pids
             js(browser, "document.getElementById('message').className = ''")  # wait for the next one
 

@@ -39,6 +39,7 @@ from .errors import (
     SchemaMismatch,
     ServerError,
     StorageError,
+    UpgradeNeeded,
     ViewDBError,
 )
 from .http.client import RemoteServer
@@ -109,6 +110,7 @@ __all__ = [
     "StoredView",
     "SymmetryType",
     "TierArrays",
+    "UpgradeNeeded",
     "ViewClasses",
     "ViewDB",
     "ViewDBError",

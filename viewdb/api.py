@@ -24,7 +24,7 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import BuildConfig, OverlayConfig, RenderConfig
+from .config import LIMITS, BuildConfig, OverlayConfig, RenderConfig, finite, integer
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -42,7 +42,7 @@ from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
 from .storage.catalogue import SearchHit, StoredCatalogue
 from .storage.export import export_client
-from .storage.integrity import CheckReport, check_store
+from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import Store
 from .storage.tiers import TIERS
@@ -152,6 +152,7 @@ class ViewDB:
 
         try:
             options = LoadOptions(max_faces, allow_missing_textures)
+            integer(jobs, "jobs", 1, LIMITS.max_jobs)
         except ValueError as exc:
             raise ViewDBError(str(exc)) from exc
         return run_ingest(
@@ -388,6 +389,7 @@ class ViewDB:
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Render any view of a stored object from the database alone (recent renders are
         cached; their arrays are read-only)."""
+        azimuth, elevation = _view_angles(azimuth, elevation, self.path)
         return self._catalogue.render(name, azimuth, elevation)
 
     def check(self, progress: Callable[[int, int], None] | None = None) -> CheckReport:
@@ -457,7 +459,16 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         raise ViewDBError(str(exc), path) from exc
     store = Store(path, create=create, initial=(wanted, "full"), read_only=read_only)
     try:
-        stored = store.build_config()
+        damage = missing_schema(store)
+        if damage:
+            raise StorageError(f"is damaged: it lacks {', '.join(damage[:4])}"
+                               + (f" and {len(damage) - 4} more" if len(damage) > 4 else "")
+                               + "; restore it from a copy, or ingest its meshes into a new file", path)
+        try:
+            stored = store.build_config()
+        except (ValueError, KeyError, TypeError) as exc:  # written by hand, or by a viewdb
+            # that accepted settings now known to be unusable (a perspective distance of 1e308)
+            raise StorageError(f"has unusable build settings ({exc}); rebuild it", path) from exc
         if stored is None:  # a file whose creation by an older viewdb was cut short
             if not create or read_only:
                 raise StorageError("is an unfinished database (its creation was interrupted); "
@@ -498,8 +509,21 @@ def render_model(
     path: str | Path, azimuth: float, elevation: float, *, image_size: int = 256
 ) -> RenderedView:
     """Render one view of a mesh file (normalised as ingest would) without a database."""
+    azimuth, elevation = _view_angles(azimuth, elevation, path)
+    try:
+        config = RenderConfig(image_size=image_size)
+    except ValueError as exc:
+        raise ViewDBError(str(exc), path) from exc
     mesh = load_mesh(path)
-    return get_renderer(RenderConfig(image_size=image_size)).render(mesh, azimuth, elevation)
+    return get_renderer(config).render(mesh, azimuth, elevation)
+
+
+def _view_angles(azimuth: float, elevation: float, path: str | Path) -> tuple[float, float]:
+    """The angles of a view as floats, refused (naming ``path``) unless finite."""
+    try:
+        return finite(azimuth, "azimuth"), finite(elevation, "elevation")
+    except ValueError as exc:
+        raise ViewDBError(str(exc), path) from exc
 
 
 def describe_paths(paths: Sequence[str | Path]) -> list[Path]:

@@ -7,14 +7,121 @@ later ingest into the same file renders and describes views exactly the same way
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "BuildConfig", "FeatureConfig", "ImageConfig", "IndexConfig", "OverlayConfig", "PerspectiveConfig",
-    "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig", "SegmentationConfig", "SiftConfig",
-    "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
+    "LIMITS", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig", "InputLimits",
+    "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig",
+    "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
+    "finite", "integer",
 ]
+
+
+@dataclass(frozen=True)
+class InputLimits:
+    """The sane ranges every number from outside is checked against, by the library (a
+    :class:`~viewdb.errors.ViewDBError` naming the value), the CLI (a usage error) and the
+    server (a 422), so that no input can exhaust memory or reach a numeric failure."""
+
+    #: Smallest grid gap, degrees: a grid holds (360/gap)² views per object, 129,600 at
+    #: 1°; a gap of 1e-9 would ask for 1.3e23 and exhaust memory before rendering one.
+    min_gap: float = 1.0
+    #: Farthest perspective camera, in bounding radii (the silhouette is then within
+    #: rasterisation noise of the orthographic one; at 1e300 the pinhole camera's field
+    #: of view underflows to zero).
+    max_perspective_distance: float = 1000.0
+    #: Focal lengths fx, fy in pixels (below 1 pixel the field of view of even the
+    #: smallest image is over 160°; at 1e20 the pose's depth overflows the renderer's clip
+    #: planes, and at 5e-324 the projection divides by zero).
+    min_focal: float = 1.0
+    max_focal: float = 1e7
+    #: Largest |cx|, |cy| of the principal point, pixels.
+    max_principal: float = 1e7
+    #: Most worker processes of an ingest (each holds a renderer, about 300 MB).
+    max_jobs: int = 64
+    #: Side of a rendered view, pixels.
+    min_image_size: int = 16
+    max_image_size: int = 4096
+
+
+#: The limits in force.
+LIMITS = InputLimits()
+
+
+@dataclass(frozen=True)
+class HttpConfig:
+    """Time and size limits of ``viewdb serve`` and of the remote client
+    (:class:`viewdb.RemoteServer`), so that neither side can be held or flooded by the other."""
+
+    #: Server: a connection must deliver a request's whole header within this many seconds
+    #: of opening (or of the previous response): a client trickling a header one line at a
+    #: time (slowloris) is cut off instead of holding the connection.
+    header_timeout: float = 10.0
+    #: Server: a request's whole body must arrive within this many seconds of its header.
+    body_timeout: float = 60.0
+    #: Client: seconds to open the connection.
+    connect_timeout: float = 10.0
+    #: Client: seconds the server may stay silent while sending a reply.
+    read_timeout: float = 120.0
+    #: Client: seconds for a whole exchange, however the server paces it (one header line
+    #: a second is cut off here).
+    total_timeout: float = 300.0
+    #: Client: largest reply body in bytes (the largest real reply, 100 colour signatures,
+    #: is about 0.6 MB).
+    max_reply_bytes: int = 16 * 1024 * 1024
+    #: Client and server: deepest nesting of arrays and objects in a JSON body (real
+    #: messages nest 4 deep).
+    max_json_depth: int = 32
+    #: Server: most pixels of an image it decodes (the query image of /pose and /fits, the
+    #: photo of /query), checked from the header before any pixel is decoded. Decoding and
+    #: posing take about 16 bytes a pixel: 16 million (a 12-megapixel phone photo fits) is
+    #: about 260 MB; the library's own limit for local files is ImageConfig.max_pixels.
+    max_pixels: int = 16_000_000
+
+    def __post_init__(self) -> None:
+        for name in ("header_timeout", "body_timeout", "connect_timeout", "read_timeout",
+                     "total_timeout"):
+            finite(getattr(self, name), name, 1e-3, 86400.0)
+        integer(self.max_reply_bytes, "max_reply_bytes", 1024)
+        integer(self.max_json_depth, "max_json_depth", 4, 1000)
+        integer(self.max_pixels, "max_pixels", 256)
+
+
+def finite(value: object, what: str, low: float = -math.inf, high: float = math.inf) -> float:
+    """``value`` as a float if it is a finite real number in ``[low, high]``, else a
+    ValueError naming ``what`` (booleans and strings are not numbers here)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{what} must be a number, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer too large for a float
+        number = math.inf
+    if not (math.isfinite(number) and low <= number <= high):
+        bounds = "" if math.isinf(low) and math.isinf(high) else f" in [{low:g}, {high:g}]"
+        raise ValueError(f"{what} must be a finite number{bounds}, got {_shown(value)}")
+    return number
+
+
+def integer(value: object, what: str, low: int, high: int | None = None) -> int:
+    """``value`` if it is an integer (not a boolean) in ``[low, high]``, else a ValueError
+    naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{what} must be an integer, got {_shown(value)}")
+    if value < low or (high is not None and value > high):
+        bounds = f"at least {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{what} must be {bounds}, got {_shown(value)}")
+    return int(value)
+
+
+def _shown(value: object) -> str:
+    """``repr(value)`` cut to 40 characters (a 5,000-digit integer cannot even be printed)."""
+    try:
+        text = repr(value)
+    except ValueError:
+        return "a number too long to print"
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass(frozen=True)
@@ -34,8 +141,7 @@ class RenderConfig:
     ambient: float = 0.3
 
     def __post_init__(self) -> None:
-        if not 16 <= self.image_size <= 4096:
-            raise ValueError(f"image_size must be in [16, 4096], got {self.image_size}")
+        integer(self.image_size, "image_size", LIMITS.min_image_size, LIMITS.max_image_size)
         if not 0.0 <= self.ambient <= 1.0:
             raise ValueError(f"ambient must be in [0, 1], got {self.ambient}")
 
@@ -123,12 +229,14 @@ class PerspectiveConfig:
                 f"perspective distances must be a sequence of numbers (bounding radii), e.g. "
                 f"(3, 4, 6), or () for none; got {self.distances!r}"
             ) from None
-        if any(not d > 1.0 for d in self.distances) or len(set(self.distances)) != len(self.distances):
+        far = LIMITS.max_perspective_distance
+        if (any(not 1.0 < d <= far for d in self.distances)
+                or len(set(self.distances)) != len(self.distances)):
             raise ValueError(
-                f"perspective distances must be distinct and greater than 1 (bounding radii), "
-                f"got {list(self.distances)}"
+                f"perspective distances must be distinct, greater than 1 and at most {far:g} "
+                f"(bounding radii), got {', '.join(f'{d:g}' for d in self.distances)}"
             )
-        if not _divides_360(self.gap):
+        if not _divides_360(self.gap) or self.gap < LIMITS.min_gap:
             raise ValueError(f"perspective gap must divide 360 evenly, got {self.gap}")
 
     @property
@@ -372,7 +480,7 @@ def coarser_gap(gap: float, at_least: float) -> float:
 
 
 def _divides_360(gap: float) -> bool:
-    return gap > 0 and abs(360.0 / gap - round(360.0 / gap)) <= 1e-9
+    return math.isfinite(gap) and gap > 0 and abs(360.0 / gap - round(360.0 / gap)) <= 1e-9
 
 
 @dataclass(frozen=True)
@@ -389,10 +497,12 @@ class BuildConfig:
     perspective: PerspectiveConfig = field(default_factory=PerspectiveConfig)
 
     def __post_init__(self) -> None:
-        if not _divides_360(self.gap):
-            raise ValueError(f"gap must divide 360 evenly, got {self.gap}")
+        gap = finite(self.gap, "gap", LIMITS.min_gap, 180.0)
+        if not _divides_360(gap):
+            raise ValueError(f"gap must divide 360 evenly, got {gap:g}")
         client = self.index.client_gap
         if client is not None:
+            client = finite(client, "client gap")
             ratio = client / self.gap
             if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 or client > 180:
                 raise ValueError(

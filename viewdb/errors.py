@@ -9,6 +9,7 @@ Catch :class:`ViewDBError` to handle them all. The tree::
     ├── ImageError              a query image is unreadable or shows no object
     ├── StorageError            the database file is unreadable, corrupt or busy
     │   ├── SchemaMismatch      the file's schema is newer than this viewdb knows
+    │   ├── UpgradeNeeded       opened read-only, the file's schema is too old to read as it is
     │   └── NotFound            an object or view asked for is not in the database
     ├── QueryError              a query cannot be answered as asked
     ├── PoseError               a pose cannot be estimated
@@ -33,6 +34,7 @@ __all__ = [
     "SchemaMismatch",
     "ServerError",
     "StorageError",
+    "UpgradeNeeded",
     "ViewDBError",
 ]
 
@@ -71,6 +73,11 @@ class StorageError(ViewDBError):
 
 class SchemaMismatch(StorageError):
     """The file's schema is newer (or otherwise unknown) to this version of viewdb."""
+
+
+class UpgradeNeeded(StorageError):
+    """Opened read-only, the file's schema is older than this viewdb reads as it is: it
+    must be opened once normally (which upgrades it in place)."""
 
 
 class NotFound(StorageError):

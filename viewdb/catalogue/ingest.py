@@ -8,9 +8,13 @@ every object either complete or absent.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing as mp
+import os
 import queue as queue_module
 import signal
+import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -21,6 +25,7 @@ from typing import Any
 from ..camera import grid_views
 from ..config import BuildConfig
 from ..errors import MeshError, ViewDBError
+from ..paths import not_regular
 from .describe import (
     ObjectDescription,
     PerspectiveView,
@@ -91,10 +96,37 @@ class IngestReport:
 _TICKS: Any = None
 
 
-def _init_worker(ticks: Any) -> None:
+def _init_worker(ticks: Any, parent: int) -> None:
     global _TICKS
     _TICKS = ticks
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    die_with_parent(parent)
+
+
+#: Linux's prctl option: the signal a process gets when its parent dies.
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent: int) -> None:
+    """End this worker when the process ``parent`` dies, however it dies (SIGKILL too):
+    otherwise a killed ingest leaves its workers (about 300 MB each) and multiprocessing's
+    resource tracker waiting on a pipe for good. Linux: the kernel sends SIGKILL at the
+    parent's death (``prctl(PR_SET_PDEATHSIG)``); elsewhere a thread checks the parent
+    every second."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        armed = libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0 and sys.platform == "linux"
+    except (OSError, AttributeError):
+        armed = False
+    if os.getppid() != parent:  # it died before the signal was armed
+        os._exit(1)
+    if not armed:
+        def watch() -> None:
+            while os.getppid() == parent:
+                time.sleep(1.0)
+            os._exit(1)
+
+        threading.Thread(target=watch, name="viewdb-parent-watch", daemon=True).start()
 
 
 def _tick(n: int) -> None:
@@ -172,6 +204,7 @@ def run_ingest(
     upgrade = write_perspective is not None and config.perspective.enabled
     todo = _plan_jobs(paths, existing_hashes, lacking_perspective if upgrade else frozenset(), report)
     run = _Run(report, todo, config, write, write_perspective, progress)
+    run.report_planned()
     if jobs <= 1 or len(todo) <= 1:
         run.serial(todo, skim, options)
     else:
@@ -194,13 +227,14 @@ def _plan_jobs(
         if name in seen:
             report.outcomes.append(FileOutcome(
                 str(path), name, "failed",
-                error=f"object name {name!r} is already taken by {seen[name]} in this batch",
+                error=f"{path}: object name {name!r} is already taken by {seen[name]} in this batch",
             ))
             continue
         seen[name] = str(path)
         try:
-            if not path.is_file():
-                raise MeshError("no such file", path)
+            why = not_regular(path)
+            if why is not None:
+                raise MeshError("no such file" if why == "does not exist" else why, path)
             digest = file_hash(path)
         except (OSError, ViewDBError) as exc:
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
@@ -233,11 +267,16 @@ class _Run:
         self.done_views = 0
         self.files_total = len(report.outcomes) + len(todo)
 
-    def notify(self, outcome: FileOutcome | None = None) -> None:
+    def notify(self, outcome: FileOutcome | None = None, files_done: int | None = None) -> None:
         if self.progress is not None:
-            self.progress(IngestProgress(
-                self.done_views, self.total_views, len(self.report.outcomes), self.files_total, outcome
-            ))
+            done = len(self.report.outcomes) if files_done is None else files_done
+            self.progress(IngestProgress(self.done_views, self.total_views, done, self.files_total, outcome))
+
+    def report_planned(self) -> None:
+        """Report the files dealt with while planning (refused, or unchanged) now, so a
+        failed one's reason is known at once, not only in the final report."""
+        for i, outcome in enumerate(list(self.report.outcomes)):
+            self.notify(outcome, i + 1)
 
     def tick(self, n: int) -> None:
         self.done_views += n
@@ -289,7 +328,7 @@ class _Run:
         ticks = ctx.Queue()
         pool = ProcessPoolExecutor(
             max_workers=min(jobs, len(todo)), mp_context=ctx,
-            initializer=_init_worker, initargs=(ticks,),
+            initializer=_init_worker, initargs=(ticks, os.getpid()),
         )
         futures: dict[Future[ObjectDescription | PerspectiveAddition], _Job] = {}
         try:

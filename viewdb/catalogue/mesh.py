@@ -27,12 +27,14 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from ..config import integer
 from ..errors import MeshError
 from ..interrupts import interrupts_held
+from ..paths import not_regular, open_regular
 
 __all__ = [
     "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "load_mesh", "mesh_from_glb",
-    "missing_textures",
+    "missing_textures", "referenced_files",
 ]
 
 #: File endings ingest accepts (case-insensitive).
@@ -81,7 +83,7 @@ class NormalisedMesh:
 def file_hash(path: str | Path) -> str:
     """SHA-256 of a file's bytes (the content hash that makes re-ingest a no-op)."""
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -103,8 +105,8 @@ class LoadOptions:
     allow_missing_textures: bool = False
 
     def __post_init__(self) -> None:
-        if self.max_faces is not None and self.max_faces < 1:
-            raise ValueError(f"max_faces must be at least 1, got {self.max_faces}")
+        if self.max_faces is not None:
+            integer(self.max_faces, "max_faces", 1)
 
 
 def load_mesh(
@@ -132,23 +134,16 @@ def load_mesh(
         not exist (unless ``options.allow_missing_textures``).
     """
     path = Path(path)
-    if not path.is_file():
-        raise MeshError("no such file", path)
+    why = not_regular(path)
+    if why is not None:
+        raise MeshError("no such file" if why == "does not exist" else why, path)
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(
             f"unsupported file type {path.suffix or '(none)'!r}; "
             f"use one of {', '.join(MESH_SUFFIXES)}",
             path,
         )
-    if not options.allow_missing_textures:
-        missing = missing_textures(path)
-        if missing:
-            raise MeshError(
-                f"names texture file {missing[0]!r}, which does not exist"
-                + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else "")
-                + "; restore it, or ingest untextured with --allow-missing-textures",
-                path,
-            )
+    _check_references(path, options)
     with interrupts_held():  # see the module doc
         try:
             loaded = trimesh.load(str(path), process=False)
@@ -171,42 +166,67 @@ def _face_count(loaded: object) -> int:
     return len(getattr(loaded, "faces", ()))
 
 
-def missing_textures(path: str | Path) -> list[str]:
-    """Texture files a mesh file names that do not exist next to it: ``map_*`` lines of
-    an OBJ's material libraries (a missing library counts too), and image ``uri``s of a
-    glTF (embedded ``data:`` images and GLB files need nothing outside)."""
+def referenced_files(path: str | Path) -> list[tuple[str, Path]]:
+    """The files a mesh file names beside itself, as ``(name as written, path)``: an
+    OBJ's material libraries and their ``map_*`` images, a glTF's external images and
+    buffers (embedded ``data:`` ones and GLB files need nothing outside). A library that
+    cannot be read names nothing more."""
     path = Path(path)
     folder = path.parent
     suffix = path.suffix.lower()
-    out: list[str] = []
+    out: list[tuple[str, Path]] = []
     try:
         if suffix == ".obj":
-            with open(path, encoding="utf-8", errors="replace") as f:
-                libraries = [line.split(None, 1)[1].strip() for line in f
+            with open_regular(path, "r", encoding="utf-8", errors="replace") as lines:
+                libraries = [line.split(None, 1)[1].strip() for line in lines
                              if line.startswith("mtllib") and len(line.split(None, 1)) == 2]
             for library in libraries:
                 mtl = folder / library
-                if not mtl.is_file():
-                    out.append(library)
+                out.append((library, mtl))
+                if not_regular(mtl) is not None:
                     continue
-                with open(mtl, encoding="utf-8", errors="replace") as f:
-                    for line in f:
+                with open_regular(mtl, "r", encoding="utf-8", errors="replace") as lines:
+                    for line in lines:
                         parts = line.strip().split()
                         if parts and parts[0].lower().startswith("map_") and len(parts) >= 2:
-                            name = parts[-1]  # options (-s 1 1 1 ...) come before the file
-                            if not (mtl.parent / name).is_file():
-                                out.append(name)
+                            # options (-s 1 1 1 ...) come before the file
+                            out.append((parts[-1], mtl.parent / parts[-1]))
         elif suffix == ".gltf":
-            with open(path, encoding="utf-8") as f:
+            with open_regular(path, "r", encoding="utf-8") as f:
                 doc = json.load(f)
-            for image in doc.get("images", []) if isinstance(doc, dict) else []:
-                uri = image.get("uri") if isinstance(image, dict) else None
-                if isinstance(uri, str) and not uri.startswith("data:"):
-                    if not (folder / unquote(uri)).is_file():
-                        out.append(uri)
+            for key in ("images", "buffers"):
+                for item in doc.get(key, []) if isinstance(doc, dict) else []:
+                    uri = item.get("uri") if isinstance(item, dict) else None
+                    if isinstance(uri, str) and not uri.startswith("data:"):
+                        out.append((uri, folder / unquote(uri)))
     except (OSError, ValueError):
         return out  # an unreadable file is reported by the loader
     return out
+
+
+def missing_textures(path: str | Path) -> list[str]:
+    """Texture files (and material libraries, glTF buffers) a mesh file names that do not
+    exist next to it (:func:`referenced_files`)."""
+    return [name for name, ref in referenced_files(path) if not_regular(ref) == "does not exist"]
+
+
+def _check_references(path: Path, options: LoadOptions) -> None:
+    """Refuse a mesh naming a file that is there but not a regular file (a FIFO would
+    block the loader for good), and unless allowed one naming a missing file."""
+    missing = []
+    for name, ref in referenced_files(path):
+        why = not_regular(ref)
+        if why == "does not exist":
+            missing.append(name)
+        elif why is not None:
+            raise MeshError(f"names the file {name!r}, which {why}", path)
+    if missing and not options.allow_missing_textures:
+        raise MeshError(
+            f"names texture file {missing[0]!r}, which does not exist"
+            + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else "")
+            + "; restore it, or ingest untextured with --allow-missing-textures",
+            path,
+        )
 
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:

@@ -11,8 +11,9 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
                   re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
-``GET /health``   liveness (no database access, no token)
-``GET /openapi.json``  the schema
+``GET /health``   liveness (no database access, no token; the worker's pid only with it)
+``GET /openapi.json``, ``/docs``, ``/redoc``  the schema and its pages: public even with a
+                  token (they describe the API and hold no data)
 ``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
                   the web page's endpoints: the whole query on the server, with pictures
                   (:mod:`viewdb.http.web`)
@@ -20,8 +21,11 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 
 Bad input never gets a 500: a body that is not JSON is 400, a well-formed one that is
 not a valid message 422 (wrong array lengths, NaN, out-of-range numbers), a body over the
-limit 413 (refused from its Content-Length before it is read), a missing or wrong bearer
-token 401; every error body is ``{"error": "<one line>", "status": <code>}``.
+limit 413 (refused from its Content-Length before it is read), a body that takes longer
+than ``body_timeout`` to arrive 408, a missing or wrong bearer token 401; every error body
+is ``{"error": "<one line>", "status": <code>}``. A connection must deliver each request's
+header within ``header_timeout`` seconds (:mod:`viewdb.http.protocol`); an image of more
+than ``max_pixels`` pixels is refused from its header.
 
 Each worker process opens the database read-only once and answers on one thread of its
 own (the renderer's GL context is per thread): requests to one worker are served one
@@ -54,7 +58,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
-from ..config import WebConfig
+from ..config import HttpConfig, WebConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models, web
@@ -80,6 +84,7 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
+ENV_BODY_TIMEOUT, ENV_MAX_PIXELS = "VIEWDB_BODY_TIMEOUT", "VIEWDB_MAX_PIXELS"
 #: "0": no web page (``viewdb serve --no-ui``).
 ENV_UI = "VIEWDB_UI"
 
@@ -96,9 +101,12 @@ def _error(status: int, message: str, headers: dict[str, str] | None = None) -> 
 DRAIN_BYTES = 16 * 1024 * 1024
 
 
-async def _drain(receive: Receive, seen: int) -> None:
+async def _drain(receive: Receive, seen: int, deadline: float) -> None:
     while seen <= DRAIN_BYTES:
-        message = await receive()
+        try:
+            message = await asyncio.wait_for(receive(), max(deadline - time.monotonic(), 0.0))
+        except TimeoutError:
+            return
         if message["type"] != "http.request":
             return
         seen += len(message.get("body", b""))
@@ -108,15 +116,18 @@ async def _drain(receive: Receive, seen: int) -> None:
 
 class BodyLimit:
     """ASGI middleware: 413 for a body over the path's limit, from its Content-Length
-    before reading, or while reading a body sent without one (chunked)."""
+    before reading, or while reading a body sent without one (chunked); 408 for a body
+    that has not arrived whole ``timeout`` seconds after the request's header."""
 
-    def __init__(self, app: ASGIApp, limits: dict[str, int], default: int) -> None:
-        self.app, self.limits, self.default = app, limits, default
+    def __init__(self, app: ASGIApp, limits: dict[str, int], default: int,
+                 timeout: float = HttpConfig().body_timeout) -> None:
+        self.app, self.limits, self.default, self.timeout = app, limits, default, timeout
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        deadline = time.monotonic() + self.timeout
         limit = self.limits.get(scope["path"], self.default)
         declared = dict(scope["headers"]).get(b"content-length")
         close = {"Connection": "close"}
@@ -126,22 +137,30 @@ class BodyLimit:
                 return
             if int(declared) > limit:
                 if int(declared) <= DRAIN_BYTES:
-                    await _drain(receive, 0)
+                    await _drain(receive, 0, deadline)
                 await _error(413, f"body of {int(declared):,} bytes is over this endpoint's "
                                   f"limit of {limit:,}", close)(scope, receive, send)
                 return
         seen = 0
+        complete = False
 
         async def limited() -> Message:
-            nonlocal seen
-            message = await receive()
+            nonlocal seen, complete
+            if complete:  # after the body only a disconnect can come: no deadline
+                return await receive()
+            try:
+                message = await asyncio.wait_for(receive(), max(deadline - time.monotonic(), 0.0))
+            except TimeoutError:
+                raise HTTPException(408, f"the body did not arrive within {self.timeout:g} s",
+                                    headers=close) from None
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
+                complete = not message.get("more_body", False)
                 if seen > limit:
                     if message.get("more_body", False):
-                        await _drain(receive, seen)
+                        await _drain(receive, seen, deadline)
                     raise HTTPException(413, f"body is over this endpoint's limit of {limit:,} bytes",
-                                    headers=close)
+                                        headers=close)
             return message
 
         await self.app(scope, limited, send)
@@ -186,7 +205,8 @@ def _body(model: type[Any]) -> dict[str, Any]:
 _ERRORS: dict[int | str, dict[str, Any]] = {
     code: {"model": models.ErrorModel, "description": what} for code, what in (
         (400, "the body is not JSON"), (401, "missing or wrong bearer token"),
-        (413, "the body is over the limit"), (422, "the JSON is not a valid message"),
+        (408, "the body did not arrive in time"), (413, "the body is over the limit"),
+        (422, "the JSON is not a valid message"),
     )
 }
 
@@ -199,14 +219,20 @@ def create_app(
     max_image_body: int = DEFAULT_MAX_IMAGE_BODY,
     ui: bool = True,
     web_config: WebConfig | None = None,
+    http: HttpConfig | None = None,
 ) -> FastAPI:
     """The ASGI app serving the full database at ``db_path`` (opened read-only at startup).
 
-    ``token``: when given, every endpoint but ``/health``, the schema and the web page
-    needs the header ``Authorization: Bearer <token>``. ``ui``: serve the web page at
-    ``/`` (its endpoints are served either way).
+    ``token``: when given, every endpoint but ``/health``, the schema (``/openapi.json``,
+    ``/docs``, ``/redoc``) and the web page needs the header ``Authorization: Bearer
+    <token>`` (those are public on purpose: they describe the API and hold no data);
+    ``/health`` then shows the worker's pid only to a caller with the token. ``ui``:
+    serve the web page at ``/`` (its endpoints are served either way). ``http``: the
+    body timeout (408) and the most pixels of an image decoded
+    (:class:`~viewdb.config.HttpConfig`).
     """
-    server = _Server(Path(db_path), token, max_body, max_image_body)
+    http = http or HttpConfig()
+    server = _Server(Path(db_path), token, max_body, max_image_body, http.max_pixels)
     app = FastAPI(
         title="viewdb server",
         version=__version__,
@@ -216,12 +242,14 @@ def create_app(
     )
     _add_error_handlers(app)
     app.include_router(_routes(server))
-    app.include_router(web.web_router(server.run, [Depends(server.authorised)], web_config))
+    app.include_router(web.web_router(server.run, [Depends(server.authorised)], web_config,
+                                      max_pixels=http.max_pixels))
     if ui:
         web.add_page(app)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     app.add_middleware(BodyLimit, limits={"/pose": max_image_body, "/fits": max_image_body,
-                                          "/query": max_image_body}, default=max_body)
+                                          "/query": max_image_body}, default=max_body,
+                       timeout=http.body_timeout)
     return app
 
 
@@ -229,9 +257,10 @@ class _Server:
     """What the routes of one worker share: its open database and the thread that
     answers on it, the token and the limits."""
 
-    def __init__(self, db_path: Path, token: str | None, max_body: int, max_image_body: int) -> None:
+    def __init__(self, db_path: Path, token: str | None, max_body: int, max_image_body: int,
+                 max_pixels: int) -> None:
         self.db_path, self.token = db_path, token
-        self.max_body, self.max_image_body = max_body, max_image_body
+        self.max_body, self.max_image_body, self.max_pixels = max_body, max_image_body, max_pixels
         self._state: _State | None = None
 
     @asynccontextmanager
@@ -313,9 +342,15 @@ def _routes(server: _Server) -> APIRouter:
     guarded = [Depends(server.authorised)]
     state, run = server.state, server.run
 
-    @router.get("/health", summary="Liveness: the worker is up and its database open")
-    async def health() -> dict[str, Any]:
-        return {"status": "ok", "pid": os.getpid(), "objects": state().objects}
+    @router.get("/health", summary="Liveness: the worker is up and its database open (no token "
+                                    "needed; the worker's pid only with the token)")
+    async def health(request: Request) -> dict[str, Any]:
+        out: dict[str, Any] = {"status": "ok", "objects": state().objects}
+        try:
+            server.authorised(request)
+        except HTTPException:
+            return out  # a caller without the token learns nothing about the process
+        return {**out, "pid": os.getpid()}
 
     @router.get("/info", dependencies=guarded, responses=_ERRORS,
                 summary="What the database holds, its build settings and this server's limits")
@@ -324,7 +359,7 @@ def _routes(server: _Server) -> APIRouter:
         data.pop("path", None)
         return {**data, "viewdb": __version__, "role": "full", "read_only": True,
                 "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": server.max_body,
-                           "max_image_body": server.max_image_body,
+                           "max_image_body": server.max_image_body, "max_pixels": server.max_pixels,
                            "curve_samples": state().curve_samples},
                 "auth": server.token is not None}
 
@@ -346,11 +381,11 @@ def _routes(server: _Server) -> APIRouter:
         found, ms = await run(lambda db: db.server_tier().walk(req)[0])
         return _reply(found, ms)
 
-    _image_routes(router, guarded, run)
+    _image_routes(router, guarded, run, server.max_pixels)
     return router
 
 
-def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]) -> None:
+def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any], max_pixels: int) -> None:
     """The endpoints that take the segmented query image or stored views' signatures."""
 
     @router.post("/pose", dependencies=guarded, openapi_extra=_body(models.PoseRequestModel),
@@ -359,7 +394,7 @@ def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]
     async def pose(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: PoseRequest.from_dict(data))
-        query = _parse(lambda: decode_query(req.image))
+        query = _parse(lambda: decode_query(req.image, max_pixels))
         poses, ms = await run(lambda db: db.server_tier().poses(
             query, req.matches, req.intrinsics, req.curves, rerank=req.rerank)[0])
         return PoseReply(poses, {"server_ms": ms}).to_dict()
@@ -379,7 +414,7 @@ def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]
     async def fits(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: FitRequest.from_dict(data))
-        query = _parse(lambda: decode_query(req.image))
+        query = _parse(lambda: decode_query(req.image, max_pixels))
         found, ms = await run(lambda db: db.server_tier().fits(query, req.views)[0])
         return FitReply(found, {"server_ms": ms}).to_dict()
 
@@ -417,8 +452,9 @@ def _open_for_serving(path: Path) -> ViewDB:
 
 def app_from_env() -> FastAPI:
     """The app configured from the environment (``VIEWDB_DB``, ``VIEWDB_TOKEN``,
-    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``): the factory each
-    worker of ``viewdb serve`` calls."""
+    ``VIEWDB_MAX_BODY``, ``VIEWDB_MAX_IMAGE_BODY``, ``VIEWDB_UI``, ``VIEWDB_BODY_TIMEOUT``,
+    ``VIEWDB_MAX_PIXELS``): the factory each worker of ``viewdb serve`` calls."""
+    default = HttpConfig()
     path = os.environ.get(ENV_DB)
     if not path:
         raise ViewDBError(f"set {ENV_DB} to the database to serve")
@@ -427,4 +463,6 @@ def app_from_env() -> FastAPI:
         max_body=int(os.environ.get(ENV_MAX_BODY, DEFAULT_MAX_BODY)),
         max_image_body=int(os.environ.get(ENV_MAX_IMAGE_BODY, DEFAULT_MAX_IMAGE_BODY)),
         ui=os.environ.get(ENV_UI, "1") != "0",
+        http=HttpConfig(body_timeout=float(os.environ.get(ENV_BODY_TIMEOUT, default.body_timeout)),
+                        max_pixels=int(os.environ.get(ENV_MAX_PIXELS, default.max_pixels))),
     )

@@ -1,26 +1,37 @@
-"""A client of ``viewdb serve``: the server half of the plans over HTTP (stdlib only).
+"""A client of ``viewdb serve``: the server half of the plans over HTTP (httpx).
 
 >>> with viewdb.open("client.db", read_only=True) as client, \\
 ...         viewdb.RemoteServer("http://127.0.0.1:8765") as server:      # doctest: +SKIP
 ...     result = client.query("photo.jpg", plan="cs1", server=server)
 
-One persistent (keep-alive) connection per :class:`RemoteServer`, used by one request at
-a time (a lock serialises threads sharing it). A connection the server closed while idle
-is reopened once transparently; every request is a pure read, so that is safe.
+One keep-alive connection per :class:`RemoteServer` (httpx, which brings the timeouts,
+connection pooling and TLS), used by one request at a time (a lock serialises threads
+sharing it). A connection the server closed while idle is reopened once transparently;
+every request is a pure read, so that is safe.
+
+The client does not trust the server (:class:`~viewdb.config.HttpConfig`): connecting,
+each read and the whole exchange have their own time limits (a server that sends one
+header line a second is cut off at the total), a reply over ``max_reply_bytes`` is
+refused while it streams in (never held whole), a compressed reply is refused (no
+decompression bomb), and JSON nested deeper than ``max_json_depth`` is refused. Every
+failure is a :class:`~viewdb.errors.ServerError` naming the URL.
 """
 
 from __future__ import annotations
 
-import http.client
 import json
+import socket
 import threading
 import time
 import urllib.parse
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
+import httpx
 import numpy as np
 
+from ..config import HttpConfig
 from ..errors import QueryError, ServerError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.server_tier import Exchange
@@ -28,44 +39,70 @@ from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from ..typed import Intrinsics
 from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
 
-__all__ = ["RemoteServer"]
+__all__ = ["RemoteServer", "is_token", "json_depth"]
 
 
 class RemoteServer:
     """The server tier (:class:`~viewdb.recognition.server_tier.ServerTier`) at ``url``
-    (``http://host:port``, optionally with a path prefix).
+    (``http://host:port`` or ``https://``, optionally with a path prefix).
 
-    ``token`` is sent as ``Authorization: Bearer <token>``. Errors are
-    :class:`~viewdb.errors.ServerError` naming the URL: cannot connect, timed out, or the
-    server's own one-line reason with its HTTP status.
+    ``token`` is sent as ``Authorization: Bearer <token>``. ``config`` sets the time and
+    size limits (:class:`~viewdb.config.HttpConfig`: ``connect_timeout``,
+    ``read_timeout``, ``total_timeout``, ``max_reply_bytes``, ``max_json_depth``);
+    ``timeout``, if given, is the read timeout. Errors are
+    :class:`~viewdb.errors.ServerError` naming the URL: cannot connect, timed out, a reply
+    too large or malformed, or the server's own one-line reason with its HTTP status.
     """
 
-    def __init__(self, url: str, *, token: str | None = None, timeout: float = 120.0) -> None:
-        parts = urllib.parse.urlsplit(url)
+    def __init__(self, url: str, *, token: str | None = None, timeout: float | None = None,
+                 config: HttpConfig | None = None) -> None:
+        try:
+            parts = urllib.parse.urlsplit(url)
+        except ValueError as exc:  # "http://[::1": an unclosed IPv6 address
+            raise ServerError(f"is not a server URL ({exc})", url) from exc
         if parts.scheme not in ("http", "https") or not parts.hostname:
             raise ServerError("is not a server URL (expected http://host:port)", url)
+        if token and not is_token(token):
+            raise ServerError("the bearer token must be printable ASCII without spaces", url)
         try:
-            port = parts.port
+            parts.port  # noqa: B018 - raises for a bad port
         except ValueError as exc:
             raise ServerError(f"has a bad port: {exc}", url) from exc
+        try:
+            self.config = config or HttpConfig()
+            if timeout is not None:
+                self.config = replace(self.config, read_timeout=timeout)
+        except ValueError as exc:
+            raise ServerError(str(exc), url) from exc
         self.url = url.rstrip("/")
         self.remote = True
-        self._https = parts.scheme == "https"
-        self._host, self._port = parts.hostname, port
-        self._prefix = parts.path.rstrip("/")
-        self._headers = {"Content-Type": "application/json", "Accept": "application/json"}
+        headers = {"Content-Type": "application/json", "Accept": "application/json",
+                   "Accept-Encoding": "identity"}
         if token:
-            self._headers["Authorization"] = f"Bearer {token}"
-        self.timeout = timeout
-        self._conn: http.client.HTTPConnection | None = None
+            headers["Authorization"] = f"Bearer {token}"
+        cfg = self.config
+        self._client = httpx.Client(
+            base_url=self.url, headers=headers, follow_redirects=False, trust_env=False,
+            timeout=httpx.Timeout(connect=cfg.connect_timeout, read=cfg.read_timeout,
+                                  write=cfg.read_timeout, pool=cfg.connect_timeout),
+            limits=httpx.Limits(max_connections=1, max_keepalive_connections=1),
+        )
         self._lock = threading.Lock()
+        #: The socket of the connection last opened (the pool holds one): the total
+        #: timeout's watchdog shuts it down to end a read that would go on.
+        self._socket: socket.socket | None = None
+        #: This attempt opened a connection; the watchdog fired.
+        self._connected = self._timed_out = False
+
+    @property
+    def timeout(self) -> float:
+        """The read timeout in seconds."""
+        return self.config.read_timeout
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         with self._lock:
-            if self._conn is not None:
-                self._conn.close()
-                self._conn = None
+            self._client.close()
 
     def __enter__(self) -> RemoteServer:
         return self
@@ -77,12 +114,6 @@ class RemoteServer:
         return f"RemoteServer({self.url!r})"
 
     # ------------------------------------------------------------------ transport
-    def _connection(self) -> http.client.HTTPConnection:
-        if self._conn is None:
-            cls = http.client.HTTPSConnection if self._https else http.client.HTTPConnection
-            self._conn = cls(self._host, self._port, timeout=self.timeout)
-        return self._conn
-
     def request(self, method: str, path: str, body: Any = None) -> tuple[Any, Exchange]:
         """Send one request (``body`` as JSON) and return the decoded JSON reply and what
         the exchange cost; ``server_ms`` is taken from the reply's ``stats`` if present."""
@@ -90,60 +121,123 @@ class RemoteServer:
                                                     allow_nan=False).encode()
         with self._lock:
             start = time.perf_counter()
-            status, raw = self._send(method, self._prefix + path, data)
+            status, raw = self._send(method, path, data)
             wall = (time.perf_counter() - start) * 1e3
-        try:
-            reply = json.loads(raw) if raw else None
-        except ValueError:
-            reply = None
+        reply = self._decode(raw, path)
         if not 200 <= status < 300:
             reason = reply.get("error") if isinstance(reply, dict) else None
-            raise ServerError(f"server refused the request ({status}): "
-                              f"{reason or raw[:200].decode(errors='replace') or 'no reason given'}",
+            if not isinstance(reason, str):
+                reason = raw[:200].decode(errors="replace") or "no reason given"
+            raise ServerError(f"server refused the request ({status}): {reason[:300]}",
                               self.url + path, status)
         if reply is None:
             raise ServerError(f"server sent a reply that is not JSON ({len(raw)} bytes)", self.url + path)
         stats = reply.get("stats") if isinstance(reply, dict) else None
-        server_ms = float(stats.get("server_ms", 0.0)) if isinstance(stats, dict) else 0.0
-        return reply, Exchange(len(data or b""), len(raw), wall, server_ms)
+        server_ms = stats.get("server_ms", 0.0) if isinstance(stats, dict) else 0.0
+        if isinstance(server_ms, bool) or not isinstance(server_ms, int | float) or not 0 <= server_ms < 1e9:
+            server_ms = 0.0
+        return reply, Exchange(len(data or b""), len(raw), wall, float(server_ms))
+
+    def _decode(self, raw: bytes, path: str) -> Any:
+        """The reply's JSON (None if it is not JSON); refused if nested too deep."""
+        if not raw:
+            return None
+        try:
+            reply = json.loads(raw)
+        except RecursionError:
+            reply = _TOO_DEEP
+        except ValueError:
+            return None
+        if reply is _TOO_DEEP or json_depth(reply) > self.config.max_json_depth:
+            raise ServerError(f"server sent JSON nested more than {self.config.max_json_depth} deep",
+                              self.url + path)
+        return reply
 
     def _send(self, method: str, path: str, data: bytes | None) -> tuple[int, bytes]:
         for attempt in (0, 1):
-            reused = self._conn is not None
-            conn = self._connection()
+            self._connected = self._timed_out = False
             try:
-                conn.request(method, path, body=data, headers=self._headers)
-                response = conn.getresponse()
-                raw = response.read()
-                if response.will_close:
-                    self._drop()
-                return response.status, raw
-            except (http.client.RemoteDisconnected, BrokenPipeError, ConnectionResetError) as exc:
-                self._drop()
-                if reused and attempt == 0:
+                return self._exchange(method, path, data)
+            except httpx.HTTPError as exc:
+                if self._timed_out:
+                    raise ServerError(f"no complete reply within {self.config.total_timeout:g} s "
+                                      "(total timeout)", self.url + path) from None
+                idle_closed = isinstance(exc, httpx.RemoteProtocolError | httpx.ReadError | httpx.WriteError)
+                if idle_closed and not self._connected and attempt == 0:
                     continue  # the server closed an idle keep-alive connection: retry once
-                raise ServerError(f"the server closed the connection ({_reason(exc)})", self.url) from exc
-            except TimeoutError as exc:
-                self._drop()
-                raise ServerError(f"no reply within {self.timeout:g} s", self.url) from exc
-            except (OSError, http.client.HTTPException) as exc:
-                self._drop()
-                raise ServerError(f"cannot connect: {_reason(exc)}", self.url) from exc
+                raise self._failure(exc, path) from exc
         raise AssertionError("unreachable")  # pragma: no cover
 
-    def _drop(self) -> None:
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
+    def _exchange(self, method: str, path: str, data: bytes | None) -> tuple[int, bytes]:
+        """One request under the total timeout: a watchdog shuts the connection's socket
+        down at the deadline, which ends whatever read is waiting; the reply is read in
+        chunks and refused as soon as it is over the size limit."""
+        cfg = self.config
+        watchdog = threading.Timer(cfg.total_timeout, self._expire)
+        watchdog.daemon = True
+        watchdog.start()
+        try:
+            with self._client.stream(method, path, content=data,
+                                     extensions={"trace": self._trace}) as response:
+                encoding = response.headers.get("content-encoding", "identity").strip().lower()
+                if encoding not in ("", "identity"):
+                    raise ServerError(f"server sent a {encoding[:40]!r}-encoded reply; only plain "
+                                      "replies are accepted", self.url + path)
+                declared = response.headers.get("content-length", "")
+                if declared.isdigit() and int(declared) > cfg.max_reply_bytes:
+                    raise self._too_large(path)
+                chunks, size = [], 0
+                for chunk in response.iter_raw():
+                    size += len(chunk)
+                    if size > cfg.max_reply_bytes:
+                        raise self._too_large(path)
+                    chunks.append(chunk)
+                return response.status_code, b"".join(chunks)
+        finally:
+            watchdog.cancel()
+
+    def _trace(self, event: str, info: dict[str, Any]) -> None:
+        """httpx's trace hook: remember the socket of each new connection."""
+        if event == "connection.connect_tcp.complete":
+            self._connected = True
+            stream = info.get("return_value")
+            sock = stream.get_extra_info("socket") if stream is not None else None
+            self._socket = sock if isinstance(sock, socket.socket) else None
+
+    def _expire(self) -> None:
+        self._timed_out = True
+        sock = self._socket
+        if sock is not None:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass  # already closed
+
+    def _too_large(self, path: str) -> ServerError:
+        return ServerError(f"server sent a reply over {self.config.max_reply_bytes:,} bytes",
+                           self.url + path)
+
+    def _failure(self, exc: httpx.HTTPError, path: str) -> ServerError:
+        cfg = self.config
+        if isinstance(exc, httpx.ConnectTimeout):
+            return ServerError(f"cannot connect within {cfg.connect_timeout:g} s", self.url)
+        if isinstance(exc, httpx.TimeoutException):
+            return ServerError(f"no reply within {cfg.read_timeout:g} s", self.url + path)
+        if isinstance(exc, httpx.ConnectError):
+            return ServerError(f"cannot connect: {_reason(exc)}", self.url)
+        if isinstance(exc, httpx.RemoteProtocolError | httpx.ReadError | httpx.WriteError):
+            return ServerError(f"the server closed the connection or broke the protocol ({_reason(exc)})",
+                               self.url + path)
+        return ServerError(f"request failed: {_reason(exc)}", self.url + path)
 
     # ------------------------------------------------------------------ the server tier
     def health(self) -> dict[str, Any]:
         reply, _ = self.request("GET", "/health")
-        return dict(reply)
+        return _object(reply, self.url)
 
     def info(self) -> dict[str, Any]:
         reply, _ = self.request("GET", "/info")
-        return dict(reply)
+        return _object(reply, self.url)
 
     def refine(self, request: RefineRequest) -> tuple[ServerReply, Exchange]:
         reply, exchange = self.request("POST", "/refine", request.to_dict())
@@ -190,6 +284,35 @@ class RemoteServer:
         return poses, exchange
 
 
+_TOO_DEEP = object()
+
+
+def is_token(token: str) -> bool:
+    """Whether ``token`` can travel in an ``Authorization: Bearer`` header: printable
+    ASCII without spaces (anything else cannot be sent, or would split the header)."""
+    return bool(token) and all(33 <= ord(c) <= 126 for c in token)
+
+
+def json_depth(value: Any) -> int:
+    """How deeply arrays and objects nest in a decoded JSON value (a scalar is 0),
+    without recursion."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        deepest = max(deepest, depth)
+        stack.extend((child, depth + 1) for child in children if isinstance(child, dict | list))
+    return deepest
+
+
+def _object(reply: Any, url: str) -> dict[str, Any]:
+    if not isinstance(reply, dict):
+        raise ServerError("server sent a reply that is not a JSON object", url)
+    return reply
+
+
 def _parse_reply(parse: Any, reply: Any, url: str) -> Any:
     try:
         return parse(reply)
@@ -199,4 +322,4 @@ def _parse_reply(parse: Any, reply: Any, url: str) -> Any:
 
 def _reason(exc: BaseException) -> str:
     text = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-    return " ".join(str(text).split())
+    return " ".join(str(text).split())[:200]

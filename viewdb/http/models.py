@@ -8,11 +8,16 @@ validate against them).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..config import LIMITS
 from ..search.plans import MAX_BAND, MAX_K
+
+#: A distance-curve sample: curves have mean 1, so no sample of an n-sample curve exceeds
+#: n (the server checks the bound against the curve's own length).
+Sample = Annotated[float, Field(ge=0)]
 
 __all__ = [
     "CandidateModel",
@@ -52,7 +57,7 @@ class CandidateModel(_Strict):
                     "a server ignores the bounds of objects it holds in another version",
     )
     camera_distance: float | None = Field(
-        default=None, gt=1,
+        default=None, gt=1, le=LIMITS.max_perspective_distance,
         description="the view is a perspective silhouette from this many bounding radii "
                     "(absent: an orthographic view)",
     )
@@ -62,8 +67,9 @@ class RefineRequestModel(_Strict):
     """CS1: the query's distance curve and the client's top-k on its sparse tier (an empty
     ``client`` list gives the ``server`` plan: exact k-NN on the full tier)."""
 
-    curve: list[float] = Field(description="the server's curve_samples numbers (see /info)",
-                               min_length=8)
+    curve: list[Sample] = Field(description="the server's curve_samples numbers (see /info), each "
+                                            "in [0, curve_samples] (a curve has mean 1)",
+                                min_length=8)
     band: int = Field(ge=0, le=MAX_BAND, description="Sakoe-Chiba band in samples")
     k: int = Field(ge=1, le=MAX_K)
     client: list[CandidateModel] = Field(max_length=MAX_K)
@@ -87,8 +93,10 @@ class PoseRequestModel(_Strict):
     matches: list[CandidateModel] = Field(min_length=1, max_length=MAX_K)
     intrinsics: list[float] | None = Field(
         default=None, min_length=4, max_length=4,
-        description="fx, fy, cx, cy for a perspective (OpenCV-frame) pose; null: orthographic")
-    curves: list[list[float] | None] | None = Field(
+        description=f"fx, fy, cx, cy in pixels for a perspective (OpenCV-frame) pose (fx, fy in "
+                    f"[{LIMITS.min_focal:g}, {LIMITS.max_focal:g}], |cx|, |cy| at most "
+                    f"{LIMITS.max_principal:g}); null: orthographic")
+    curves: list[list[Sample] | None] | None = Field(
         default=None, description="per match, the query's distance curve at the in-plane turn that "
                                   "matched (its nearest views add pose candidates), or null")
     rerank: bool = Field(default=False, description="with intrinsics: fit every match's perspective "

@@ -16,16 +16,21 @@ from pathlib import Path
 from typing import Any
 
 from ..api import open as open_db
+from ..config import HttpConfig
 from ..errors import ServerError, ViewDBError
 from .app import (
     DEFAULT_MAX_BODY,
     DEFAULT_MAX_IMAGE_BODY,
+    ENV_BODY_TIMEOUT,
     ENV_DB,
     ENV_MAX_BODY,
     ENV_MAX_IMAGE_BODY,
+    ENV_MAX_PIXELS,
     ENV_TOKEN,
     ENV_UI,
 )
+from .client import is_token
+from .protocol import ENV_HEADER_TIMEOUT
 
 __all__ = ["bind", "run_server"]
 
@@ -61,15 +66,21 @@ def run_server(
     log_level: str = "warning",
     ready: Callable[[str, int], None] | None = None,
     ui: bool = True,
+    http: HttpConfig | None = None,
 ) -> None:
     """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
     once the socket listens (before the workers start answering). ``ui``: serve the web
-    page at ``/``."""
+    page at ``/``. ``http`` sets the header and body timeouts and the largest image
+    decoded (:class:`~viewdb.config.HttpConfig`)."""
     import uvicorn
     from uvicorn.supervisors import Multiprocess
 
     if workers < 1:
         raise ViewDBError(f"workers must be at least 1, got {workers}")
+    if token and not is_token(token):
+        raise ViewDBError("the bearer token must be printable ASCII without spaces (a client could "
+                          "not send it)")
+    http = http or HttpConfig()
     with open_db(db, read_only=True) as vdb:  # refuse a bad file before binding anything
         if vdb.role != "full":
             raise ViewDBError("is a client file (export-client); serve the full database", db)
@@ -77,6 +88,9 @@ def run_server(
     os.environ[ENV_DB] = str(Path(db).resolve())
     os.environ[ENV_MAX_BODY] = str(int(max_body))
     os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
+    os.environ[ENV_HEADER_TIMEOUT] = repr(float(http.header_timeout))
+    os.environ[ENV_BODY_TIMEOUT] = repr(float(http.body_timeout))
+    os.environ[ENV_MAX_PIXELS] = str(int(http.max_pixels))
     os.environ[ENV_UI] = "1" if ui else "0"
     if token:
         os.environ[ENV_TOKEN] = token
@@ -88,7 +102,8 @@ def run_server(
         shown = f"[{bound_host}]" if ":" in bound_host else bound_host
         config = uvicorn.Config("viewdb.http.app:app_from_env", factory=True, workers=workers,
                                 log_level=log_level, access_log=log_level in ("debug", "info"),
-                                timeout_graceful_shutdown=10)
+                                timeout_graceful_shutdown=10,
+                                http="viewdb.http.protocol:DeadlineH11Protocol")
         if ready is not None:
             ready(f"http://{shown}:{bound_port}", objects)
         if workers > 1:

@@ -101,6 +101,10 @@ def _finite(value: Any) -> Any:
     return value
 
 
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not allowed in JSON")
+
+
 def _data_url(kind: str, data: bytes) -> str:
     return f"data:{kind};base64,{base64.b64encode(data).decode('ascii')}"
 
@@ -149,14 +153,15 @@ def _int_field(form: Any, name: str, default: int, low: int, high: int) -> int:
 
 
 # ------------------------------------------------------------------ the query
-def _decode(data: bytes, name: str) -> tuple[NDArray[np.uint8], NDArray[np.uint8] | None]:
+def _decode(data: bytes, name: str, max_pixels: int = IMAGE_LIMITS.max_pixels
+            ) -> tuple[NDArray[np.uint8], NDArray[np.uint8] | None]:
     """The uploaded photo as RGB (+ alpha), upright (its EXIF orientation applied); an
     :class:`ImageError` names the upload, not a temporary file."""
     with tempfile.TemporaryDirectory(prefix="viewdb-upload-") as folder:
         path = Path(folder) / "photo"
         path.write_bytes(data)
         try:
-            loaded = load_image(path)
+            loaded = load_image(path, max_pixels=max_pixels)
         except ImageError as exc:
             raise ImageError(exc.message, name) from exc
     return loaded.rgb, loaded.alpha
@@ -182,10 +187,12 @@ def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], confi
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
-                 prompts: dict[str, Any] | None = None) -> dict[str, Any]:
+                 max_pixels: int = IMAGE_LIMITS.max_pixels, prompts: dict[str, Any] | None = None
+                 ) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread.
-    ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
-    rgb, alpha = _decode(data, name)
+    A photo of more than ``max_pixels`` pixels is refused from its header. ``prompts``: the
+    query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
+    rgb, alpha = _decode(data, name, max_pixels)
     image = rgb if alpha is None else np.dstack([rgb, alpha])
     try:
         result = db.query(image, k=k, plan=plan, **(prompts or {})).to_dict()
@@ -237,7 +244,8 @@ def _prompt_fields(form: Any) -> dict[str, Any]:
             "max_objects": prompts.max_objects}
 
 
-def _overlay_request(data: Any) -> tuple[dict[str, Any], tuple[int, int]]:
+def _overlay_request(data: Any, max_pixels: int = IMAGE_LIMITS.max_pixels
+                     ) -> tuple[dict[str, Any], tuple[int, int]]:
     """The result and photo size of a ``POST /overlay`` body, checked."""
     if not isinstance(data, dict) or not isinstance(data.get("result"), dict):
         raise HTTPException(422, "expected {\"result\": <one result of POST /query>, \"width\": int, "
@@ -249,21 +257,24 @@ def _overlay_request(data: Any) -> tuple[dict[str, Any], tuple[int, int]]:
             raise HTTPException(422, f"{key} must be the photo's {key} in pixels (16 to 100000), "
                                      f"got {value!r}")
         size.append(value)
-    if size[0] * size[1] > IMAGE_LIMITS.max_pixels:
+    if size[0] * size[1] > max_pixels:
         raise HTTPException(422, f"a photo of {size[1]}x{size[0]} pixels is larger than any query accepts")
     result = data["result"]
     if not isinstance(result.get("object"), str) or not isinstance(result.get("pose"), dict):
         raise HTTPException(422, "the result needs its object's name and its pose")
     try:
         OverlayPose.from_json(result)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise HTTPException(422, f"the result's pose is not a pose: {exc}") from exc
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:  # 1e400 parses as inf
+        why = " ".join(str(exc).split())[:160]
+        raise HTTPException(422, f"the result's pose is not a pose: {why}") from exc
     return result, (size[0], size[1])
 
 
 # ------------------------------------------------------------------ the router
-def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = None) -> APIRouter:
-    """The endpoints of the page (see the module doc), behind ``guarded`` (the token)."""
+def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = None, *,
+               max_pixels: int = IMAGE_LIMITS.max_pixels) -> APIRouter:
+    """The endpoints of the page (see the module doc), behind ``guarded`` (the token);
+    photos of more than ``max_pixels`` pixels are refused from their header."""
     config = config or WebConfig()
     router = APIRouter(dependencies=guarded)
     errors = {code: {"model": models.ErrorModel, "description": what} for code, what in (
@@ -271,12 +282,13 @@ def web_router(run: Runner[Any], guarded: list[Any], config: WebConfig | None = 
         (413, "the photo is over the server's limit"),
         (422, "the photo is not an image, shows no object, or an option is out of range"),
     )}
-    _photo_routes(router, run, config, errors)
+    _photo_routes(router, run, config, errors, max_pixels)
     _object_routes(router, run, config, errors)
     return router
 
 
-def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any]) -> None:
+def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors: dict[Any, Any],
+                  max_pixels: int) -> None:
     """``POST /query`` and ``POST /overlay``: a photo's answer and one result's overlay."""
 
     @router.post("/query", responses={200: {"model": models.WebQueryReplyModel}, **errors},
@@ -300,7 +312,8 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
         if not data:
             raise HTTPException(422, f"{name}: empty file, not an image")
         try:
-            out, _ = await run(lambda db: answer_query(db, data, name, plan, k, config, prompts))
+            out, _ = await run(lambda db: answer_query(db, data, name, plan, k, config, max_pixels,
+                                                       prompts))
         except ImageError as exc:
             raise HTTPException(422, str(exc)) from exc
         return out
@@ -311,10 +324,10 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
                  summary="One result's overlay, to lay over the photo as POST /query shows it")
     async def overlay(request: Request) -> Response:
         try:
-            data = json.loads(await request.body() or b"null")
-        except ValueError as exc:
+            data = json.loads(await request.body() or b"null", parse_constant=_no_constant)
+        except (ValueError, RecursionError) as exc:
             raise HTTPException(400, f"body is not valid JSON: {exc}") from exc
-        result, shape = _overlay_request(data)
+        result, shape = _overlay_request(data, max_pixels)
         png, _ = await run(lambda db: draw_layer(db, result, shape, config))
         return Response(png, media_type="image/png")
 

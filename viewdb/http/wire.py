@@ -28,8 +28,9 @@ from PIL import Image
 from ..config import ImageConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
+from ..pose.intrinsics import check_intrinsics
 from ..recognition.colour import BINS
-from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite
+from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite, stats_from_dict
 from ..typed import Intrinsics
 
 __all__ = [
@@ -92,11 +93,8 @@ def _number(x: float) -> float | None:
 
 
 def _back(x: Any, what: str) -> float:
-    if x is None:
-        return math.nan
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise QueryError(f"pose {what} must be a number")
-    return float(x)
+    """A pose number as sent (null for a non-finite one)."""
+    return math.nan if x is None else _finite(x, f"pose {what}")
 
 
 def pose_to_dict(p: PoseEstimate) -> dict[str, Any]:
@@ -139,12 +137,9 @@ def pose_from_dict(data: Any) -> PoseEstimate:
 def _intrinsics(x: Any) -> Intrinsics | None:
     if x is None:
         return None
-    if not isinstance(x, list) or len(x) != 4:
+    if not isinstance(x, list):
         raise QueryError("intrinsics must be null or [fx, fy, cx, cy]")
-    fx, fy, cx, cy = (_finite(v, "intrinsics") for v in x)
-    if not (fx > 0 and fy > 0):
-        raise QueryError("intrinsics fx and fy must be positive")
-    return fx, fy, cx, cy
+    return check_intrinsics(x)
 
 
 @dataclass(frozen=True)
@@ -226,8 +221,7 @@ class PoseReply:
             if error is not None and not isinstance(error, str):
                 raise QueryError("pose error must be a string")
             out.append((None if pose is None else pose_from_dict(pose), error))
-        stats = data.get("stats", {})
-        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+        return cls(out, stats_from_dict(data.get("stats")))
 
 
 def _image(data: dict[str, Any]) -> bytes:
@@ -306,8 +300,7 @@ class ColourReply:
             if (values < 0).any():
                 raise QueryError("signature values must not be negative")
             out.append(values.reshape(BINS, BINS))
-        stats = data.get("stats", {})
-        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+        return cls(out, stats_from_dict(data.get("stats")))
 
 
 @dataclass(frozen=True)
@@ -359,5 +352,4 @@ class FitReply:
             if not 0.0 <= value <= 1.0:
                 raise QueryError(f"each fit must be in [0, 1], not {value}")
             out.append(value)
-        stats = data.get("stats", {})
-        return cls(out, {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+        return cls(out, stats_from_dict(data.get("stats")))

@@ -46,7 +46,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
-from ..errors import PoseError
+from ..errors import PoseError, QueryError
+from .intrinsics import check_intrinsics
 
 __all__ = [
     "CAMERA_DISTANCE",
@@ -181,12 +182,14 @@ def view_plane(xy: NDArray[np.floating], image_size: int, xmag: float) -> NDArra
 
 
 def intrinsics_matrix(intrinsics: Sequence[float]) -> NDArray[np.float64]:
-    """The 3×3 camera matrix of ``(fx, fy, cx, cy)``; ``PoseError`` unless ``fx, fy > 0``
-    and ``cx, cy`` are finite."""
+    """The 3×3 camera matrix of ``(fx, fy, cx, cy)``; ``PoseError`` unless they are a
+    camera within :data:`~viewdb.config.LIMITS` (:func:`~viewdb.pose.intrinsics.check_intrinsics`)."""
     try:
-        fx, fy, cx, cy = (float(x) for x in intrinsics)
-    except (TypeError, ValueError) as exc:
-        raise PoseError(f"intrinsics must be four numbers (fx, fy, cx, cy), got {intrinsics!r}") from exc
-    if not (fx > 0 and fy > 0 and math.isfinite(cx) and math.isfinite(cy)):
-        raise PoseError(f"intrinsics need fx, fy > 0 and finite cx, cy, got {intrinsics!r}")
+        values = tuple(intrinsics)
+    except TypeError:
+        values = ()
+    try:
+        fx, fy, cx, cy = check_intrinsics(values)
+    except QueryError as exc:
+        raise PoseError(exc.message) from exc
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])

@@ -12,17 +12,18 @@ Accepted (pixels, OpenCV convention: pixel centres on integers, no distortion):
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..config import LIMITS, finite
 from ..errors import QueryError
+from ..paths import not_regular, open_regular
 from ..typed import Intrinsics
 
-__all__ = ["Intrinsics", "parse_intrinsics"]
+__all__ = ["Intrinsics", "check_intrinsics", "parse_intrinsics"]
 
 #: Keys a camera matrix may be stored under.
 MATRIX_KEYS = ("K", "k", "camera_matrix", "cameraMatrix", "intrinsics", "intrinsic_matrix")
@@ -50,7 +51,7 @@ def parse_intrinsics(value: str | os.PathLike[str] | Any) -> Intrinsics:
         if len(numbers) != 4:
             raise QueryError(f"intrinsics {value!r}: expected fx,fy,cx,cy (four numbers) or a "
                              "JSON/YAML file")
-        return _check(numbers, None)
+        return check_intrinsics(numbers, None)
     if isinstance(value, (list, tuple, np.ndarray)):
         try:
             value = np.asarray(value, dtype=np.float64).ravel().tolist()
@@ -63,11 +64,20 @@ def _looks_numeric(text: str) -> bool:
     return all(c in "0123456789.,+-eE \t" for c in text) and "," in text
 
 
+#: An intrinsics file is a few numbers; a larger file is not one.
+MAX_FILE_BYTES = 1 << 20
+
+
 def _from_file(path: Path) -> Intrinsics:
-    if not path.is_file():
-        raise QueryError("intrinsics file not found", path)
+    why = not_regular(path)
+    if why is not None:
+        raise QueryError("intrinsics file not found" if why == "does not exist" else why, path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with open_regular(path) as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            raise QueryError(f"is over {MAX_FILE_BYTES:,} bytes: not an intrinsics file", path)
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise QueryError(f"cannot read the intrinsics file: {exc}", path) from exc
     if path.suffix.lower() in (".yaml", ".yml"):
@@ -88,7 +98,7 @@ def _from_file(path: Path) -> Intrinsics:
 def _from_data(data: Any, path: Path | None) -> Intrinsics:
     if isinstance(data, dict):
         if all(key in data for key in ("fx", "fy", "cx", "cy")):
-            return _check([data["fx"], data["fy"], data["cx"], data["cy"]], path)
+            return check_intrinsics([data["fx"], data["fy"], data["cx"], data["cy"]], path)
         for key in MATRIX_KEYS:
             if key in data:
                 return _from_data(data[key], path)
@@ -101,14 +111,14 @@ def _from_data(data: Any, path: Path | None) -> Intrinsics:
         if flat is None:
             raise QueryError("intrinsics must be numbers", path)
         if len(flat) == 4:
-            return _check(flat, path)
+            return check_intrinsics(flat, path)
         if len(flat) == 9:
             if any(abs(float(a) - b) > 1e-9 for a, b in zip(flat[6:], (0.0, 0.0, 1.0), strict=True)):
                 raise QueryError(f"camera matrix's last row must be 0 0 1, got {flat[6:]}", path)
             if abs(float(flat[1])) > 1e-9 or abs(float(flat[3])) > 1e-9:
                 raise QueryError("camera matrix with skew or shear is not supported "
                                  f"(K[0][1] = {flat[1]}, K[1][0] = {flat[3]})", path)
-            return _check([flat[0], flat[4], flat[2], flat[5]], path)
+            return check_intrinsics([flat[0], flat[4], flat[2], flat[5]], path)
         raise QueryError(f"expected a 3x3 camera matrix or four numbers, got {len(flat)} numbers", path)
     raise QueryError(f"no intrinsics found in a {type(data).__name__}", path)
 
@@ -128,13 +138,18 @@ def _flatten(data: Any) -> list[Any] | None:
     return out
 
 
-def _check(values: list[Any], path: Path | None) -> Intrinsics:
+def check_intrinsics(values: Any, path: Path | None = None) -> Intrinsics:
+    """``(fx, fy, cx, cy)`` from four numbers, refused unless they are a camera within
+    :data:`~viewdb.config.LIMITS` (focal lengths in ``[min_focal, max_focal]`` pixels, the
+    principal point within ``max_principal`` pixels of the origin); the one check of every
+    way intrinsics come in (text, file, array, HTTP)."""
+    if not isinstance(values, list | tuple | np.ndarray) or len(values) != 4:
+        raise QueryError(f"intrinsics must be four numbers fx, fy, cx, cy, got {values!r}"[:200], path)
     try:
-        fx, fy, cx, cy = (float(v) for v in values)
-    except (TypeError, ValueError) as exc:
-        raise QueryError(f"intrinsics must be numbers, got {values!r}", path) from exc
-    if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)
-            and math.isfinite(cx) and math.isfinite(cy)):
-        raise QueryError(f"intrinsics need fx, fy > 0 and finite cx, cy; got fx={fx:g}, fy={fy:g}, "
-                         f"cx={cx:g}, cy={cy:g}", path)
+        fx, fy = (finite(v, name, LIMITS.min_focal, LIMITS.max_focal)
+                  for v, name in zip(values[:2], ("fx", "fy"), strict=True))
+        cx, cy = (finite(v, name, -LIMITS.max_principal, LIMITS.max_principal)
+                  for v, name in zip(values[2:], ("cx", "cy"), strict=True))
+    except ValueError as exc:
+        raise QueryError(f"intrinsics {exc} (pixels)", path) from exc
     return fx, fy, cx, cy

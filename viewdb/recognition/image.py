@@ -48,6 +48,7 @@ from PIL import Image, UnidentifiedImageError
 
 from ..config import ImageConfig
 from ..errors import ImageError
+from ..paths import open_regular
 
 __all__ = ["LoadedImage", "check_size", "describe_error", "load_image"]
 
@@ -184,7 +185,7 @@ def _from_file(path: Path, max_pixels: int) -> tuple[NDArray[np.uint8], NDArray[
             raise ImageError("no such file", name)
         if not path.is_file():
             raise ImageError("not a regular file", name)
-        with open(path, "rb") as f:
+        with open_regular(path) as f:
             width, height, orientation = _read_header(f, name)
             check_size(width, height, max_pixels, name)
             f.seek(0)

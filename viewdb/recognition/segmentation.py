@@ -67,6 +67,7 @@ larger than ``max_object_fraction`` of it (no background found).
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,6 +79,7 @@ from PIL import Image, UnidentifiedImageError
 from ..catalogue.features import distance_curve
 from ..config import SegmentationConfig
 from ..errors import FeatureError, ImageError
+from ..paths import open_regular
 from .image import DEFAULTS as IMAGE_DEFAULTS
 from .image import LoadedImage, check_size, describe_error, load_image
 
@@ -222,9 +224,14 @@ def read_label_map(label_map: np.ndarray | str | os.PathLike[str], image: Loaded
         if not path.is_file():
             raise ImageError("label map not found", path)
         try:
-            with Image.open(path) as im:
-                check_size(im.width, im.height, IMAGE_DEFAULTS.max_pixels, str(path))
-                arr = np.asarray(im)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # DecompressionBombWarning: the size is checked here
+                with open_regular(path) as f, Image.open(f) as im:
+                    check_size(im.width, im.height, IMAGE_DEFAULTS.max_pixels, str(path))
+                    arr = np.asarray(im)
+        except Image.DecompressionBombError as exc:
+            raise ImageError(f"label map too large ({describe_error(exc)}; refused as a possible "
+                             "decompression bomb)", path) from exc
         except (OSError, UnidentifiedImageError, ValueError) as exc:
             raise ImageError(f"cannot read the label map: {describe_error(exc)}", path) from exc
     else:

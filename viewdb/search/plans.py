@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.features import mirror_curve
+from ..config import LIMITS, finite
 from ..errors import QueryError
 from .bounds import dtw
 from .knn import Neighbour, SearchStats, TierSource, knn
@@ -49,33 +50,54 @@ __all__ = [
 PLANS = ("server", "cs1", "cs2")
 
 
-def _finite(x: Any, what: str) -> float:
+def _finite(x: Any, what: str, low: float = -math.inf, high: float = math.inf) -> float:
+    """A JSON number (not a string or a boolean) that is finite and in ``[low, high]``."""
     try:
-        value = float(x)
-    except (TypeError, ValueError) as exc:
-        raise QueryError(f"{what} must be a number, got {x!r}") from exc
-    if not math.isfinite(value):
-        raise QueryError(f"{what} must be finite, got {x!r}")
-    return value
+        return finite(x, what, low, high)
+    except ValueError as exc:
+        raise QueryError(str(exc)) from None
+
+
+def stats_from_dict(stats: Any) -> dict[str, float]:
+    """A reply's ``stats``: its finite numbers by name (anything else is left out; the
+    counters are for reading, never for deciding)."""
+    if not isinstance(stats, dict):
+        return {}
+    out = {}
+    for key, value in list(stats.items())[:64]:
+        try:
+            out[str(key)[:64]] = finite(value, "stat")
+        except ValueError:
+            continue
+    return out
 
 
 def _int(x: Any, what: str, low: int, high: int) -> int:
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
-        raise QueryError(f"{what} must be an integer, got {x!r}")
+        raise QueryError(f"{what} must be an integer, got {x!r}"[:120])
     if not low <= int(x) <= high:
-        raise QueryError(f"{what} must be in [{low}, {high}], got {x}")
+        raise QueryError(f"{what} must be in [{low}, {high}], got {x}"[:120])
     return int(x)
 
 
 def _curve(x: Any, samples: int | None = None) -> NDArray[np.float64]:
+    """A distance curve: a list of numbers (not strings or booleans), each finite and in
+    ``[0, n]`` (a curve has mean 1, so no sample of an ``n``-sample curve exceeds ``n``)."""
+    numeric = (isinstance(x, np.ndarray) and x.dtype.kind in "iuf") or (
+        isinstance(x, list) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in x))
+    if not numeric:
+        raise QueryError("curve must be a list of numbers")
     try:
         curve = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise QueryError("curve must be a list of numbers") from exc
+    except OverflowError:  # an integer beyond any float
+        raise QueryError("curve must contain only finite numbers") from None
     if curve.ndim != 1 or len(curve) < 8 or (samples is not None and len(curve) != samples):
         raise QueryError(f"curve must have {samples or 'at least 8'} samples, got shape {curve.shape}")
     if not np.all(np.isfinite(curve)):
         raise QueryError("curve must contain only finite numbers")
+    if curve.min() < 0 or curve.max() > len(curve):
+        raise QueryError(f"curve samples must be in [0, {len(curve)}] (a distance curve has mean 1), "
+                         f"got {curve.min():g} to {curve.max():g}")
     return curve
 
 
@@ -128,10 +150,10 @@ class Candidate:
             camera = data.get("camera_distance")
             if camera is not None and (
                 isinstance(camera, bool) or not isinstance(camera, (int, float))
-                or not _finite(camera, "candidate camera_distance") > 1
+                or not 1 < _finite(camera, "candidate camera_distance") <= LIMITS.max_perspective_distance
             ):
-                raise QueryError(f"candidate camera_distance must be a number greater than 1, "
-                                 f"got {camera!r}")
+                raise QueryError(f"candidate camera_distance must be a number greater than 1 and at "
+                                 f"most {LIMITS.max_perspective_distance:g}, got {camera!r}"[:160])
             return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
                        _finite(data["elevation"], "candidate elevation"), mirrored, version,
                        None if camera is None else float(camera))
@@ -219,9 +241,7 @@ class ServerReply:
     def from_dict(cls, data: Any) -> ServerReply:
         if not isinstance(data, dict) or not isinstance(data.get("results"), list):
             raise QueryError("reply must be an object with a results list")
-        stats = data.get("stats", {})
-        return cls(_candidates(data["results"], MAX_K),
-                   {str(k): float(v) for k, v in stats.items()} if isinstance(stats, dict) else {})
+        return cls(_candidates(data["results"], MAX_K), stats_from_dict(data.get("stats")))
 
 
 def refine(
@@ -307,7 +327,19 @@ def walk(
         if math.isfinite(best):
             results.append(Candidate(cand.object, best, h, v, mirrored))
     results.sort(key=lambda c: (c.distance, c.object))
-    return results[: request.k], {"dtw": float(2 * len(evaluated))}
+    return _one_per_object(results)[: request.k], {"dtw": float(2 * len(evaluated))}
+
+
+def _one_per_object(ranked: Sequence[Candidate]) -> list[Candidate]:
+    """The first (best) candidate of each object, in order: a client that names an object
+    twice (two starting views) gets it back once."""
+    seen: set[str] = set()
+    out = []
+    for c in ranked:
+        if c.object not in seen:
+            seen.add(c.object)
+            out.append(c)
+    return out
 
 
 def neighbours_to_candidates(

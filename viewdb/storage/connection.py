@@ -32,7 +32,8 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
 
 from ..config import BuildConfig
-from ..errors import SchemaMismatch, StorageError
+from ..errors import SchemaMismatch, StorageError, UpgradeNeeded
+from ..paths import not_regular
 from . import schema as s
 
 __all__ = ["READ_ONLY_COMPATIBLE", "Database", "alembic_config", "known_revisions", "read_only_uri"]
@@ -114,6 +115,37 @@ def read_only_uri(path: Path) -> str:
     return base
 
 
+def _peek(path: Path) -> tuple[str | None, int]:
+    """``(schema revision or None, number of tables)`` of an existing file, read through a
+    read-only connection: one that may write switches the file to WAL (changing its
+    header) before anything could tell it is another program's database."""
+    try:
+        conn = sqlite3.connect(read_only_uri(path), uri=True)
+    except sqlite3.Error as exc:
+        raise StorageError(f"cannot be opened: {exc}", path) from exc
+    try:
+        names = {str(r[0]) for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        row = (conn.execute("SELECT version_num FROM alembic_version").fetchone()
+               if "alembic_version" in names else None)
+    except sqlite3.DatabaseError as exc:
+        raise StorageError(f"database is corrupt or unreadable: {exc}", path) from exc
+    finally:
+        conn.close()
+    return (None if row is None else str(row[0])), len(names)
+
+
+def _recognise(path: Path, revision: str | None, tables: int) -> None:
+    """Refuse a file that is not a viewdb database (tables but no schema revision) or
+    was written by a newer viewdb."""
+    if revision is None and tables:
+        raise StorageError("is an SQLite file but not a viewdb database (no schema version)", path)
+    if revision is not None and revision not in known_revisions():
+        raise SchemaMismatch(
+            f"was written by a newer viewdb (schema revision {revision}; this viewdb "
+            f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it", path,
+        )
+
+
 class Database:
     """An open database file: its connections, schema revision and transactions."""
 
@@ -129,11 +161,15 @@ class Database:
         self._initial = initial
         self._create = create
         self.read_only = read_only
-        exists = self.path.exists() and self.path.stat().st_size > 0
+        why = not_regular(self.path)
+        if why not in (None, "does not exist"):  # a FIFO would block SQLite for good
+            raise StorageError(why or "", self.path)
+        exists = why is None and self.path.stat().st_size > 0
         if not exists and (read_only or not create):
             raise StorageError("no such database", self.path)
         if exists:
             self._check_header()
+            _recognise(self.path, *_peek(self.path))  # before a connection that may write
         elif not self.path.parent.exists():
             raise StorageError("its folder does not exist", self.path)
         #: TEMP tables standing in for what an older file lacks (read-only opens only).
@@ -229,16 +265,9 @@ class Database:
                 tables = conn.exec_driver_sql(
                     "SELECT count(*) FROM sqlite_master WHERE type='table'"
                 ).scalar_one()
-            if tables:
-                raise StorageError(
-                    "is an SQLite file but not a viewdb database (no schema version)", self.path
-                )
-        elif current not in known_revisions():
-            raise SchemaMismatch(
-                f"was written by a newer viewdb (schema revision {current}; this viewdb "
-                f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it",
-                self.path,
-            )
+            _recognise(self.path, None, int(tables))
+        else:
+            _recognise(self.path, current, 1)
         if current is None and (self.read_only or not self._create):
             # an SQLite file without tables: a creation killed before its first commit;
             # only a caller that may create a file makes it a database (with its settings)
@@ -249,7 +278,7 @@ class Database:
                 self._stand_ins = READ_ONLY_COMPATIBLE[current]
                 self.engine.dispose()  # the next connections get the stand-ins
                 return
-            raise StorageError(
+            raise UpgradeNeeded(
                 f"has schema revision {current}, older than this viewdb's {s.SCHEMA_REVISION}: "
                 "open it once without read-only (e.g. viewdb info --db FILE) to upgrade it",
                 self.path,

@@ -49,6 +49,8 @@ def export_client(
         raise ViewDBError("is a client database; export from the full database", source.path)
     if out.exists():
         raise ViewDBError("already exists; remove it or choose another --out", out)
+    if not out.parent.is_dir():
+        raise ViewDBError("its folder does not exist", out)
     try:
         client = replace(config, index=replace(
             config.index, client_gap=float(client_gap) if client_gap is not None else config.client_gap))

@@ -33,12 +33,31 @@ from .spatial import FourierIndex
 from .store import Store
 from .tiers import TIERS
 
-__all__ = ["CheckReport", "check_store"]
+__all__ = ["CheckReport", "check_store", "missing_schema"]
 
 #: How far a stored Fourier point may be from the DFT of its stored curve.
 FOURIER_TOLERANCE = 1e-9
 #: Problems listed in full before the rest are only counted.
 MAX_LISTED = 50
+
+
+def missing_schema(store: Store) -> list[str]:
+    """The tables and columns of the schema the file lacks (``"table curves"``,
+    ``"column views.azimuth"``); TEMP stand-ins of a read-only open count as present. A
+    file someone damaged (a table dropped) is refused on opening with these, instead of
+    failing somewhere later, or worse, answering queries without its curves."""
+    out = []
+    with store.read() as conn:
+        present = {str(r[0]) for r in conn.exec_driver_sql(
+            "SELECT name FROM sqlite_master WHERE type='table' "
+            "UNION SELECT name FROM sqlite_temp_master WHERE type='table'")}
+        for table in s.metadata.sorted_tables:
+            if table.name not in present:
+                out.append(f"table {table.name}")
+                continue
+            columns = {str(r[1]) for r in conn.exec_driver_sql(f'PRAGMA table_info("{table.name}")')}
+            out += [f"column {table.name}.{c.name}" for c in table.columns if c.name not in columns]
+    return out
 
 
 @dataclass
