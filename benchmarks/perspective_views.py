@@ -33,7 +33,7 @@ from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
 from viewdb.camera import camera_pose, grid_views
 from viewdb.catalogue.features import distance_curve
 from viewdb.catalogue.gl import pyrender_module
-from viewdb.catalogue.render import _offscreen
+from viewdb.catalogue.render import offscreen
 from viewdb.errors import FeatureError
 from viewdb.recognition.image import load_image
 from viewdb.recognition.segmentation import segment
@@ -63,7 +63,7 @@ def silhouette_curves(db, name: str, gap: int, distances: list[float | None]) ->
         curves = out[d] = []
         for h, v in grid_views(gap):
             scene.set_pose(node, camera_pose(h, v, away))
-            depth = np.asarray(_offscreen(SIZE).render(scene, flags=flags))
+            depth = np.asarray(offscreen(SIZE).render(scene, flags=flags))
             try:
                 curves.append(distance_curve(depth > 0, SAMPLES))
             except FeatureError:

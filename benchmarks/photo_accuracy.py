@@ -38,7 +38,7 @@ import viewdb
 from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 from viewdb.camera import camera_pose
 from viewdb.catalogue.gl import pyrender_module
-from viewdb.catalogue.render import _offscreen, pyrender_mesh
+from viewdb.catalogue.render import offscreen, pyrender_mesh
 from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 
 
@@ -56,7 +56,7 @@ def true_mask(mesh, spec: PhotoSpec) -> np.ndarray:
                                         znear=max(0.05, spec.distance - 1.5), zfar=spec.distance + 1.5)
     scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
     flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
-    return np.asarray(_offscreen(spec.image_size).render(scene, flags=flags)) > 0
+    return np.asarray(offscreen(spec.image_size).render(scene, flags=flags)) > 0
 
 
 def pnp_pose(db, photo: np.ndarray, spec: PhotoSpec) -> tuple[float, float, str, str, float]:

@@ -98,7 +98,9 @@ def test_silhouette_equals_the_orthographic_render(db, name, h, v):
 def test_turned_scaled_and_moved_pose_matches_the_warped_render(db, name, h, v, turn, scale, dx, dy):
     """A photo made by turning the view counter-clockwise on screen, scaling and moving
     it (as the demo photo is made) has the pose the contract describes; its drawn
-    silhouette is the photo's to within the warp's own resampling (a pixel)."""
+    silhouette is the photo's to within the warp's own resampling (a pixel of either
+    outline: shrinking a render drops or keeps thin parts, a chair's legs, by where the
+    samples fall, and a dropped part is then the drawing's alone)."""
     size = 256
     truth = get_renderer(RenderConfig(image_size=size)).render(db.mesh(name), h, v).mask
     m = cv2.getRotationMatrix2D(((size - 1) / 2, (size - 1) / 2), turn, scale)
@@ -106,7 +108,8 @@ def test_turned_scaled_and_moved_pose_matches_the_warped_render(db, name, h, v, 
     warped = cv2.warpAffine(truth.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
     mine = project_silhouette(ortho(name, h, v, turn, scale, (dx, dy), size), db.mesh(name), (size, size))
     wrong = warped ^ mine
-    assert edge_distance(warped)[wrong].max(initial=0) <= 1.5
+    near_an_outline = np.minimum(edge_distance(warped), edge_distance(mine))
+    assert near_an_outline[wrong].max(initial=0) <= 1.5
 
 
 @settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])

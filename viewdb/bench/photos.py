@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from ..camera import camera_pose
 from ..catalogue.gl import pyrender_module
 from ..catalogue.mesh import NormalisedMesh
-from ..catalogue.render import RenderedView, _offscreen, _reraise_interrupt, pyrender_mesh
+from ..catalogue.render import RenderedView, offscreen, pyrender_mesh, reraise_interrupt
 from ..errors import RenderError
 
 __all__ = ["PhotoSpec", "composite_photo", "draw_photo_spec", "encode_jpeg", "render_photo", "table_photo"]
@@ -103,11 +103,11 @@ def render_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
         light = pyrender.DirectionalLight(color=np.ones(3), intensity=spec.light_intensity)
         scene.add(light, pose=camera_pose(spec.azimuth + spec.light_azimuth,
                                           spec.elevation + spec.light_elevation, 1.0))
-        gl = _offscreen(size)
+        gl = offscreen(size)
         flags = pyrender.RenderFlags
         color, _ = gl.render(scene, flags=flags.SKIP_CULL_FACES)
     except Exception as exc:
-        _reraise_interrupt(exc)
+        reraise_interrupt(exc)
         raise RenderError(f"rendering a photo of {mesh.name!r} failed: {exc}") from exc
     rgb = np.asarray(color)[:, :, :3].astype(np.float64)
     noise = np.random.default_rng(spec.noise_seed).normal(0.0, spec.noise, rgb.shape)

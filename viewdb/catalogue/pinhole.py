@@ -24,7 +24,7 @@ from ..interrupts import interrupts_held
 from ..typed import Intrinsics
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
-from .render import _reraise_interrupt, render_depth
+from .render import render_depth, reraise_interrupt
 
 __all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
 
@@ -95,7 +95,7 @@ class PinholeRenderer:
                 geometry = mesh.geometry
                 self._mesh_node = scene.add(pyrender.Mesh.from_trimesh(geometry, smooth=False))
         except Exception as exc:
-            _reraise_interrupt(exc)
+            reraise_interrupt(exc)
             raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
         self._scene = scene
         self._camera_node = None

@@ -28,7 +28,10 @@ from ..interrupts import interrupts_held
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 
-__all__ = ["RenderedView", "Renderer", "get_renderer", "headlight_shading", "render_depth"]
+__all__ = [
+    "RenderedView", "Renderer", "get_renderer", "headlight_shading", "offscreen", "render_depth",
+    "reraise_interrupt",
+]
 
 #: A depth step larger than this many pixel widths between neighbours is an occlusion edge.
 DEPTH_JUMP_PIXELS = 6.0
@@ -107,7 +110,7 @@ def orthographic_depth(
     return out.astype(np.float32)
 
 
-def _reraise_interrupt(exc: Exception) -> None:
+def reraise_interrupt(exc: Exception) -> None:
     """Ctrl-C inside a ctypes call into GL surfaces as ``ctypes.ArgumentError`` naming
     KeyboardInterrupt; it must stay an interrupt, not become a RenderError."""
     if "KeyboardInterrupt" in str(exc):
@@ -133,7 +136,7 @@ class Renderer:
             scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
             scene.add(pyrender_mesh(mesh))
         except Exception as exc:
-            _reraise_interrupt(exc)
+            reraise_interrupt(exc)
             raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
         camera = pyrender.OrthographicCamera(
             xmag=cfg.xmag, ymag=cfg.xmag, znear=cfg.znear, zfar=cfg.zfar
@@ -183,7 +186,7 @@ class Renderer:
         pose = camera_pose(azimuth, elevation, cfg.camera_distance)
         assert self._scene is not None
         self._scene.set_pose(self._camera_node, pose)
-        gl = _offscreen(cfg.image_size)
+        gl = offscreen(cfg.image_size)
         try:
             if shaded:
                 albedo, depth = gl.render(
@@ -195,7 +198,7 @@ class Renderer:
                 )
                 albedo = None
         except Exception as exc:
-            _reraise_interrupt(exc)
+            reraise_interrupt(exc)
             raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
         mask = np.asarray(depth) > 0
         depth = orthographic_depth(np.asarray(depth), mask, cfg.znear, cfg.zfar)
@@ -213,12 +216,12 @@ def render_depth(scene, size: int, name: str) -> NDArray[np.float32]:  # type: i
     """Depth only (both faces) of ``scene`` through its main camera, ``size`` pixels square;
     GL failures become a :class:`RenderError` naming the object ``name``."""
     pyrender = pyrender_module()
-    gl = _offscreen(size)
+    gl = offscreen(size)
     try:
         depth = gl.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY
                           | pyrender.RenderFlags.SKIP_CULL_FACES)
     except Exception as exc:
-        _reraise_interrupt(exc)
+        reraise_interrupt(exc)
         raise RenderError(f"rendering {name!r} failed: {exc}") from exc
     return np.asarray(depth, dtype=np.float32)
 
@@ -246,7 +249,7 @@ def pyrender_mesh(mesh: NormalisedMesh):  # type: ignore[no-untyped-def]
 _LOCAL = threading.local()
 
 
-def _offscreen(size: int):  # type: ignore[no-untyped-def]
+def offscreen(size: int):  # type: ignore[no-untyped-def]
     """This thread's one pyrender OffscreenRenderer, resized to ``size`` if needed.
 
     Several EGL renderers in one process share a display, and deleting one terminates it

@@ -69,13 +69,13 @@ from rtree.exceptions import RTreeError
 from ..errors import NotFound, StorageError
 from ..interrupts import interrupts_held
 
-__all__ = ["FourierIndex", "SqlitePageStorage", "ensure_table"]
+__all__ = ["FourierIndex", "SqlitePageStorage", "ensure_table", "raw_connection"]
 
 #: Pages of libspatialindex nodes kept in memory per open index (a cache; see ``writethrough``).
 DEFAULT_BUFFER_PAGES = 4096
 
 
-def _raw(conn: Any) -> sqlite3.Connection:
+def raw_connection(conn: Any) -> sqlite3.Connection:
     """A sqlite3 connection from a sqlite3 or SQLAlchemy connection."""
     if isinstance(conn, sqlite3.Connection):
         return conn
@@ -87,7 +87,7 @@ def _raw(conn: Any) -> sqlite3.Connection:
 
 def ensure_table(conn: Any) -> None:
     """Create ``rtree_pages`` and ``rtree_meta`` if missing (does not commit)."""
-    c = _raw(conn)
+    c = raw_connection(conn)
     c.execute(
         "CREATE TABLE IF NOT EXISTS rtree_pages ("
         " tier TEXT NOT NULL, page INTEGER NOT NULL, data BLOB NOT NULL,"
@@ -119,7 +119,7 @@ class SqlitePageStorage(rtree.index.CustomStorage):
     """
 
     def __init__(self, conn: Any, tier: str) -> None:
-        self.conn = _raw(conn)
+        self.conn = raw_connection(conn)
         self.tier = str(tier)
         self.detached = False
         self.error: BaseException | None = None
@@ -240,7 +240,7 @@ class FourierIndex:
         buffer_pages: int = DEFAULT_BUFFER_PAGES,
         writethrough: bool = False,
     ) -> None:
-        self.conn = _raw(conn)
+        self.conn = raw_connection(conn)
         self.tier = str(tier)
         self.dimension = int(dimension)
         self._options = {
@@ -287,7 +287,7 @@ class FourierIndex:
         cls, conn: Any, tier: str, dimension: int, **options: Any
     ) -> FourierIndex:
         """A new, empty tree ``tier`` (an existing one of that name is an error)."""
-        c = _raw(conn)
+        c = raw_connection(conn)
         ensure_table(c)
         if int(dimension) < 1:
             raise ValueError("dimension must be >= 1")
@@ -309,7 +309,7 @@ class FourierIndex:
     ) -> FourierIndex:
         """A new tree ``tier`` built by libspatialindex's STR bulk loader (much faster and
         better packed than inserting one by one)."""
-        c = _raw(conn)
+        c = raw_connection(conn)
         ensure_table(c)
         pts = np.asarray(points, dtype=np.float64)
         ids_arr = np.asarray(list(ids) if not isinstance(ids, np.ndarray) else ids, np.int64)
@@ -330,7 +330,7 @@ class FourierIndex:
     @classmethod
     def open(cls, conn: Any, tier: str, **options: Any) -> FourierIndex:
         """The stored tree ``tier``, read as it is (nothing rebuilt)."""
-        c = _raw(conn)
+        c = raw_connection(conn)
         try:
             row = c.execute(
                 "SELECT dimension, header_page FROM rtree_meta WHERE tier = ?", (tier,)

@@ -37,7 +37,7 @@ from ..search.grouping import (
 )
 from ..search.knn import QueryBoxes, TierArrays
 from .codecs import decode_array, encode_array
-from .spatial import FourierIndex, _raw
+from .spatial import FourierIndex, raw_connection
 
 __all__ = [
     "TIERS",
@@ -79,7 +79,7 @@ def write_groups(
     ``members[tier]`` are positions in ``view_ids``/``curves`` of the views in that tier.
     Runs in the caller's transaction; on an error the caller must roll back.
     """
-    raw = _raw(conn)
+    raw = raw_connection(conn)
     ids = np.asarray(view_ids, dtype=np.int64)
     all_curves = np.asarray(curves, dtype=np.float32)
     counts = {}
@@ -113,7 +113,7 @@ def write_groups(
 
 def delete_groups(conn: Any, object_ids: Iterable[int], tiers: Sequence[str] = TIERS) -> None:
     """Take the objects' groups out of ``tiers`` (default both; caller's transaction)."""
-    raw = _raw(conn)
+    raw = raw_connection(conn)
     for object_id in object_ids:
         rows = [r for r in raw.execute(
             "SELECT id, tier, lo, hi FROM index_groups WHERE object_id = ?", (int(object_id),)
@@ -228,7 +228,7 @@ def index_stored_objects(conn: Any, config: BuildConfig) -> int:
     R-trees; the tiers must be empty). Returns the number of objects indexed."""
     from ..catalogue.symmetry import SymmetryType
 
-    raw = _raw(conn)
+    raw = raw_connection(conn)
     objects = raw.execute("SELECT id, skimmed, symmetry FROM objects ORDER BY id").fetchall()
     for object_id, skimmed, symmetry in objects:
         rows = raw.execute(
