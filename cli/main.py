@@ -355,8 +355,9 @@ def query(
     ] = 12,
     band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
     no_pose: Annotated[bool, typer.Option("--no-pose", help="Skip pose estimation.")] = False,
-    pose_top: Annotated[int | None, typer.Option(
-        help="Pose only the best N results (default: all k; about 0.4 s each).", min=0)] = None,
+    pose_top: Annotated[int, typer.Option(
+        help="Pose the best N results (default: the top one; -k N poses all; 0 = --no-pose).",
+        min=0)] = 1,
     intrinsics: Annotated[
         str | None, typer.Option(help="Camera intrinsics: fx,fy,cx,cy or a JSON/YAML file (fx, fy, cx, cy "
                                       "or a 3x3 K); the pose is then in that camera's OpenCV frame, "
@@ -662,7 +663,7 @@ def demo(
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     _say(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
-          no_pose=False, pose_top=None, intrinsics=None, label_map=None, label=None, rerank=False,
+          no_pose=False, pose_top=1, intrinsics=None, label_map=None, label=None, rerank=False,
           as_json=False)
 
 

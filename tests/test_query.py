@@ -94,8 +94,8 @@ def test_query_json_has_the_contract_shape(query_db, tmp_path, capsys):
 def test_pose_top_poses_only_the_best_results(query_db, tmp_path, capsys):
     with viewdb.open(query_db, create=False) as db:
         img, _ = photo(db, "car", 200, 15, -30, 0.9)
-        every = db.query(img, k=3)
-        top = db.query(img, k=3, pose_top=1)
+        every = db.query(img, k=3, pose_top=None)
+        top = db.query(img, k=3)  # the top result only, by default
         assert [m.object for m in top.results] == [m.object for m in every.results]
         assert all(m.pose is not None for m in every.results)
         assert top.results[0].pose is not None and np.allclose(top.results[0].pose.rotation,

@@ -189,7 +189,7 @@ class ViewDB:
         rerank: bool = False,
         colour: bool = True,
         verify: bool = True,
-        pose_top: int | None = None,
+        pose_top: int | None = 1,
         options: QueryOptions | None = None,
         boxes: Sequence[str | Sequence[float] | Box] | None = None,
         points: Sequence[str | Sequence[float] | Point] | None = None,
@@ -205,7 +205,7 @@ class ViewDB:
         ``cs2``; the client half runs on ``client``, default this file); a photo with colour
         re-ranks the plan's best objects by colour (``colour``), and all by how well each
         matched view fits the photo's shape (``verify``; ``colour=False, verify=False``
-        ranks by outline alone, as the paper does); the best ``pose_top`` (default all k)
+        ranks by outline alone, as the paper does); the best ``pose_top`` (default the top one; None: all k)
         are posed by SIFT or by outline. ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix,
         or a JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the
         mesh file's own frame and units; with them ``rerank`` re-ranks the k results by the

@@ -135,8 +135,9 @@ def view_url(name: str, azimuth: float, elevation: float, content_hash: str) -> 
 
 
 def _upload_name(upload: UploadFile) -> str:
-    name = Path(upload.filename or "photo").name.strip()
-    return " ".join(name.split())[:120] or "photo"
+    name = Path(upload.filename or "photo").name
+    printable = "".join(c if c.isprintable() else " " for c in name)
+    return " ".join(printable.split())[:120] or "photo"
 
 
 def _int_field(form: Any, name: str, default: int, low: int, high: int) -> int:
@@ -187,15 +188,16 @@ def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], confi
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
-                 max_pixels: int = IMAGE_LIMITS.max_pixels, prompts: dict[str, Any] | None = None
-                 ) -> dict[str, Any]:
+                 max_pixels: int = IMAGE_LIMITS.max_pixels, pose_top: int | None = None,
+                 prompts: dict[str, Any] | None = None) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread.
-    A photo of more than ``max_pixels`` pixels is refused from its header. ``prompts``: the
-    query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
+    A photo of more than ``max_pixels`` pixels is refused from its header; the best
+    ``pose_top`` results are posed (None: all k, since the page shows each one's pose).
+    ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
     rgb, alpha = _decode(data, name, max_pixels)
     image = rgb if alpha is None else np.dstack([rgb, alpha])
     try:
-        result = db.query(image, k=k, plan=plan, **(prompts or {})).to_dict()
+        result = db.query(image, k=k, plan=plan, pose_top=pose_top, **(prompts or {})).to_dict()
     except ImageError as exc:
         raise ImageError(exc.message, name) from exc
     result["image"] = name
@@ -304,6 +306,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             if plan not in PLANS:
                 raise HTTPException(422, f"plan must be server, cs1 or cs2, got {plan[:40]!r}")
             k = _int_field(form, "k", 3, 1, config.max_k)
+            pose_top = _int_field(form, "pose_top", k, 0, config.max_k)
             prompts = _prompt_fields(form)
             name = _upload_name(upload)
             data = await upload.read()
@@ -313,7 +316,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             raise HTTPException(422, f"{name}: empty file, not an image")
         try:
             out, _ = await run(lambda db: answer_query(db, data, name, plan, k, config, max_pixels,
-                                                       prompts))
+                                                       pose_top, prompts))
         except ImageError as exc:
             raise HTTPException(422, str(exc)) from exc
         return out

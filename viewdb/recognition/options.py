@@ -35,8 +35,9 @@ class QueryOptions:
     rotations: int = 12
     #: Pose the results (needs the meshes: a full file or a server).
     pose: bool = True
-    #: Pose only the best this many results (None: all k).
-    pose_top: int | None = None
+    #: Pose only the best this many results (None: all k). The common question is "what is
+    #: this and how does it sit": the top result's pose; each further one costs as much.
+    pose_top: int | None = 1
     #: The camera, for a perspective pose in its OpenCV frame and the mesh's units.
     intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None
     #: With intrinsics: re-rank the k results by the IoU of their perspective silhouette fit.
