@@ -31,32 +31,16 @@ import argparse
 import math
 import time
 
-import cv2
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
-from viewdb.camera import camera_pose
-from viewdb.catalogue.gl import pyrender_module
-from viewdb.catalogue.render import offscreen, pyrender_mesh
+from viewdb.bench.photos import PhotoSpec, decoded_photo, photo_series, true_silhouette
 from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 
 
 def direction(azimuth: float, elevation: float) -> np.ndarray:
     h, v = math.radians(azimuth), math.radians(elevation)
     return np.array([math.sin(h) * math.cos(v), math.sin(v), math.cos(h) * math.cos(v)])
-
-
-def true_mask(mesh, spec: PhotoSpec) -> np.ndarray:
-    """The photo's exact silhouette: the same perspective camera, depth > 0."""
-    pyrender = pyrender_module()
-    scene = pyrender.Scene()
-    scene.add(pyrender_mesh(mesh))
-    camera = pyrender.PerspectiveCamera(yfov=math.radians(spec.fov), aspectRatio=1.0,
-                                        znear=max(0.05, spec.distance - 1.5), zfar=spec.distance + 1.5)
-    scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
-    flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
-    return np.asarray(offscreen(spec.image_size).render(scene, flags=flags)) > 0
 
 
 def pnp_pose(db, photo: np.ndarray, spec: PhotoSpec) -> tuple[float, float, str, str, float]:
@@ -115,7 +99,6 @@ def main() -> None:
     plans = args.plans.split(",")
     db = viewdb.open(args.db, read_only=True)
     names = [o.name for o in db.objects()]
-    rng = np.random.default_rng(args.seed)
     runs = (plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
             + ([f"{p}+outline" for p in plans] if args.outline else [])
             + ([f"{p}+unverified" for p in plans] if args.unverified else []))
@@ -124,14 +107,12 @@ def main() -> None:
     pose_rows = []
     pnp_rows: list[tuple[float, float, str, str, float]] = []
     eligible: dict[str, bool] = {}
-    for i in range(args.photos):
-        name = names[rng.integers(len(names))]
-        spec = draw_photo_spec(rng, name)
+    for i, spec in enumerate(photo_series(names, args.seed, args.photos)):
+        name = spec.object
         mesh = db.mesh(name)
-        jpeg = encode_jpeg(render_photo(mesh, spec), spec.jpeg_quality)
-        photo = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        photo = decoded_photo(mesh, spec)
         line = [f"{i:3d} {name:32s}"]
-        exact = true_mask(mesh, spec) if args.true_mask else None
+        exact = true_silhouette(mesh, spec) if args.true_mask else None
         for run in runs:
             plan = run.split("+")[0]
             start = time.perf_counter()

@@ -15,7 +15,8 @@ and warmed up (two queries each way); then, alternating, ``--repeats`` times eac
 * **remote**: what ``viewdb query PHOTO --client CLIENT --server URL`` runs: the client
   file (exported from the same database) segments the photo and runs the plan's client
   half here, :class:`viewdb.RemoteServer` sends the server half, colours, fits and
-  poses to the server.
+  poses to the server. Every result is posed (``pose_top=None``, ``--pose-top K`` on
+  the CLI), as the page poses every result it shows.
 
 Both give the same ranking (checked). Printed: the median wall time of each, the ratios
 web / remote with and without the thumbnails, and what each way spends that the other
@@ -71,7 +72,7 @@ def remote_query(client: viewdb.ViewDB, server: viewdb.RemoteServer, photo: Path
                  k: int) -> tuple[float, list[str], float]:
     """Seconds, the ranked objects, and the milliseconds spent on the network."""
     start = time.perf_counter()
-    result = client.query(str(photo), k=k, plan=plan, server=server)
+    result = client.query(str(photo), k=k, plan=plan, server=server, pose_top=None)  # as the page
     return time.perf_counter() - start, [r.object for r in result.results], result.timing_ms["network"]
 
 

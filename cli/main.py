@@ -212,7 +212,7 @@ def ingest(
         out.print(
             f"{counts['added']} added, {counts['replaced']} replaced, "
             f"{counts['unchanged']} unchanged, "
-            + (f"{counts['upgraded']} upgraded (perspective views added), "
+            + (f"{counts['upgraded']} upgraded (perspective views or appearance added), "
                if counts["upgraded"] else "")
             + f"{counts['failed']} failed; "
             f"{report.views_rendered} views in {report.seconds:.1f} s "
@@ -260,6 +260,11 @@ def info(
                  f"{', '.join(f'{d:g}' for d in distances)} bounding radii)" if distances else " (none)")
               + (f"; {lacking} objects have none yet: ingest their files again to add them"
                  if distances and lacking else ""))
+    if data.rows.get("sift_features", 0):  # a full file (a client file has no appearance)
+        without = sum(1 for o in data.objects if o.appearances == 0 and o.views_stored)
+        out.print(f"  appearance records: {data.rows.get('appearances', 0)}"
+                  + (f"; {without} objects have none yet (queries render their views): ingest "
+                     "their files again to add them" if without else ""))
     for tier, t in data.tiers.items():
         out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
                   f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")

@@ -11,6 +11,7 @@ The wire messages of the client–server plans live in :mod:`viewdb.http`.
 """
 
 from .api import DatabaseInfo, ViewDB, describe_paths, open, render_model
+from .catalogue.appearance import Appearance
 from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
 from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh
 from .catalogue.reading import CandidatePose, CatalogueReader, ObjectInfo, StoredView
@@ -18,6 +19,7 @@ from .catalogue.render import RenderedView
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
 from .config import (
+    AppearanceConfig,
     BuildConfig,
     FeatureConfig,
     IndexConfig,
@@ -59,6 +61,8 @@ from .storage.integrity import CheckReport
 __version__ = "0.1.0"
 
 __all__ = [
+    "Appearance",
+    "AppearanceConfig",
     "Box",
     "BuildConfig",
     "Candidate",

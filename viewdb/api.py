@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .catalogue.describe import ObjectDescription
-from .catalogue.ingest import IngestProgress, IngestReport, PerspectiveAddition, run_ingest
+from .catalogue.ingest import IngestProgress, IngestReport, Upgrade, run_ingest
 from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
@@ -125,9 +125,11 @@ class ViewDB:
         Each object is classified (symmetry type H1–H4 × V1–V4); with ``skim`` only the
         views its skim plan keeps are rendered and stored (the paper's camera view
         skimming), otherwise the whole grid; and the perspective silhouettes of the
-        build configuration (:class:`~viewdb.config.PerspectiveConfig`). Unchanged files
-        (same name and content hash) are skipped, except that an object stored without
-        perspective views (by an older viewdb) gets them ("upgraded"); changed ones
+        build configuration (:class:`~viewdb.config.PerspectiveConfig`); and the
+        appearance of the stored views and of the views opposite them
+        (:mod:`viewdb.catalogue.appearance`). Unchanged files (same name and content hash)
+        are skipped, except that an object stored without perspective views or without
+        appearance records (by an older viewdb) gets them ("upgraded"); changed ones
         replace their object. Each object is written in one
         transaction. Files that fail are listed in the report's ``failed`` and the rest
         still go in: among them meshes with more than ``max_faces`` triangles (``None``:
@@ -146,9 +148,12 @@ class ViewDB:
             self._store.write_object(desc, self.config)
             self._catalogue.forget(desc.name)
 
-        def write_perspective(addition: PerspectiveAddition) -> None:
-            self._store.add_perspective(addition.name, addition.views, self.config)
-            self._catalogue.forget(addition.name)
+        def write_upgrade(upgrade: Upgrade) -> None:
+            if upgrade.perspective is not None:
+                self._store.add_perspective(upgrade.name, upgrade.perspective, self.config)
+            if upgrade.appearance is not None:
+                self._store.add_appearance(upgrade.name, upgrade.appearance)
+            self._catalogue.forget(upgrade.name)
 
         try:
             options = LoadOptions(max_faces, allow_missing_textures)
@@ -158,7 +163,9 @@ class ViewDB:
         return run_ingest(
             list(paths), self.config, self._store.object_hashes(), write,
             lacking_perspective=self._store.objects_lacking_perspective(),
-            write_perspective=write_perspective,
+            lacking_appearance={name: self._catalogue.views(name)
+                                for name in self._store.objects_lacking_appearance()},
+            write_upgrade=write_upgrade,
             jobs=jobs, skim=skim, progress=progress, options=options,
         )
 

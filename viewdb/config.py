@@ -12,10 +12,10 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "LIMITS", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig", "InputLimits",
-    "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig", "RenderConfig",
-    "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig", "default_client_gap",
-    "finite", "integer",
+    "LIMITS", "AppearanceConfig", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig",
+    "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
+    "RenderConfig", "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig",
+    "default_client_gap", "finite", "integer",
 ]
 
 
@@ -245,6 +245,37 @@ class PerspectiveConfig:
 
 
 @dataclass(frozen=True)
+class AppearanceConfig:
+    """What an ingest stores of each view's appearance for the re-rankings and the pose
+    (schema revision 0005; :mod:`viewdb.catalogue.appearance`): its silhouette, colour
+    signature and internal edges, so a query compares stored data instead of rendering.
+
+    The edges are found as the shape pose finds them in a render
+    (:mod:`viewdb.pose.edges`); a query whose :class:`PoseConfig` asks for other edges
+    renders the view instead."""
+
+    #: Canny hysteresis thresholds of the internal edges (:attr:`PoseConfig.edge_thresholds`).
+    edge_thresholds: tuple[float, float] = (30.0, 90.0)
+    #: Edges closer to the silhouette than this share of the image size (at least 2
+    #: pixels) are the outline's and are not kept (:attr:`PoseConfig.edge_margin`).
+    edge_margin: float = 0.012
+    #: The views opposite the stored ones (what a mirrored match shows) are recorded too
+    #: when their directions add at most this share to the renders of the stored views
+    #: (:func:`viewdb.catalogue.describe.appearance_views`). An asymmetric object's add none:
+    #: its stored views see each direction twice, turned by 180°, and one render serves
+    #: both. A symmetric object's would add up to 90 % (measured), so it renders those on
+    #: demand.
+    opposite_cost: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "edge_thresholds", tuple(float(t) for t in self.edge_thresholds))
+        lo, hi = self.edge_thresholds
+        if not 0 <= lo <= hi or not 0 <= self.edge_margin < 0.5 or not self.opposite_cost >= 0:
+            raise ValueError("need 0 <= low <= high edge thresholds, 0 <= edge_margin < 0.5 and "
+                             "opposite_cost >= 0")
+
+
+@dataclass(frozen=True)
 class ImageConfig:
     """Limits on query images (:mod:`viewdb.recognition.image`, the HTTP query decoder)."""
 
@@ -412,10 +443,10 @@ class PoseConfig:
     #: gradient of the grey image, after a 3×3 Gaussian blur). The query's are found at the
     #: level of its image pyramid nearest each view's scale. Thresholds of 15/45 and colour
     #: edges were measured no better on the sample models.
-    edge_thresholds: tuple[float, float] = (30.0, 90.0)
+    edge_thresholds: tuple[float, float] = AppearanceConfig().edge_thresholds
     #: Edges closer to the silhouette than this fraction of the view's image size (at least
     #: 2 pixels) are the outline's, which the outline distance already scores.
-    edge_margin: float = 0.012
+    edge_margin: float = AppearanceConfig().edge_margin
     #: A query has internal detail (and the edge term is used) when its interior holds at
     #: least this many edge pixels per pixel of sqrt(area), at about the views' resolution.
     min_detail_edges: float = 0.1
@@ -495,6 +526,7 @@ class BuildConfig:
     skim: SkimConfig = field(default_factory=SkimConfig)
     index: IndexConfig = field(default_factory=IndexConfig)
     perspective: PerspectiveConfig = field(default_factory=PerspectiveConfig)
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
 
     def __post_init__(self) -> None:
         gap = finite(self.gap, "gap", LIMITS.min_gap, 180.0)
@@ -543,6 +575,9 @@ class BuildConfig:
             # files from before revision 0004 record none: they get the defaults, and an
             # ingest of their unchanged sources adds the perspective views they lack
             perspective=PerspectiveConfig(**data.get("perspective", {})),
+            # files from before revision 0005 record none: an ingest of their unchanged
+            # sources adds the appearance rows with these defaults
+            appearance=AppearanceConfig(**data.get("appearance", {})),
         )
 
 
@@ -575,19 +610,27 @@ class PosingConfig:
     #: views (by the query curve) are candidates too: a silhouette often matches several
     #: sides of an object about equally, and SIFT can tell them apart.
     near_views: int = 4
-    #: Image size of the orthographic silhouettes the perspective silhouette search aligns.
-    silhouette_search_size: int = 128
-    #: The off-grid shape refinement stops at this step (degrees).
+    #: How a shape pose leaves the grid (:func:`viewdb.pose.matched.refine_shape`):
+    #: "interpolate" (between the fits of the grid neighbours, from their stored
+    #: appearance: no render), "walk" (rendering off-grid views in halving steps) or
+    #: "none" (the best grid view's direction).
+    shape_refine: str = "interpolate"
+    #: "interpolate": moves to a better-fitting grid neighbour before interpolating, at most.
+    shape_climb: int = 3
+    #: "walk": the off-grid walk stops at this step (degrees).
     shape_refine_step: float = 2.0
     #: IoU re-ranking: results fitted again with the full silhouette search after the
     #: quick one (besides the plan's first).
     rerank_full: int = 1
 
     def __post_init__(self) -> None:
-        if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0:
-            raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0")
-        if not (16 <= self.silhouette_search_size <= 4096 and self.shape_refine_step > 0):
-            raise ValueError("need 16 <= silhouette_search_size <= 4096 and shape_refine_step > 0")
+        if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0 or self.shape_climb < 0:
+            raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0, shape_climb >= 0")
+        if self.shape_refine not in ("interpolate", "walk", "none"):
+            raise ValueError(
+                f"shape_refine must be 'interpolate', 'walk' or 'none', got {self.shape_refine!r}")
+        if not self.shape_refine_step > 0:
+            raise ValueError("need shape_refine_step > 0")
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from typing import Any
 from ..config import BuildConfig, IndexConfig, RenderConfig
 from ..errors import ViewDBError
 
-__all__ = ["CONFIGURATIONS", "PROTOCOLS", "BenchConfig", "Configuration"]
+__all__ = ["CONFIGURATIONS", "PROTOCOLS", "BenchConfig", "Configuration", "MissConfig", "TwinConfig"]
 
 #: Query protocols: ``grid`` is the paper's (a view at a random grid pose of a random
 #: object, rendered from its mesh); ``photo`` an off-grid perspective render with random
@@ -139,3 +139,43 @@ class BenchConfig:
         out["models"], out["out"] = str(self.models), str(self.out)
         out["cache"] = str(self.cache_dir)
         return json.loads(json.dumps(out))
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """The twin test (:mod:`viewdb.bench.twins`): when two meshes are near-identical."""
+
+    #: Random surface points per mesh (dense: they stand for the surface), and how many of
+    #: them are measured from.
+    samples: int = 20000
+    probes: int = 2000
+    #: Twins have a twin distance (symmetric chamfer, in RMS radii) at most this.
+    threshold: float = 0.03
+    #: Best axis alignments refined by ICP, and ICP's most iterations.
+    icp_starts: int = 4
+    icp_iterations: int = 30
+    #: Seed of the surface sampling.
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 10 <= self.probes <= self.samples or self.threshold < 0:
+            raise ValueError("need 10 <= probes <= samples and threshold >= 0")
+        if self.icp_starts < 1 or self.icp_iterations < 0:
+            raise ValueError("need icp_starts >= 1 and icp_iterations >= 0")
+
+
+@dataclass(frozen=True)
+class MissConfig:
+    """How a recognition miss is classified (:mod:`viewdb.bench.misses`)."""
+
+    #: A miss whose automatic mask has an IoU below this with the true silhouette is a
+    #: segmentation miss.
+    min_iou: float = 0.9
+    #: The search's shortlist: a miss whose object is not among the search's best this many
+    #: (by outline alone, before the colour and shape re-rankings) is a recall miss.
+    shortlist: int = 10
+    twins: TwinConfig = field(default_factory=TwinConfig)
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_iou <= 1.0 or not 1 <= self.shortlist <= 100:
+            raise ValueError("need 0 <= min_iou <= 1 and 1 <= shortlist <= 100")

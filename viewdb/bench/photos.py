@@ -16,6 +16,7 @@ so the same spec always gives the same image.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -29,7 +30,10 @@ from ..catalogue.mesh import NormalisedMesh
 from ..catalogue.render import RenderedView, offscreen, pyrender_mesh, reraise_interrupt
 from ..errors import RenderError
 
-__all__ = ["PhotoSpec", "composite_photo", "draw_photo_spec", "encode_jpeg", "render_photo", "table_photo"]
+__all__ = [
+    "PhotoSpec", "composite_photo", "decoded_photo", "draw_photo_spec", "encode_jpeg", "photo_series",
+    "render_photo", "table_photo", "true_silhouette",
+]
 
 #: A wooden table top's colour (RGB).
 TABLE = (176, 132, 92)
@@ -87,6 +91,15 @@ def draw_photo_spec(rng: np.random.Generator, name: str, image_size: int = 256) 
     )
 
 
+def photo_series(names: Sequence[str], seed: int, count: int, image_size: int = 256) -> list[PhotoSpec]:
+    """The ``count`` photos of the synthetic photo benchmarks (``benchmarks/photo_accuracy.py``,
+    ``benchmarks/miss_analysis.py``) for ``seed``: each a random object of ``names`` (in the
+    catalogue's order) and a random photo of it (:func:`draw_photo_spec`); same seed, same
+    photos."""
+    rng = np.random.default_rng(seed)
+    return [draw_photo_spec(rng, names[rng.integers(len(names))], image_size) for _ in range(count)]
+
+
 def render_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
     """The photo ``spec`` describes, as RGB uint8 (before JPEG; see :func:`encode_jpeg`)."""
     pyrender = pyrender_module()
@@ -121,6 +134,33 @@ def encode_jpeg(rgb: NDArray[np.uint8], quality: int) -> bytes:
     if not ok:
         raise RenderError("JPEG encoding failed")
     return bytes(buf)
+
+
+def decoded_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
+    """The photo ``spec`` describes as a user would have it: rendered, JPEG-compressed at the
+    spec's quality and decoded again (RGB uint8)."""
+    jpeg = encode_jpeg(render_photo(mesh, spec), spec.jpeg_quality)
+    bgr = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+
+
+def true_silhouette(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.bool_]:
+    """The photo's exact silhouette: the same perspective camera, rendered depth > 0."""
+    pyrender = pyrender_module()
+    try:
+        scene = pyrender.Scene()
+        scene.add(pyrender_mesh(mesh))
+        camera = pyrender.PerspectiveCamera(
+            yfov=math.radians(spec.fov), aspectRatio=1.0, znear=max(0.05, spec.distance - 1.5),
+            zfar=spec.distance + 1.5,
+        )
+        scene.add(camera, pose=camera_pose(spec.azimuth, spec.elevation, spec.distance))
+        flags = pyrender.RenderFlags.DEPTH_ONLY | pyrender.RenderFlags.SKIP_CULL_FACES
+        depth = offscreen(spec.image_size).render(scene, flags=flags)
+    except Exception as exc:
+        reraise_interrupt(exc)
+        raise RenderError(f"rendering the silhouette of {mesh.name!r} failed: {exc}") from exc
+    return np.asarray(depth) > 0
 
 
 def composite_photo(

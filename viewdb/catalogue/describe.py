@@ -8,15 +8,16 @@ worker process can hand it back to the writer).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import grid_views
-from ..config import BuildConfig
+from ..config import AppearanceConfig, BuildConfig
 from ..errors import FeatureError
+from .appearance import Appearance, appearance_of, carries_colour, opposite_view, turned_render, turned_view
 from .features import distance_curve, fourier_point
 from .mesh import NormalisedMesh
 from .render import RenderedView, Renderer, get_renderer
@@ -28,7 +29,9 @@ __all__ = [
     "ObjectDescription",
     "PerspectiveView",
     "ViewDescription",
+    "appearance_views",
     "classify_object",
+    "describe_appearance",
     "describe_object",
     "describe_perspective",
     "describe_view",
@@ -84,6 +87,8 @@ class ObjectDescription:
     #: Perspective silhouettes (:func:`describe_perspective`); empty when the build
     #: configuration has none.
     perspective: list[PerspectiveView] = field(default_factory=list, repr=False)
+    #: The appearance of every direction of :func:`appearance_views`.
+    appearance: list[Appearance] = field(default_factory=list, repr=False)
 
 
 def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
@@ -169,6 +174,69 @@ def describe_perspective(
     return kept
 
 
+def appearance_views(
+    stored: list[tuple[float, float]], config: AppearanceConfig
+) -> list[tuple[float, float]]:
+    """The views whose appearance is recorded for an object with ``stored`` views, one per
+    viewing direction (a view whose turned twin,
+    :func:`~viewdb.catalogue.appearance.turned_view`, is already recorded is left out):
+    each stored view, and the view opposite each
+    (:func:`~viewdb.catalogue.appearance.opposite_view`, the side a mirrored match shows)
+    when that adds at most ``config.opposite_cost`` of the stored views' renders."""
+
+    def directions(views: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        seen: set[tuple[float, float]] = set()
+        for view in views:
+            if view not in seen and turned_view(*view) not in seen:
+                seen.add(view)
+                out.append(view)
+        return out
+
+    both = directions([*stored, *(opposite_view(h, v) for h, v in stored)])
+    if len(both) <= (1.0 + config.opposite_cost) * len(stored):
+        return both
+    return directions(stored)
+
+
+def _render_views(
+    mesh: NormalisedMesh, views: list[tuple[float, float]], renderer: Renderer,
+) -> Iterator[RenderedView]:
+    """Renders of ``views`` (in any order): a view whose turned twin is also asked for is
+    rendered once, the twin turned by 180° from it
+    (:func:`~viewdb.catalogue.appearance.turned_render`)."""
+    wanted = set(views)
+    done: set[tuple[float, float]] = set()
+    for view in views:
+        if view in done:
+            continue
+        rendered = renderer.render(mesh, *view)
+        done.add(view)
+        yield rendered
+        twin = turned_view(*view)
+        if twin in wanted and twin not in done:
+            done.add(twin)
+            yield turned_render(rendered)
+
+
+def describe_appearance(
+    mesh: NormalisedMesh, config: BuildConfig, stored: list[tuple[float, float]],
+    renderer: Renderer | None = None, on_view: Callable[[int], None] | None = None,
+) -> list[Appearance]:
+    """The appearance records of an object stored with views ``stored`` (its
+    :func:`appearance_views`; views without a silhouette have none). ``on_view(1)`` after
+    each."""
+    renderer = renderer or get_renderer(config.render)
+    coloured = carries_colour(mesh)
+    records = []
+    for rendered in _render_views(mesh, appearance_views(stored, config.appearance), renderer):
+        if rendered.mask.any():
+            records.append(appearance_of(rendered, config.appearance, coloured))
+        if on_view is not None:
+            on_view(1)
+    return records
+
+
 def describe_object(
     mesh: NormalisedMesh,
     config: BuildConfig,
@@ -176,11 +244,13 @@ def describe_object(
     skim: bool = True,
     on_view: Callable[[int], None] | None = None,
 ) -> ObjectDescription:
-    """Classify ``mesh``, then render and describe the views to store.
+    """Classify ``mesh``, then render and describe the views to store, and record the
+    appearance of them (and of the views opposite them: :func:`appearance_views`).
 
     With ``skim`` only the views of the skim plan are described; otherwise the whole
     grid. ``on_view(n)`` is told of every ``n`` grid views dealt with (pruned views count
-    as dealt with when the plan is made).
+    as dealt with when the plan is made). A view whose turned twin is also rendered is
+    made from the twin's render (:func:`~viewdb.catalogue.appearance.turned_render`).
     """
     start = time.perf_counter()
     renderer = get_renderer(config.render)
@@ -189,14 +259,24 @@ def describe_object(
     views = list(plan.kept)
     if on_view is not None and plan.views_grid > plan.views_stored:
         on_view(plan.views_grid - plan.views_stored)
-    described: list[ViewDescription] = []
+    kept = set(views)
+    recorded = appearance_views(views, config.appearance)
+    to_record = set(recorded)
+    coloured = carries_colour(mesh)
+    described: dict[tuple[float, float], ViewDescription] = {}
     empty: list[tuple[float, float]] = []
-    for azimuth, elevation in views:
-        rendered = renderer.render(mesh, azimuth, elevation)
+    appearance: dict[tuple[float, float], Appearance] = {}
+    extra = [view for view in recorded if view not in kept]
+    for rendered in _render_views(mesh, views + extra, renderer):
+        view = (rendered.azimuth, rendered.elevation)
+        if view in to_record and rendered.mask.any():
+            appearance[view] = appearance_of(rendered, config.appearance, coloured)
+        if view not in kept:
+            continue
         try:
-            described.append(describe_view(rendered, config))
+            described[view] = describe_view(rendered, config)
         except FeatureError:
-            empty.append((azimuth, elevation))
+            empty.append(view)
         if on_view is not None:
             on_view(1)
     perspective = describe_perspective(mesh, config, renderer, on_view)
@@ -209,10 +289,11 @@ def describe_object(
         n_faces=mesh.n_faces,
         n_vertices=mesh.n_vertices,
         glb=mesh.to_glb(),
-        views=described,
-        empty_views=empty,
+        views=[described[view] for view in views if view in described],
+        empty_views=[view for view in views if view in set(empty)],
         seconds=time.perf_counter() - start,
         symmetry=symmetry,
         skimmed=skim,
         perspective=perspective,
+        appearance=[appearance[view] for view in recorded if view in appearance],
     )

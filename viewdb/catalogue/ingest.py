@@ -26,16 +26,19 @@ from ..camera import grid_views
 from ..config import BuildConfig
 from ..errors import MeshError, ViewDBError
 from ..paths import not_regular
+from .appearance import Appearance
 from .describe import (
     ObjectDescription,
     PerspectiveView,
+    appearance_views,
+    describe_appearance,
     describe_object,
     describe_perspective,
     perspective_grid,
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
-__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "PerspectiveAddition", "run_ingest"]
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "Upgrade", "run_ingest"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +60,7 @@ class FileOutcome:
     path: str
     name: str
     #: "added", "replaced", "unchanged", "upgraded" (an unchanged file whose object gained
-    #: the perspective views it lacked) or "failed".
+    #: the perspective views or the appearance records it lacked) or "failed".
     status: str
     views: int = 0
     seconds: float = 0.0
@@ -135,29 +138,38 @@ def _tick(n: int) -> None:
 
 
 @dataclass(frozen=True)
-class PerspectiveAddition:
-    """The perspective views of an object already stored without them."""
+class Upgrade:
+    """What an object stored by an older viewdb lacked: its perspective views and/or its
+    appearance records (None: it had them)."""
 
     name: str
-    views: list[PerspectiveView]
+    perspective: list[PerspectiveView] | None
+    appearance: list[Appearance] | None
     seconds: float
+
+    @property
+    def views(self) -> list[Any]:
+        return [*(self.perspective or ()), *(self.appearance or ())]
 
 
 def _describe(
     job: _Job, config: BuildConfig, skim: bool, options: LoadOptions,
     on_view: Callable[[int], None],
-) -> ObjectDescription | PerspectiveAddition:
+) -> ObjectDescription | Upgrade:
     start = time.perf_counter()
     mesh = load_mesh(job.path, job.name, job.digest, options)
-    if job.perspective_only:
-        views = describe_perspective(mesh, config, on_view=on_view)
-        return PerspectiveAddition(job.name, views, time.perf_counter() - start)
+    if job.upgrade:
+        perspective = (describe_perspective(mesh, config, on_view=on_view)
+                       if "perspective" in job.upgrade else None)
+        appearance = (describe_appearance(mesh, config, job.stored, on_view=on_view)
+                      if "appearance" in job.upgrade else None)
+        return Upgrade(job.name, perspective, appearance, time.perf_counter() - start)
     return describe_object(mesh, config, skim=skim, on_view=on_view)
 
 
 def _describe_file(
     job: _Job, config: BuildConfig, skim: bool, options: LoadOptions
-) -> ObjectDescription | PerspectiveAddition:
+) -> ObjectDescription | Upgrade:
     return _describe(job, config, skim, options, _tick)
 
 
@@ -168,12 +180,19 @@ class _Job:
     #: The file's content hash, computed once when deciding whether to ingest it.
     digest: str
     replaces: bool
-    #: The file is unchanged and its object lacks only the perspective views.
-    perspective_only: bool = False
+    #: The file is unchanged and its object lacks only these: "perspective" (views),
+    #: "appearance" (records).
+    upgrade: frozenset[str] = frozenset()
+    #: The object's stored views (for an appearance upgrade).
+    stored: list[tuple[float, float]] = field(default_factory=list)
+    #: Appearance records to make (an appearance upgrade).
+    records: int = 0
 
     def views(self, grid: int, perspective: int) -> int:
         """Views to render for this job (the progress total)."""
-        return perspective if self.perspective_only else grid + perspective
+        if not self.upgrade:
+            return grid + perspective
+        return (perspective if "perspective" in self.upgrade else 0) + self.records
 
 
 def run_ingest(
@@ -183,7 +202,8 @@ def run_ingest(
     write: Callable[[ObjectDescription], None],
     *,
     lacking_perspective: set[str] | frozenset[str] = frozenset(),
-    write_perspective: Callable[[PerspectiveAddition], None] | None = None,
+    lacking_appearance: dict[str, list[tuple[float, float]]] | None = None,
+    write_upgrade: Callable[[Upgrade], None] | None = None,
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
@@ -192,8 +212,9 @@ def run_ingest(
     """Describe every new or changed file and hand each result to ``write``.
 
     An unchanged file whose object is in ``lacking_perspective`` (stored by an older
-    viewdb) gets only its perspective views rendered, handed to ``write_perspective``,
-    when the configuration asks for perspective views.
+    viewdb) gets only its perspective views rendered, when the configuration asks for
+    perspective views; one in ``lacking_appearance`` (name → its stored views) only its
+    appearance records; either is handed to ``write_upgrade``.
 
     A file that fails (unreadable, no area, …) is reported as ``failed`` and the others
     still go in. ``KeyboardInterrupt`` stops the workers and propagates; objects already
@@ -201,9 +222,11 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    upgrade = write_perspective is not None and config.perspective.enabled
-    todo = _plan_jobs(paths, existing_hashes, lacking_perspective if upgrade else frozenset(), report)
-    run = _Run(report, todo, config, write, write_perspective, progress)
+    upgrade = write_upgrade is not None
+    lacking = _Lacking(lacking_perspective if upgrade and config.perspective.enabled else frozenset(),
+                       (lacking_appearance or {}) if upgrade else {}, config)
+    todo = _plan_jobs(paths, existing_hashes, lacking, report)
+    run = _Run(report, todo, config, write, write_upgrade, progress)
     run.report_planned()
     if jobs <= 1 or len(todo) <= 1:
         run.serial(todo, skim, options)
@@ -213,12 +236,32 @@ def run_ingest(
     return report
 
 
+@dataclass(frozen=True)
+class _Lacking:
+    """What objects stored by an older viewdb lack: perspective views, appearance records
+    (name → stored views)."""
+
+    perspective: set[str] | frozenset[str]
+    appearance: dict[str, list[tuple[float, float]]]
+    config: BuildConfig
+
+    def job(self, path: Path, name: str, digest: str) -> _Job | None:
+        """The upgrade of an unchanged file's object, or None if it lacks nothing."""
+        adds = frozenset(({"perspective"} if name in self.perspective else set())
+                         | ({"appearance"} if name in self.appearance else set()))
+        if not adds:
+            return None
+        stored = list(self.appearance.get(name, []))
+        records = len(appearance_views(stored, self.config.appearance)) if "appearance" in adds else 0
+        return _Job(str(path), name, digest, True, adds, stored, records)
+
+
 def _plan_jobs(
-    paths: Sequence[str | Path], existing_hashes: dict[str, str],
-    lacking_perspective: set[str] | frozenset[str], report: IngestReport,
+    paths: Sequence[str | Path], existing_hashes: dict[str, str], lacking: _Lacking,
+    report: IngestReport,
 ) -> list[_Job]:
-    """The files to describe (new, changed, or unchanged but in ``lacking_perspective``);
-    the others go in ``report`` as unchanged or failed."""
+    """The files to describe (new, changed, or unchanged but lacking what ``lacking``
+    says); the others go in ``report`` as unchanged or failed."""
     todo: list[_Job] = []
     seen: dict[str, str] = {}
     for raw in paths:
@@ -240,8 +283,9 @@ def _plan_jobs(
             report.outcomes.append(FileOutcome(str(path), name, "failed", error=str(exc)))
             continue
         if existing_hashes.get(name) == digest:
-            if name in lacking_perspective:
-                todo.append(_Job(str(path), name, digest, True, perspective_only=True))
+            upgrade = lacking.job(path, name, digest)
+            if upgrade is not None:
+                todo.append(upgrade)
             else:
                 report.outcomes.append(FileOutcome(str(path), name, "unchanged"))
             continue
@@ -256,11 +300,11 @@ class _Run:
     def __init__(
         self, report: IngestReport, todo: list[_Job], config: BuildConfig,
         write: Callable[[ObjectDescription], None],
-        write_perspective: Callable[[PerspectiveAddition], None] | None,
+        write_upgrade: Callable[[Upgrade], None] | None,
         progress: Callable[[IngestProgress], None] | None,
     ) -> None:
         self.report, self.config = report, config
-        self.write, self.write_perspective, self.progress = write, write_perspective, progress
+        self.write, self.write_upgrade, self.progress = write, write_upgrade, progress
         self.grid = len(grid_views(config.gap))
         self.perspective = len(perspective_grid(config))
         self.total_views = sum(job.views(self.grid, self.perspective) for job in todo)
@@ -282,7 +326,7 @@ class _Run:
         self.done_views += n
         self.notify()
 
-    def finish(self, job: _Job, result: ObjectDescription | PerspectiveAddition | BaseException) -> None:
+    def finish(self, job: _Job, result: ObjectDescription | Upgrade | BaseException) -> None:
         """Write a described file (or record its failure) and report it."""
         if isinstance(result, ViewDBError):
             outcome = FileOutcome(job.path, job.name, "failed", error=str(result))
@@ -296,16 +340,16 @@ class _Run:
         self.report.outcomes.append(outcome)
         self.notify(outcome)
 
-    def _write(self, job: _Job, result: ObjectDescription | PerspectiveAddition) -> FileOutcome:
+    def _write(self, job: _Job, result: ObjectDescription | Upgrade) -> FileOutcome:
         try:
-            if isinstance(result, PerspectiveAddition):
-                assert self.write_perspective is not None
-                self.write_perspective(result)
+            if isinstance(result, Upgrade):
+                assert self.write_upgrade is not None
+                self.write_upgrade(result)
             else:
                 self.write(result)
         except ViewDBError as exc:
             return FileOutcome(job.path, job.name, "failed", error=str(exc))
-        status = ("upgraded" if isinstance(result, PerspectiveAddition)
+        status = ("upgraded" if isinstance(result, Upgrade)
                   else "replaced" if job.replaces else "added")
         return FileOutcome(job.path, job.name, status, views=len(result.views), seconds=result.seconds)
 
@@ -314,7 +358,7 @@ class _Run:
         for job in todo:
             expected_done = self.done_views + job.views(self.grid, self.perspective)
             try:
-                result: ObjectDescription | PerspectiveAddition | BaseException = _describe(
+                result: ObjectDescription | Upgrade | BaseException = _describe(
                     job, self.config, skim, options, self.tick
                 )
             except ViewDBError as exc:
@@ -330,7 +374,7 @@ class _Run:
             max_workers=min(jobs, len(todo)), mp_context=ctx,
             initializer=_init_worker, initargs=(ticks, os.getpid()),
         )
-        futures: dict[Future[ObjectDescription | PerspectiveAddition], _Job] = {}
+        futures: dict[Future[ObjectDescription | Upgrade], _Job] = {}
         try:
             for job in todo:
                 futures[pool.submit(_describe_file, job, self.config, skim, options)] = job

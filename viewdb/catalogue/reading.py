@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import BuildConfig
+from .appearance import Appearance
 from .mesh import NormalisedMesh
 from .render import RenderedView
 from .skimming import ViewClasses
@@ -46,6 +47,8 @@ class ObjectInfo:
     symmetry: SymmetryType | None = None
     #: Perspective silhouettes stored (0 for objects ingested before revision 0004).
     perspective_views: int = 0
+    #: Appearance records stored (0 for objects ingested before revision 0005).
+    appearances: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         sym = self.symmetry
@@ -59,7 +62,7 @@ class ObjectInfo:
             "base_view": [sym.base_azimuth, sym.base_elevation] if sym else None,
             "skimmed": self.skimmed, "views_stored": self.views_stored,
             "views_grid": self.views_grid, "empty_views": self.empty_views,
-            "perspective_views": self.perspective_views,
+            "perspective_views": self.perspective_views, "appearances": self.appearances,
             "ingest_seconds": round(self.ingest_seconds, 3), "created_at": self.created_at,
         }
 
@@ -117,6 +120,10 @@ class CatalogueReader(Protocol):
 
     def render(self, name: str, azimuth: float, elevation: float) -> RenderedView:
         """Any view rendered from the stored mesh (arrays read-only)."""
+        ...
+
+    def appearance(self, name: str, azimuth: float, elevation: float) -> Appearance:
+        """Any view's appearance: stored, or made from its render."""
         ...
 
     def view_plan(self, name: str) -> ViewClasses:

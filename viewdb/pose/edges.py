@@ -12,15 +12,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.appearance import edge_interior, grey_of, internal_edges, margin_pixels
 from ..config import PoseConfig
 from ..errors import PoseError
 from .views import CandidateView
 
 __all__ = ["QueryDetail", "ViewDetail", "view_detail"]
-
-
-def _grey(color: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    return color if color.ndim == 2 else cv2.cvtColor(color, cv2.COLOR_RGB2GRAY)
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,26 +34,28 @@ class _Detail:
     nearest_theta: NDArray[np.float32]
 
 
-def _detail(grey: NDArray[np.uint8], mask: NDArray[np.uint8], image_size: int, config: PoseConfig) -> _Detail:
-    """Canny edges of ``grey`` inside ``mask`` eroded by ``config.edge_margin`` of
-    ``image_size`` (the outline's own edges are left to the outline distance)."""
-    r = max(2, int(round(config.edge_margin * image_size)))
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    interior = cv2.erode(mask, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
-    blurred = cv2.GaussianBlur(grey, (3, 3), 0)
-    lo, hi = config.edge_thresholds
-    edges = (cv2.Canny(blurred, lo, hi, L2gradient=True) > 0) & interior
-    ys, xs = np.nonzero(edges)  # row-major, as distanceTransformWithLabels numbers them
+def _with_distances(ys: NDArray[np.intp], xs: NDArray[np.intp], theta: NDArray[np.float64],
+                    interior: NDArray[np.bool_]) -> _Detail:
+    """A :class:`_Detail` of edge pixels at rows ``ys``, columns ``xs`` (row-major order,
+    as distanceTransformWithLabels numbers them) of a window with ``interior``."""
     if len(xs) == 0:
-        far = np.full(mask.shape, np.inf, np.float32)
-        return _Detail(np.zeros((0, 2)), np.zeros(0), interior, far, np.zeros(mask.shape, np.float32))
-    gx = cv2.Sobel(blurred, cv2.CV_32F, 1, 0)[ys, xs]
-    gy = cv2.Sobel(blurred, cv2.CV_32F, 0, 1)[ys, xs]
-    theta = np.mod(np.arctan2(gy, gx), np.pi).astype(np.float64)
-    distance, labels = cv2.distanceTransformWithLabels(
-        np.where(edges, 0, 255).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+        far = np.full(interior.shape, np.inf, np.float32)
+        return _Detail(np.zeros((0, 2)), np.zeros(0), interior, far, np.zeros(interior.shape, np.float32))
+    edges = np.full(interior.shape, 255, np.uint8)
+    edges[ys, xs] = 0
+    distance, labels = cv2.distanceTransformWithLabels(edges, cv2.DIST_L2, 5,
+                                                       labelType=cv2.DIST_LABEL_PIXEL)
     nearest = theta.astype(np.float32)[labels - 1]
     return _Detail(np.stack([xs, ys], axis=1).astype(np.float64), theta, interior, distance, nearest)
+
+
+def _detail(grey: NDArray[np.uint8], mask: NDArray[np.uint8], image_size: int, config: PoseConfig) -> _Detail:
+    """Canny edges of ``grey`` inside ``mask`` eroded by ``config.edge_margin`` of
+    ``image_size`` (the outline's own edges are left to the outline distance;
+    :func:`viewdb.catalogue.appearance.internal_edges`)."""
+    interior = edge_interior(mask, margin_pixels(config.edge_margin, image_size))
+    ys, xs, theta = internal_edges(grey, interior, config.edge_thresholds)
+    return _with_distances(ys, xs, theta, interior)
 
 
 def _lookup(
@@ -80,22 +79,33 @@ class ViewDetail:
 
 
 def view_detail(cand: CandidateView, area: float, config: PoseConfig) -> ViewDetail | None:
-    """The candidate render's internal edges, in a window around its silhouette (padded by
-    the truncation distance, so query edges near its border still find theirs)."""
-    if cand.color is None:
+    """The candidate's internal edges, in a window around its silhouette (padded by the
+    truncation distance, so query edges near its border still find theirs): found in its
+    shaded render, or read from its stored appearance (found in the same render at ingest,
+    directions quantised; :mod:`viewdb.catalogue.appearance`). None without either."""
+    if cand.color is None and cand.appearance is None:
         return None
-    color = np.asarray(cand.color)
     mask = np.asarray(cand.mask, dtype=bool)
-    if color.dtype != np.uint8 or color.shape[:2] != mask.shape or color.ndim not in (2, 3):
-        raise PoseError(f"candidate ({cand.azimuth}, {cand.elevation}): colour {color.dtype} "
-                        f"{color.shape} is not uint8 RGB or grey of its mask's size {mask.shape}")
     norm = math.sqrt(area)
     pad = int(math.ceil(config.detail_truncation * norm)) + 2
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     y0, x0 = max(0, int(rows[0]) - pad), max(0, int(cols[0]) - pad)
     y1, x1 = min(mask.shape[0], int(rows[-1]) + 1 + pad), min(mask.shape[1], int(cols[-1]) + 1 + pad)
-    detail = _detail(np.ascontiguousarray(_grey(color)[y0:y1, x0:x1]),
-                     np.ascontiguousarray(mask[y0:y1, x0:x1].astype(np.uint8)), cand.image_size, config)
+    window = np.ascontiguousarray(mask[y0:y1, x0:x1].astype(np.uint8))
+    if cand.color is None:
+        assert cand.appearance is not None
+        stored = cand.appearance
+        interior = edge_interior(window, margin_pixels(config.edge_margin, cand.image_size))
+        xs = stored.edge_points[:, 0].astype(np.intp) - x0
+        ys = stored.edge_points[:, 1].astype(np.intp) - y0
+        keep = interior[ys, xs]  # a wider margin than the stored edges' leaves some out
+        detail = _with_distances(ys[keep], xs[keep], stored.theta()[keep], interior)
+        return ViewDetail(detail, np.array([x0, y0], np.float64), norm)
+    color = np.asarray(cand.color)
+    if color.dtype != np.uint8 or color.shape[:2] != mask.shape or color.ndim not in (2, 3):
+        raise PoseError(f"candidate ({cand.azimuth}, {cand.elevation}): colour {color.dtype} "
+                        f"{color.shape} is not uint8 RGB or grey of its mask's size {mask.shape}")
+    detail = _detail(np.ascontiguousarray(grey_of(color)[y0:y1, x0:x1]), window, cand.image_size, config)
     return ViewDetail(detail, np.array([x0, y0], np.float64), norm)
 
 
@@ -111,7 +121,7 @@ class QueryDetail:
         y0, x0 = max(0, int(rows[0]) - 4), max(0, int(cols[0]) - 4)
         y1, x1 = int(rows[-1]) + 5, int(cols[-1]) + 5
         self.offset = np.array([x0, y0], np.float64)
-        grey = np.ascontiguousarray(_grey(color)[y0:y1, x0:x1])
+        grey = np.ascontiguousarray(grey_of(color)[y0:y1, x0:x1])
         m = np.ascontiguousarray(mask[y0:y1, x0:x1].astype(np.uint8) * 255)
         self.levels = [(grey, m)]
         while min(grey.shape) >= 32 and len(self.levels) < 8:

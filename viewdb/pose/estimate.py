@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..catalogue.sift import extract_sift
 from ..config import PoseConfig
@@ -37,7 +38,7 @@ from .shape_pose import shape_pose
 from .sift_pose import SiftQuery, sift_pose, sift_upscale
 from .views import CandidateView, PoseEstimate, QueryView
 
-__all__ = ["CandidateView", "PoseConfig", "PoseEstimate", "QueryView", "estimate_pose"]
+__all__ = ["CandidateView", "PoseConfig", "PoseEstimate", "QueryView", "estimate_pose", "sift_estimate"]
 
 
 def estimate_pose(
@@ -89,6 +90,16 @@ def estimate_pose(
     config = config or PoseConfig()
     if len(candidates) == 0:
         raise PoseError("no candidate views to estimate a pose from")
+    color, mask = _checked(query)
+    k_matrix = None if intrinsics is None else intrinsics_matrix(intrinsics)
+    found = sift_estimate(query, candidates, config, intrinsics)
+    if found is not None:
+        return found
+    return shape_pose(query, color, mask, candidates, config, k_matrix, inplane_near)
+
+
+def _checked(query: QueryView) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
+    """The query's colour and mask, or ``PoseError`` if they are not a segmented image."""
     color = np.asarray(query.color)
     mask = np.asarray(query.mask, dtype=bool)
     if mask.ndim != 2 or color.shape[:2] != mask.shape:
@@ -98,27 +109,36 @@ def estimate_pose(
                         f"{color.dtype} {color.shape}")
     if not mask.any():
         raise PoseError("the query mask is empty: no object to estimate a pose for")
+    return color, mask
+
+
+def sift_estimate(
+    query: QueryView, candidates: Sequence[CandidateView], config: PoseConfig,
+    intrinsics: Intrinsics | None = None,
+) -> PoseEstimate | None:
+    """:func:`estimate_pose`'s SIFT pose, or None when it is not accepted (fewer than
+    ``config.min_inliers``, or no candidate with features)."""
+    if not any(len(c.descriptors) for c in candidates):
+        return None  # nothing to match (e.g. refining)
+    color, mask = _checked(query)
     k_matrix = None if intrinsics is None else intrinsics_matrix(intrinsics)
     height, width = mask.shape
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     extent = float(max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
-
-    found = None
-    if any(len(c.descriptors) for c in candidates):  # else nothing to match (e.g. refining)
-        upscale = sift_upscale(extent, candidates, config)
-        keypoints, descriptors = query.derived(
-            ("sift", config.max_keypoints, upscale),
-            lambda: extract_sift(color, mask, config.max_keypoints, upscale))
-        found = sift_pose(SiftQuery(keypoints, width, height, k_matrix), descriptors, candidates,
-                          extent, config)
-    if found is not None and found[1] >= config.min_inliers:
-        hyp, support, ratio = found
-        if k_matrix is None:
-            h, v, a = rotation_to_view(hyp.rotation)
-            frame = "viewdb"
-        else:
-            h, v, a = rotation_to_view(GL_TO_CV @ hyp.rotation)
-            frame = "opencv"
-        return PoseEstimate(h, v, a, hyp.scale, hyp.rotation, hyp.translation, "sift", support,
-                            hyp.candidate, frame, ratio)
-    return shape_pose(query, color, mask, candidates, config, k_matrix, inplane_near)
+    upscale = sift_upscale(extent, candidates, config)
+    keypoints, descriptors = query.derived(
+        ("sift", config.max_keypoints, upscale),
+        lambda: extract_sift(color, mask, config.max_keypoints, upscale))
+    found = sift_pose(SiftQuery(keypoints, width, height, k_matrix), descriptors, candidates,
+                      extent, config)
+    if found is None or found[1] < config.min_inliers:
+        return None
+    hyp, support, ratio = found
+    if k_matrix is None:
+        h, v, a = rotation_to_view(hyp.rotation)
+        frame = "viewdb"
+    else:
+        h, v, a = rotation_to_view(GL_TO_CV @ hyp.rotation)
+        frame = "opencv"
+    return PoseEstimate(h, v, a, hyp.scale, hyp.rotation, hyp.translation, "sift", support,
+                        hyp.candidate, frame, ratio)

@@ -62,31 +62,36 @@ def outline_of(mask: NDArray[np.bool_], samples: int) -> Outline:
     return Outline(pts, abs(area2) / 2.0, centroid, dist)
 
 
-def _sample_distance(dist: NDArray[np.float32], pts: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distance-map values at points (..., 2) (nearest pixel); points outside the image get
-    the value at the nearest border pixel plus their distance to it."""
+def _sample_distance(dist: NDArray[np.float32], x: NDArray[np.float64], y: NDArray[np.float64]
+                     ) -> NDArray[np.float64]:
+    """Distance-map values at points ``(x, y)`` (nearest pixel); points outside the image
+    get the value at the nearest border pixel plus their distance to it."""
     h, w = dist.shape
-    x, y = pts[..., 0], pts[..., 1]
     cx, cy = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
-    inside = dist[np.rint(cy).astype(np.int64), np.rint(cx).astype(np.int64)].astype(np.float64)
+    flat = np.rint(cy).astype(np.intp) * w + np.rint(cx).astype(np.intp)
+    inside = dist.ravel().take(flat).astype(np.float64)
     return inside + np.hypot(x - cx, y - cy)
 
 
-def _rotate_up(d: NDArray[np.float64], degrees: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotate y-down offsets (n, 2) counter-clockwise on screen by each angle → (T, n, 2)."""
+def _rotate_up(d: NDArray[np.float64], degrees: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rotate y-down offsets (n, 2) counter-clockwise on screen by each angle → x and y,
+    each (T, n)."""
     t = np.radians(degrees)[:, None]
     c, s = np.cos(t), np.sin(t)
     x, y = d[None, :, 0], -d[None, :, 1]  # to y up
-    return np.stack([c * x - s * y, -(s * x + c * y)], axis=-1)  # back to y down
+    return c * x - s * y, -(s * x + c * y)  # back to y down
 
 
 def _chamfer(query: Outline, view: Outline, lam: float, angles: NDArray[np.float64]) -> NDArray[np.float64]:
     """Symmetric mean chamfer distance (query pixels) for each in-plane angle, with the view
     scaled by ``lam`` and its centroid put on the query's."""
-    to_query = query.centroid + lam * _rotate_up(view.points - view.centroid, angles)
-    d1 = _sample_distance(query.distance, to_query).mean(axis=1)
-    to_view = view.centroid + _rotate_up(query.points - query.centroid, -angles) / lam
-    d2 = lam * _sample_distance(view.distance, to_view).mean(axis=1)
+    x, y = _rotate_up(view.points - view.centroid, angles)
+    d1 = _sample_distance(query.distance, query.centroid[0] + lam * x,
+                             query.centroid[1] + lam * y).mean(axis=1)
+    x, y = _rotate_up(query.points - query.centroid, -angles)
+    d2 = lam * _sample_distance(view.distance, view.centroid[0] + x / lam,
+                                   view.centroid[1] + y / lam).mean(axis=1)
     return (d1 + d2) / 2.0
 
 
@@ -193,7 +198,8 @@ def shape_pose(
     if not hyps:
         raise PoseError("no candidate view has a silhouette to align the query with")
     hyps.sort(key=lambda x: x[0])  # stable: ties keep the candidates' order
-    use_detail = config.detail_weight > 0 and all(candidates[i].color is not None for i in views)
+    use_detail = config.detail_weight > 0 and all(
+        candidates[i].color is not None or candidates[i].appearance is not None for i in views)
     detail_key = ("detail", config.edge_thresholds, config.edge_margin, config.min_detail_edges,
                   config.detail_truncation, config.detail_orientation)
     query_detail = (query.derived(detail_key, lambda: QueryDetail(color, mask, outline.area, config))

@@ -6,10 +6,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from ..catalogue.appearance import Appearance
 
 __all__ = ["CandidateView", "PoseEstimate", "QueryView"]
 
@@ -59,8 +62,12 @@ class CandidateView:
     #: Half-extent of the view's orthographic volume in model units.
     xmag: float = 1.0
     #: The view's shaded render, uint8 RGB (S, S, 3) (or grey (S, S)), for the shape
-    #: fallback's internal edges; without it only the outline is compared.
+    #: fallback's internal edges; without it (and without ``appearance``) only the outline
+    #: is compared.
     color: NDArray[np.uint8] | None = field(default=None, repr=False)
+    #: The view's stored appearance (:class:`viewdb.catalogue.appearance.Appearance`),
+    #: whose internal edges the shape fallback compares when ``color`` is None.
+    appearance: Appearance | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,8 +13,10 @@ with the background.
 The query engine re-ranks its results by their outline distance times
 ``1 + COLOUR_WEIGHT * colour distance`` (:func:`reranked_score`), where the colour
 distance is the Bhattacharyya distance between the photo's signature and that of the
-result's matched view, rendered from the mesh (0 = the same colours, 1 = none shared); for
-a mirrored match, the view from the opposite side, the side the photo shows
+result's matched view, stored with the view's appearance at ingest
+(:mod:`viewdb.catalogue.appearance`, where :func:`colour_signature` lives) or rendered from
+the mesh for a view without one (0 = the same colours, 1 = none shared); for a mirrored
+match, the view from the opposite side, the side the photo shows
 (:func:`viewdb.recognition.verify.physical_view`).
 A photo without colour (greyscale, or every pixel nearly neutral: :func:`has_colour`)
 is not re-ranked. A mesh whose file gives no colour (no texture, no vertex or face
@@ -26,55 +28,24 @@ as the pool's others on average (:func:`rerank`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..interrupts import interrupts_held
+from ..catalogue.appearance import BINS, carries_colour, colour_signature
 
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
-    "reranked_score", "rerank",
+    "reranked_score", "rerank", "rerank_by_colour",
 ]
 
-#: Histogram bins per chromaticity channel (r and g, each over [0, 1]).
-BINS = 16
 #: How much a full colour mismatch (distance 1) lengthens the outline distance: × (1 + w).
 COLOUR_WEIGHT = 1.0
 #: A photo has colour when at least this share of its pixels are at least
 #: :data:`CHROMA_MIN` away from neutral grey in the a*b* plane.
 COLOURED_SHARE = 0.01
 CHROMA_MIN = 12.0
-#: Fewest object pixels (after leaving out the outline) a signature is made of.
-MIN_PIXELS = 20
-#: Pixels whose R + G + B is below this are too dark to have a colour (unless the
-#: object has too few others).
-DARK_SUM = 30
-#: Upper end of the histogram's range: just above 1, so that pure red (r = 1) counts.
-TOP = 1.0 + 1e-6
-
-
-def colour_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_]) -> NDArray[np.float32]:
-    """The chromaticity histogram (``BINS`` × ``BINS``, sums to 1) of ``rgb`` where ``mask``.
-
-    The outline's pixels and too dark ones are left out when enough pixels remain. An
-    empty mask gives an all-zero histogram (it shares no colour with anything).
-    """
-    inner = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    if np.count_nonzero(inner) < MIN_PIXELS:
-        inner = np.asarray(mask, bool)
-    x = np.asarray(rgb[:, :, :3], np.float32)
-    total = x.sum(axis=2)
-    lit = inner & (total >= DARK_SUM)
-    if np.count_nonzero(lit) >= MIN_PIXELS:
-        inner = lit
-    chroma = np.ascontiguousarray(x[:, :, :2] / np.maximum(total, 1.0)[:, :, None])
-    hist = cv2.calcHist([chroma], [0, 1], inner.astype(np.uint8), [BINS, BINS], [0.0, TOP, 0.0, TOP])
-    hist = cv2.GaussianBlur(hist, (3, 3), 0)
-    mass = float(hist.sum())
-    return (hist / mass if mass > 0 else hist).astype(np.float32)
 
 
 def colour_distance(a: NDArray[np.float32], b: NDArray[np.float32]) -> float:
@@ -98,36 +69,26 @@ def reranked_score(distance: float, colour: float, weight: float = COLOUR_WEIGHT
     return distance * (1.0 + weight * colour)
 
 
-def carries_colour(mesh: Any) -> bool:
-    """Whether a normalised mesh (:class:`viewdb.catalogue.mesh.NormalisedMesh`) has colour of its
-    own: a texture image, vertex or face colours, or a material colour that is not grey."""
-    with interrupts_held():  # trimesh's visuals swallow BaseException in places
-        return any(_carries_colour(geometry.visual) for geometry in mesh.scene.geometry.values())
-
-
-def _carries_colour(visual: Any) -> bool:
-    if visual.kind in ("vertex", "face"):
-        return True
-    material = getattr(visual, "material", None)
-    if material is None:
-        return False
-    if any(getattr(material, key, None) is not None for key in ("baseColorTexture", "image")):
-        return True
-    factor = getattr(material, "baseColorFactor", None)
-    return factor is not None and bool(np.ptp(np.asarray(factor, np.float64)[:3]) > 0)
-
-
 def rerank(
     distances: Sequence[float], query: NDArray[np.float32],
-    signatures: Sequence[NDArray[np.float32] | None],
+    signatures: Sequence[NDArray[np.float32] | None], weight: float = COLOUR_WEIGHT,
 ) -> tuple[list[int], list[float | None], list[float]]:
     """The order of results (indices) by score, ties kept in the given order; each one's
     colour distance (None: its mesh has no colour) and score (:func:`reranked_score`). A
     result without a signature is scored with the mean colour distance of those with one;
     when none has one the scores are the distances."""
     colours = [None if s is None else colour_distance(query, s) for s in signatures]
+    order, scores = rerank_by_colour(distances, colours, weight)
+    return order, colours, scores
+
+
+def rerank_by_colour(
+    distances: Sequence[float], colours: Sequence[float | None], weight: float = COLOUR_WEIGHT,
+) -> tuple[list[int], list[float]]:
+    """:func:`rerank` from colour distances already measured: the order and the scores."""
     known = [c for c in colours if c is not None]
     neutral = float(np.mean(known)) if known else 0.0
-    scores = [reranked_score(d, neutral if c is None else c) for d, c in zip(distances, colours, strict=True)]
+    scores = [reranked_score(d, neutral if c is None else c, weight)
+              for d, c in zip(distances, colours, strict=True)]
     order = sorted(range(len(distances)), key=lambda i: (scores[i], i))
-    return order, colours, scores
+    return order, scores

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import PoseError, QueryError, RenderError
-from ..pose.estimate import CandidateView, PoseConfig, PoseEstimate, QueryView
+from ..pose.estimate import PoseConfig, PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
-from ..pose.matched import pose_matches
+from ..pose.matched import appearance_view, pose_matches
 from ..pose.shape_pose import shape_fit
 from ..search.plans import (
     Candidate,
@@ -33,13 +33,9 @@ from ..search.plans import (
     walk,
 )
 from ..storage.catalogue import StoredCatalogue
-from .colour import carries_colour, colour_signature
 from .server_tier import Exchange
 
 __all__ = ["LocalServerTier"]
-
-#: Views whose colour signatures stay cached.
-COLOUR_CACHE_VIEWS = 4096
 
 T = TypeVar("T")
 
@@ -110,45 +106,32 @@ class LocalServerTier:
     def colours(
         self, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
-        """The colour signatures of views ``(object, azimuth, elevation)``, rendered from
-        the stored meshes (cached); None for an object whose mesh has no colour."""
+        """The colour signatures of views ``(object, azimuth, elevation)``, from their
+        stored appearance (or their render: :meth:`StoredCatalogue.appearance`); None for
+        an object whose mesh has no colour."""
         return self._exchange(lambda: self.view_colours(views))
 
     def view_colours(
         self, views: Sequence[tuple[str, float, float]]
     ) -> list[NDArray[np.float32] | None]:
-        def signature(name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
-            if not carries_colour(self.catalogue.mesh(name)):
-                return None
-            view = self.catalogue.render(name, azimuth, elevation)
-            return colour_signature(view.color, view.mask)
-
-        return [self.catalogue.derived("colour", (name, float(azimuth), float(elevation)),
-                                       lambda n=name, a=azimuth, e=elevation: signature(n, a, e),
-                                       COLOUR_CACHE_VIEWS)
+        return [self.catalogue.appearance(name, azimuth, elevation).colour()
                 for name, azimuth, elevation in views]
 
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:
-        """How well each view ``(object, azimuth, elevation)``, rendered from the stored
-        mesh, explains the segmented query's shape (in [0, 1]; None: no silhouette)."""
+        """How well each view ``(object, azimuth, elevation)`` explains the segmented
+        query's shape (in [0, 1]; None: no silhouette), compared with its stored appearance
+        (:func:`viewdb.pose.matched.appearance_view`)."""
         return self._exchange(lambda: self.view_fits(query, views))
 
     def view_fits(self, query: QueryView, views: Sequence[tuple[str, float, float]]) -> list[float | None]:
-        config = self.catalogue.config
-        empty = np.zeros((0, 3), np.float32)
+        config = PoseConfig()
         fits: list[float | None] = []
         for name, azimuth, elevation in views:
             try:
-                rendered = self.catalogue.render(name, azimuth, elevation)
-                view = CandidateView(
-                    azimuth=azimuth, elevation=elevation, mirrored=False,
-                    keypoints=np.zeros((0, 5), np.float32), descriptors=np.zeros((0, 128), np.uint8),
-                    points3d=empty, mask=rendered.mask, image_size=config.render.image_size,
-                    xmag=config.render.xmag, color=rendered.color,
-                )
-                fits.append(shape_fit(query, view))
+                view = appearance_view(self.catalogue, name, azimuth, elevation, config)
+                fits.append(shape_fit(query, view, config))
             except (PoseError, RenderError):
                 fits.append(None)
         return fits

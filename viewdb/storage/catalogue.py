@@ -1,6 +1,6 @@
 """The read side of a viewdb file: its objects, any view of them (stored, or rendered from
-the stored mesh and described on demand), renders, meshes, curves, and the k-NN search
-of its tiers.
+the stored mesh and described on demand), any view's appearance (stored, or rendered and
+recorded on demand), renders, meshes, curves, and the k-NN search of its tiers.
 
 :class:`StoredCatalogue` implements :class:`viewdb.catalogue.reading.CatalogueReader`. It
 keeps bounded caches of what is dear to make (decoded meshes, renders, regenerated views,
@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import grid_views, normalise_angle
+from ..catalogue.appearance import Appearance, appearance_of, carries_colour, turned_view
 from ..catalogue.describe import describe_view
 from ..catalogue.features import mirror_curve
 from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
@@ -32,6 +33,7 @@ from ..errors import FeatureError, NotFound, QueryError
 from ..search.knn import SearchStats, TierArrays, knn, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
 from ..search.refine import scan_all
+from .appearances import decode_record
 from .store import ObjectRow, Store
 from .tiers import TIERS, TierReader
 
@@ -46,6 +48,9 @@ VIEW_CACHE_SIZE = 256
 RENDER_CACHE_SIZE = 64
 #: How many objects' stored curves a catalogue keeps in memory for CS2 walks.
 CURVE_CACHE_OBJECTS = 64
+#: How many views' appearance records (read and decoded, or made from a render) a
+#: catalogue keeps in memory, about 70 kB each.
+APPEARANCE_CACHE_VIEWS = 1024
 
 _K = TypeVar("_K")
 _V = TypeVar("_V")
@@ -81,9 +86,12 @@ class SearchHit:
 class StoredCatalogue:
     """The read side of an open :class:`~viewdb.storage.store.Store` built with ``config``."""
 
-    def __init__(self, store: Store, config: BuildConfig) -> None:
+    def __init__(self, store: Store, config: BuildConfig, *, stored_appearance: bool = True) -> None:
+        """``stored_appearance=False`` ignores the file's appearance records and makes every
+        view's from a render, as for a file without them (to measure what they save)."""
         self._store = store
         self.config = config
+        self.stored_appearance = stored_appearance
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._renders: OrderedDict[tuple[str, float, float], RenderedView] = OrderedDict()
@@ -134,7 +142,7 @@ class StoredCatalogue:
             ingest_seconds=row.ingest_seconds, created_at=row.created_at,
             skimmed=row.skimmed,
             symmetry=None if row.symmetry is None else SymmetryType.from_dict(row.symmetry),
-            perspective_views=row.perspective_views,
+            perspective_views=row.perspective_views, appearances=row.appearances,
         )
 
     def objects(self) -> list[ObjectInfo]:
@@ -214,6 +222,29 @@ class StoredCatalogue:
             desc.sift.descriptors, desc.sift.points3d, regenerated=True,
             stored_as=stored_as, mirrored=mirrored,
         )
+
+    def appearance(self, name: str, azimuth: float, elevation: float) -> Appearance:
+        """The appearance of any view of a stored object: its stored record, or its turned
+        twin's turned (:meth:`~viewdb.catalogue.appearance.Appearance.turned`), or, for a
+        view without either (pruned by skimming and not opposite a stored view, off the
+        grid, or a file from before revision 0005), one made from its render. Cached
+        either way."""
+        a, e = normalise_angle(azimuth), normalise_angle(elevation)
+
+        def make() -> Appearance:
+            if self.stored_appearance:
+                twin = turned_view(a, e)
+                records = self._store.appearance_records(name, [(a, e), twin])
+                size = self.config.render.image_size
+                if (a, e) in records:
+                    return decode_record(records[(a, e)], a, e, size)
+                if twin in records:
+                    return decode_record(records[twin], *twin, size).turned()
+            coloured = self.derived("carries_colour", (name,), lambda: carries_colour(self.mesh(name)),
+                                    APPEARANCE_CACHE_VIEWS)
+            return appearance_of(self.render(name, a, e), self.config.appearance, coloured)
+
+        return self.derived("appearance", (name, a, e), make, APPEARANCE_CACHE_VIEWS)
 
     def mesh(self, name: str) -> NormalisedMesh:
         """The stored normalised mesh of ``name`` (decoded once, then cached)."""

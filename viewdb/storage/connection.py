@@ -84,13 +84,22 @@ def _set_pragmas(dbapi_conn: sqlite3.Connection, _record: object) -> None:
 #: added: empty tables, which TEMP tables of the same shape stand in for on each
 #: connection (SQLite keeps TEMP tables out of the file, so the file is never written).
 #: Revision 0004 only added the perspective views: a file from 0003 (a client file
-#: shipped to a device, say) has none and searches as before.
+#: shipped to a device, say) has none and searches as before. Revision 0005 only added
+#: the stored appearance: without it a query renders what it compares (slower).
+_PERSPECTIVE_STAND_IN = (
+    "CREATE TEMP TABLE IF NOT EXISTS perspective_views (id INTEGER PRIMARY KEY,"
+    " object_id INTEGER NOT NULL, azimuth FLOAT NOT NULL, elevation FLOAT NOT NULL,"
+    " distance FLOAT NOT NULL, samples BLOB NOT NULL)"
+)
+_APPEARANCE_STAND_INS = (
+    "CREATE TEMP TABLE IF NOT EXISTS appearances (id INTEGER PRIMARY KEY,"
+    " object_id INTEGER NOT NULL, azimuth FLOAT NOT NULL, elevation FLOAT NOT NULL,"
+    " offset INTEGER NOT NULL, size INTEGER NOT NULL)",
+    "CREATE TEMP TABLE IF NOT EXISTS appearance_blobs (object_id INTEGER PRIMARY KEY, data BLOB NOT NULL)",
+)
 READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
-    "0003": (
-        "CREATE TEMP TABLE IF NOT EXISTS perspective_views (id INTEGER PRIMARY KEY,"
-        " object_id INTEGER NOT NULL, azimuth FLOAT NOT NULL, elevation FLOAT NOT NULL,"
-        " distance FLOAT NOT NULL, samples BLOB NOT NULL)",
-    ),
+    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS),
+    "0004": _APPEARANCE_STAND_INS,
 }
 
 

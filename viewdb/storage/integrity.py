@@ -8,7 +8,10 @@ Fourier point is the orthonormal DFT of its stored curve; each object's mesh is 
 its view count matches its grid; and both tiers' R-trees: every R-tree entry is a group
 row and vice versa with the same box, each group's curves are its views' stored curves and
 lie in its box, the full tier holds every view (and every perspective view) once and the
-sparse tier exactly the client grid's stand-ins.
+sparse tier exactly the client grid's stand-ins; and each object's appearance records
+(revision 0005; none for an object stored before it): one per viewing direction of
+:func:`~viewdb.catalogue.describe.appearance_views`, each decoding to what it promises, and
+a stored view's silhouette giving exactly its stored curve.
 """
 
 from __future__ import annotations
@@ -21,12 +24,15 @@ import numpy as np
 import sqlalchemy as sa
 
 from ..camera import grid_views
-from ..catalogue.features import fourier_point
+from ..catalogue.appearance import turned_view
+from ..catalogue.describe import appearance_views
+from ..catalogue.features import distance_curve, fourier_point
 from ..catalogue.skimming import skim_plan
 from ..catalogue.symmetry import SymmetryType
-from ..errors import NotFound, StorageError
+from ..errors import FeatureError, NotFound, StorageError
 from ..search.grouping import DIMENSION, MBR_PADDING, indexed_coordinates, tier_members
 from . import schema as s
+from .appearances import decode_record
 from .codecs import decode_array
 from .connection import READ_ONLY_COMPATIBLE
 from .spatial import FourierIndex
@@ -100,7 +106,95 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
         _check_objects(conn, config.gap, report, client)
         _check_views(conn, config, report, progress, client)
         _check_tiers(conn.connection.driver_connection, config, report, client)
+        _check_appearances(conn.connection.driver_connection, config, report, client)
     return report
+
+
+#: How far the curve of a stored silhouette may be from the view's stored curve (float32).
+CURVE_TOLERANCE = 1e-5
+
+
+def _check_appearances(raw, config, report: CheckReport, client: bool) -> None:  # type: ignore[no-untyped-def]
+    """Appearance records: decodable, one per direction of :func:`appearance_views` (for an
+    object that has any), inside their object's blob, and a stored view's silhouette gives
+    its stored curve."""
+    index: dict[int, list[tuple[float, float, int, int]]] = {}
+    for oid, az, el, at, length in raw.execute(
+        "SELECT object_id, azimuth, elevation, offset, size FROM appearances ORDER BY id"
+    ):
+        index.setdefault(int(oid), []).append((float(az), float(el), int(at), int(length)))
+    blobs = {int(oid): n for oid, n in raw.execute("SELECT object_id, length(data) FROM appearance_blobs")}
+    if client and (index or blobs):
+        report.add(f"a client file holds no appearance records ({sum(map(len, index.values()))} found)")
+        return
+    checked = 0
+    for oid, name in raw.execute("SELECT id, name FROM objects ORDER BY name").fetchall():
+        records, total = index.pop(int(oid), []), blobs.pop(int(oid), None)
+        if not records:
+            if total is not None:
+                report.add(f"object {name!r}: an appearance blob without records")
+            continue  # stored before revision 0005: an ingest of its file adds them
+        if total is None:
+            report.add(f"object {name!r}: {len(records)} appearance records but no blob")
+            continue
+        checked += _check_object_appearance(raw, int(oid), name, records, config, report)
+    for oid in sorted(set(index) | set(blobs)):
+        report.add(f"appearances: records of object id {oid}, which does not exist")
+    report.checked["appearances"] = checked
+
+
+def _check_object_appearance(  # type: ignore[no-untyped-def]
+    raw, oid: int, name: str, records: list[tuple[float, float, int, int]], config, report: CheckReport,
+) -> int:
+    """One object's records (they exist, and so does its blob); how many decode."""
+    data = raw.execute("SELECT data FROM appearance_blobs WHERE object_id = ?", (oid,)).fetchone()[0]
+    stored = raw.execute(
+        "SELECT v.azimuth, v.elevation, c.samples FROM views v LEFT JOIN curves c ON c.view_id = v.id"
+        " WHERE v.object_id = ? ORDER BY v.id", (oid,)).fetchall()
+    curves = {(float(a), float(e)): blob for a, e, blob in stored}
+    expected = {frozenset((v, turned_view(*v))) for v in appearance_views(list(curves), config.appearance)}
+    found: set[frozenset[tuple[float, float]]] = set()
+    checked = 0
+    for az, el, at, length in records:
+        where = f"object {name!r}: appearance ({az:g}, {el:g})"
+        pair = frozenset(((az, el), turned_view(az, el)))
+        if pair not in expected:
+            report.add(f"{where}: not a stored view's direction nor the opposite of one")
+        elif pair in found:
+            report.add(f"{where}: its direction is recorded twice")
+        found.add(pair)
+        if at < 0 or length <= 0 or at + length > len(data):
+            report.add(f"{where}: bytes {at}..{at + length} are outside its object's blob ({len(data)})")
+            continue
+        problem = _record_problem(data[at:at + length], az, el, curves.get((az, el)), config)
+        if problem is None:
+            checked += 1
+        else:
+            report.add(f"{where}: {problem}")
+    if len(found & expected) < len(expected):
+        report.add(f"object {name!r}: {len(expected - found)} of its {len(expected)} viewing "
+                   f"directions have no appearance record")
+    return checked
+
+
+def _record_problem(data: bytes, az: float, el: float, curve_blob: bytes | None, config) -> str | None:  # type: ignore[no-untyped-def]
+    """What is wrong with one packed record, or None: it must decode, and a stored view's
+    silhouette must give that view's stored curve."""
+    samples = config.features.curve_samples
+    try:
+        record = decode_record(data, az, el, config.render.image_size)
+    except StorageError as exc:
+        return exc.message
+    if curve_blob is None:
+        return None
+    try:
+        curve = decode_array(curve_blob, np.float32, (samples,))
+        own = distance_curve(record.mask, samples)
+    except (StorageError, FeatureError):
+        return "its silhouette gives no curve to compare with the view's"
+    if not np.allclose(own, curve, rtol=0, atol=CURVE_TOLERANCE):
+        return "its silhouette is not the stored view's (the curves differ)"
+    return None
 
 
 def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client: bool) -> None:

@@ -15,6 +15,12 @@ fourier_points  the view's first m orthonormal DFT coefficients (complex128 blob
 sift_features   keypoints (float32 (n, 5)), descriptors (uint8 (n, 128)), 3-D points
 perspective_views  perspective silhouettes (revision 0004): object, azimuth, elevation,
                 camera distance in bounding radii, the distance curve (float32 blob)
+appearances     a viewing direction's appearance record (revision 0005,
+                :mod:`viewdb.catalogue.appearance`): object, the grid view it was
+                recorded at (azimuth, elevation; its turned twin is the same turned by
+                180°) and where its packed bytes lie in the object's blob
+appearance_blobs  one per object: its appearance records, packed
+                (:mod:`viewdb.storage.appearances`) and concatenated
 index_groups    R-tree entries: a few views of one object in one tier (``full`` or
                 ``sparse``), with their MBR in the indexed Fourier coordinates, the
                 per-sample range of their curves and a copy of the curves (one read
@@ -43,6 +49,8 @@ from sqlalchemy import (
 
 __all__ = [
     "SCHEMA_REVISION",
+    "appearance_blobs",
+    "appearances",
     "curves",
     "fourier_points",
     "index_groups",
@@ -58,7 +66,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0004"
+SCHEMA_REVISION = "0005"
 
 metadata = MetaData()
 
@@ -144,6 +152,28 @@ perspective_views = Table(
                      name="uq_perspective_views_object_view"),
 )
 Index("ix_perspective_views_object", perspective_views.c.object_id)
+
+
+# revision 0005: stored appearance (silhouette, internal edges, colour signature)
+appearances = Table(
+    "appearances",
+    metadata,
+    Column("id", Integer, primary_key=True),
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), nullable=False),
+    Column("azimuth", Float, nullable=False),
+    Column("elevation", Float, nullable=False),
+    #: where the packed record (storage.appearances) lies in its object's appearance blob
+    Column("offset", Integer, nullable=False),
+    Column("size", Integer, nullable=False),
+    UniqueConstraint("object_id", "azimuth", "elevation", name="uq_appearances_object_view"),
+)
+
+appearance_blobs = Table(
+    "appearance_blobs",
+    metadata,
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True),
+    Column("data", LargeBinary, nullable=False),
+)
 
 
 def perspective_group_id(perspective_view_id: int) -> int:

@@ -8,6 +8,8 @@ job; :class:`Store` is a database with its rows. ``Store(path, read_only=True)``
 from __future__ import annotations
 
 import json
+import sqlite3
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -18,9 +20,10 @@ from numpy.typing import NDArray
 from sqlalchemy.engine import Connection
 
 from ..config import BuildConfig
-from ..errors import NotFound
+from ..errors import NotFound, StorageError
 from ..search.grouping import tier_members
 from . import schema as s
+from .appearances import pack_records
 from .codecs import decode_array, encode_array
 from .connection import Database
 from .tiers import delete_groups, write_groups
@@ -48,6 +51,8 @@ class ObjectRow:
     symmetry: dict[str, Any] | None = None
     #: Perspective views stored (revision 0004).
     perspective_views: int = 0
+    #: Appearance records stored (revision 0005).
+    appearances: int = 0
 
 
 @dataclass(frozen=True)
@@ -142,10 +147,14 @@ class Store(Database):
         perspective = (
             sa.select(sa.func.count(p.c.id)).where(p.c.object_id == o.c.id).scalar_subquery()
         )
+        a = s.appearances
+        appearances = (
+            sa.select(sa.func.count(a.c.id)).where(a.c.object_id == o.c.id).scalar_subquery()
+        )
         query = sa.select(
             o.c.id, o.c.name, o.c.source, o.c.content_hash, o.c.n_faces, o.c.n_vertices,
             o.c.scale, o.c.centre, count, o.c.empty_views, o.c.ingest_seconds, o.c.created_at,
-            o.c.skimmed, o.c.symmetry, perspective,
+            o.c.skimmed, o.c.symmetry, perspective, appearances,
         ).order_by(o.c.name)
         if name is not None:
             query = query.where(o.c.name == name)
@@ -159,7 +168,7 @@ class Store(Database):
                 views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
                 created_at=r[11], skimmed=bool(r[12]),
                 symmetry=None if r[13] is None else json.loads(r[13]),
-                perspective_views=int(r[14]),
+                perspective_views=int(r[14]), appearances=int(r[15]),
             )
             for r in rows
         ]
@@ -198,6 +207,7 @@ class Store(Database):
                     created_at=now, **_symmetry_columns(desc),
                 )
             ).inserted_primary_key[0]
+            self._insert_appearances(conn, object_id, getattr(desc, "appearance", []))
             if not desc.views:
                 return
             conn.execute(
@@ -290,6 +300,76 @@ class Store(Database):
         return [s.perspective_group_id(ids[(float(v.azimuth), float(v.elevation), float(v.distance))])
                 for v in views]
 
+    @staticmethod
+    def _insert_appearances(conn: Connection, object_id: int, records: Any) -> None:
+        if not records:
+            return
+        data, index = pack_records(records)
+        conn.execute(sa.insert(s.appearance_blobs).values(object_id=object_id, data=data))
+        conn.execute(sa.insert(s.appearances), [
+            {"object_id": object_id, "azimuth": a, "elevation": e, "offset": at, "size": size}
+            for a, e, at, size in index
+        ])
+
+    def add_appearance(self, name: str, records: Any) -> None:
+        """Give a stored object its appearance records (an older file's object) in one
+        transaction, replacing any it has."""
+        with self.transaction() as conn:
+            object_id = self.object_id(conn, name)
+            conn.execute(sa.delete(s.appearances).where(s.appearances.c.object_id == object_id))
+            conn.execute(sa.delete(s.appearance_blobs).where(s.appearance_blobs.c.object_id == object_id))
+            self._insert_appearances(conn, object_id, records)
+
+    def objects_lacking_appearance(self) -> set[str]:
+        """Names of the objects with stored views but no appearance records (stored before
+        revision 0005)."""
+        o, v, a = s.objects, s.views, s.appearances
+        has_views = sa.select(v.c.id).where(v.c.object_id == o.c.id).exists()
+        has = sa.select(a.c.id).where(a.c.object_id == o.c.id).exists()
+        with self.read() as conn:
+            return {r[0] for r in conn.execute(sa.select(o.c.name).where(has_views, ~has))}
+
+    def appearance_records(
+        self, name: str, views: Sequence[tuple[float, float]]
+    ) -> dict[tuple[float, float], bytes]:
+        """The packed appearance records (:mod:`viewdb.storage.appearances`) of object
+        ``name`` at any of ``views`` (normalised angles), by view; only their bytes are
+        read from the object's blob."""
+        wanted = {(float(h), float(e)) for h, e in views}
+        if not wanted:
+            return {}
+        azimuths = sorted({h for h, _ in wanted})
+        with self._errors(), self.engine.connect() as conn:
+            raw = conn.connection.driver_connection
+            began = not raw.in_transaction
+            try:
+                if began:  # one snapshot for the offsets and the bytes (a writer may replace both)
+                    raw.execute("BEGIN")
+                try:
+                    return self._read_records(raw, name, azimuths, wanted)
+                finally:
+                    if began:
+                        raw.execute("COMMIT")
+            except sqlite3.Error as exc:
+                raise StorageError(f"cannot read the appearance of {name!r}: {exc}", self.path) from exc
+
+    @staticmethod
+    def _read_records(raw: sqlite3.Connection, name: str, azimuths: list[float],
+                      wanted: set[tuple[float, float]]) -> dict[tuple[float, float], bytes]:
+        rows = raw.execute(
+                "SELECT a.azimuth, a.elevation, a.offset, a.size, a.object_id FROM appearances a"
+            " JOIN objects o ON o.id = a.object_id WHERE o.name = ?"
+            f" AND a.azimuth IN ({', '.join('?' * len(azimuths))})", (name, *azimuths),
+        ).fetchall()
+        found = [r for r in rows if (float(r[0]), float(r[1])) in wanted]
+        out: dict[tuple[float, float], bytes] = {}
+        if found:
+            with raw.blobopen("appearance_blobs", "data", int(found[0][4]), readonly=True) as blob:
+                for a, e, at, size, _ in found:
+                    blob.seek(int(at))
+                    out[(float(a), float(e))] = blob.read(int(size))
+        return out
+
     def objects_lacking_perspective(self) -> set[str]:
         """Names of the objects with no perspective views (stored before revision 0004,
         or by a configuration without them)."""
@@ -369,7 +449,7 @@ class Store(Database):
         out = {}
         with self.read() as conn:
             for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features,
-                          s.perspective_views):
+                          s.perspective_views, s.appearances):
                 out[table.name] = int(
                     conn.execute(sa.select(sa.func.count()).select_from(table)).scalar_one()
                 )
