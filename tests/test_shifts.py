@@ -373,3 +373,26 @@ def test_a_query_turned_in_the_image_is_found_by_one_shift_search_within_the_rol
             assert top.distance <= upright.distance + 0.3  # the turned curve is resampled (96 px)
             if "roll" in options:  # only the turns near the hint were searched
                 assert round(top.inplane, 6) in turns
+
+
+def test_the_cli_passes_the_gravity_hint(tiered_db, tmp_path, capsys):
+    from viewdb_cli.main import main
+
+    with viewdb.open(tiered_db, create=False) as db:
+        view = db.render("arrow", 60.0, 30.0)
+        rgba = np.ascontiguousarray(np.rot90(np.dstack([view.color, view.mask.astype(np.uint8) * 255])))
+        hinted = {roll: db.query(rgba, k=2, pose=False, colour=False, verify=False, roll=roll).to_dict()
+                  for roll in (90.0, 0.0)}
+    photo = tmp_path / "turned.png"
+    cv2.imwrite(str(photo), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
+    common = ["query", str(photo), "--db", str(tiered_db), "-k", "2", "--no-pose", "--no-colour", "--no-verify",
+              "--json"]
+    for flags, roll in ((["--roll", "90"], 90.0), (["--upright"], 0.0)):
+        capsys.readouterr()
+        assert main(common + flags) == 0
+        got = json.loads(capsys.readouterr().out)
+        assert got["results"] == hinted[roll]["results"], flags
+    assert hinted[90.0]["results"] != hinted[0.0]["results"]  # the hint changed the search
+    capsys.readouterr()
+    assert main(common + ["--roll", "90", "--upright"]) == 2
+    assert "not both" in capsys.readouterr().err
