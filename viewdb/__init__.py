@@ -50,7 +50,8 @@ from .pose.estimate import PoseConfig, PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
-from .recognition.results import QueryMatch, QueryResult
+from .recognition.regions import Box, Point, Region, parse_box, parse_point
+from .recognition.results import ObjectResult, QueryMatch, QueryResult
 from .recognition.retrieval import Recognition
 from .recognition.server_tier import Exchange, ServerTier
 from .search.knn import SearchStats, TierArrays
@@ -64,6 +65,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Appearance",
     "AppearanceConfig",
+    "Box",
     "BuildConfig",
     "Candidate",
     "CandidatePose",
@@ -85,7 +87,9 @@ __all__ = [
     "NormalisedMesh",
     "NotFound",
     "ObjectInfo",
+    "ObjectResult",
     "PerspectiveConfig",
+    "Point",
     "PoseConfig",
     "PoseError",
     "PoseEstimate",
@@ -96,6 +100,7 @@ __all__ = [
     "QueryResult",
     "Recognition",
     "RecognitionConfig",
+    "Region",
     "RemoteServer",
     "RenderConfig",
     "RenderError",
@@ -120,6 +125,8 @@ __all__ = [
     "__version__",
     "describe_paths",
     "open",
+    "parse_box",
     "parse_intrinsics",
+    "parse_point",
     "render_model",
 ]
