@@ -62,7 +62,8 @@ _LAZY: dict[str, str] = {
     **dict.fromkeys(("Intrinsics", "parse_intrinsics"), "pose.intrinsics"),
     "LocalServerTier": "recognition.local_tier",
     "QueryOptions": "recognition.options",
-    **dict.fromkeys(("QueryMatch", "QueryResult"), "recognition.results"),
+    **dict.fromkeys(("Box", "Point", "Region", "parse_box", "parse_point"), "recognition.regions"),
+    **dict.fromkeys(("ObjectResult", "QueryMatch", "QueryResult"), "recognition.results"),
     "Recognition": "recognition.retrieval",
     **dict.fromkeys(("Exchange", "ServerTier"), "recognition.server_tier"),
     **dict.fromkeys(("SearchStats", "TierArrays"), "search.knn"),
@@ -86,7 +87,8 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .pose.intrinsics import Intrinsics, parse_intrinsics
     from .recognition.local_tier import LocalServerTier
     from .recognition.options import QueryOptions
-    from .recognition.results import QueryMatch, QueryResult
+    from .recognition.regions import Box, Point, Region, parse_box, parse_point
+    from .recognition.results import ObjectResult, QueryMatch, QueryResult
     from .recognition.retrieval import Recognition
     from .recognition.server_tier import Exchange, ServerTier
     from .search.knn import SearchStats, TierArrays
@@ -114,6 +116,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Appearance",
     "AppearanceConfig",
+    "Box",
     "BuildConfig",
     "Candidate",
     "CandidatePose",
@@ -135,7 +138,9 @@ __all__ = [
     "NormalisedMesh",
     "NotFound",
     "ObjectInfo",
+    "ObjectResult",
     "PerspectiveConfig",
+    "Point",
     "PoseConfig",
     "PoseError",
     "PoseEstimate",
@@ -146,6 +151,7 @@ __all__ = [
     "QueryResult",
     "Recognition",
     "RecognitionConfig",
+    "Region",
     "RemoteServer",
     "RenderConfig",
     "RenderError",
@@ -170,6 +176,8 @@ __all__ = [
     "__version__",
     "describe_paths",
     "open",
+    "parse_box",
     "parse_intrinsics",
+    "parse_point",
     "render_model",
 ]
