@@ -76,8 +76,8 @@ def test_a_missing_lazy_module_fails_when_used_not_when_named():
 
 def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
     """The warm-up, in a fresh kernel cache, leaves nothing for the first queries of a
-    new process to compile: the CLI's query with each plan, with and without pose, on
-    another database."""
+    new process to compile: the CLI's query with each plan, with and without pose and
+    with a gravity hint, on another database."""
     import cv2
 
     import viewdb
@@ -93,7 +93,8 @@ def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
                     "r = warm_up()\nprint(json.dumps([r.compiled, r.cached]))", env)
     assert warmed[0] > 0  # the fresh cache was filled
     queries = [["query", str(path), "--db", str(small_db), "--json", *extra]
-               for extra in ([], ["--no-pose"], ["--plan", "cs1"], ["--plan", "cs2", "--no-pose"])]
+               for extra in ([], ["--no-pose"], ["--plan", "cs1"], ["--plan", "cs2", "--no-pose"],
+                             ["--upright", "--no-pose"], ["--plan", "cs1", "--roll", "30", "--no-pose"])]
     out = _child(
         "import contextlib, io, json\n"
         "from viewdb_cli.main import main\n"
@@ -106,5 +107,5 @@ def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
         "print(json.dumps({'codes': codes, 'compiled': list(r.compiled_names), 'cached': r.cached}))\n",
         env,
     )
-    assert out["codes"] == [0, 0, 0, 0]
+    assert out["codes"] == [0] * len(queries)
     assert out["compiled"] == [] and out["cached"] > 0
