@@ -1,0 +1,99 @@
+"""One shard of a sharded catalogue, answering in the process that holds it.
+
+A :class:`Shard` opens its file read-only, refuses it if ``check`` finds a problem, loads
+its full tier's curves into memory and answers the server half of the plans for its own
+objects: the bounded exact search (:meth:`Shard.refine`), CS2's walk, the colours, fits
+and poses. It knows nothing of Ray: :mod:`viewdb.shards.cluster` wraps it in an actor.
+Replies are plain dicts and lists (what crosses between processes).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import StorageError
+from ..pose.estimate import QueryView
+from ..pose.intrinsics import Intrinsics
+from ..search.knn import knn
+from ..search.plans import Candidate, ServerReply, WalkRequest, neighbours_to_candidates
+
+__all__ = ["Shard"]
+
+
+class Shard:
+    """Shard ``index`` of a sharded catalogue: the file at ``path`` (module doc)."""
+
+    def __init__(self, path: str | Path, index: int, check: bool = True) -> None:
+        from ..api import open as open_db
+
+        self.path, self.index = Path(path), index
+        self.db = open_db(self.path, create=False, read_only=True)
+        try:
+            if self.db.role != "full":
+                raise StorageError("is a client file, not a shard of a full catalogue", self.path)
+            if check:
+                report = self.db.check()
+                if not report.ok:
+                    raise StorageError(f"fails check: {report.problems[0]}", self.path)
+            self.tier = self.db.server_tier()
+            self.samples = self.db.config.features.curve_samples
+            with self.tier.catalogue.tier_reader().snapshot() as reader:
+                self.versions = dict(reader.object_versions())
+                full = reader.tier("full")
+                full.rows(np.arange(full.n_groups, dtype=np.int64))  # every curve in memory
+        except BaseException:
+            self.db.close()
+            raise
+
+    def describe(self) -> dict[str, Any]:
+        """The shard's objects (name → content hash), curve length and build settings."""
+        return {"index": self.index, "path": str(self.path), "versions": self.versions,
+                "samples": self.samples, "config": self.db.config.to_dict()}
+
+    def refine(self, curve: NDArray[np.float64], band: int, k: int,
+               known: dict[str, float], upper: float) -> dict[str, Any]:
+        """The exact k nearest objects of this shard, bounded by ``upper`` (an upper bound
+        of the k-th distance over every shard) and ``known`` (name → an upper bound of
+        that object's distance): every object of this shard whose distance is at most
+        ``upper`` and that ranks among its k best is in the reply, with its exact
+        distance; objects farther than ``upper`` may be left out."""
+        catalogue = self.tier.catalogue
+        q = catalogue.query_curve(curve, k, "full")
+        with catalogue.tier_reader().snapshot() as reader:
+            source = reader.tier("full")
+            bounds = {i: d for name, d in known.items() if (i := source.object_index(name)) is not None}
+            if source.n_groups == 0:
+                return ServerReply([], {}).to_dict()
+            found, stats = knn(q, source, k, band, upper=upper if math.isfinite(upper) else math.inf,
+                               known=bounds)
+            angles = reader.view_projections([n.view for n in found])
+        return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict()).to_dict()
+
+    def walk(self, request: dict[str, Any]) -> dict[str, Any]:
+        """CS2's walk from the client candidates of this shard's objects."""
+        reply, _ = self.tier.walk(WalkRequest.from_dict(request, self.samples))
+        return reply.to_dict()
+
+    def colours(self, views: Sequence[tuple[str, float, float]]) -> list[NDArray[np.float32] | None]:
+        return self.tier.view_colours(views)
+
+    def fits(self, query: QueryView, views: Sequence[tuple[str, float, float]]) -> list[float | None]:
+        return self.tier.view_fits(query, views)
+
+    def poses(self, query: QueryView, matches: Sequence[dict[str, Any]], intrinsics: Intrinsics | None,
+              curves: Sequence[NDArray[np.float64] | None] | None, rerank: bool) -> list[Any]:
+        found, _ = self.tier.poses(query, [Candidate.from_dict(m) for m in matches], intrinsics,
+                                   curves, rerank)
+        return found
+
+    def ping(self) -> int:
+        return self.index
+
+    def close(self) -> None:
+        self.db.close()
