@@ -14,7 +14,8 @@ from typing import Any
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig",
     "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
-    "RenderConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig", "WebConfig",
+    "RenderConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig",
+    "WebConfig",
     "default_client_gap", "finite", "integer",
 ]
 
