@@ -56,6 +56,10 @@ class Shard:
         return {"index": self.index, "path": str(self.path), "versions": self.versions,
                 "samples": self.samples, "config": self.db.config.to_dict()}
 
+    def info(self) -> dict[str, Any]:
+        """``viewdb info`` of the shard file, as JSON."""
+        return self.db.info().to_dict()
+
     def refine(self, curve: NDArray[np.float64], band: int, k: int,
                known: dict[str, float], upper: float) -> dict[str, Any]:
         """The exact k nearest objects of this shard, bounded by ``upper`` (an upper bound
