@@ -82,6 +82,8 @@ class _Host:
             self.shard = Shard(path, index, check)
         except ViewDBError as exc:
             self.error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - any failure refuses the shard, naming it
+            self.error = f"{path}: cannot be opened ({type(exc).__name__}: {exc})"
 
     def call(self, method: str, *args: Any) -> Any:
         if self.shard is None:

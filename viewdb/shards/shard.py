@@ -96,6 +96,19 @@ class Shard:
                                    curves, rerank)
         return found
 
+    def memory(self) -> dict[str, int | None]:
+        """The bytes of the full tier held in memory, and this process's resident set
+        (None where ``/proc`` is not there to say)."""
+        with self.tier.catalogue.tier_reader().snapshot() as reader:
+            full = reader.tier("full")
+            held = sum(a.nbytes for a in full.rows(np.zeros(0, np.int64)))
+        try:
+            with open("/proc/self/status", encoding="ascii") as f:
+                rss = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmRSS:"))
+        except (OSError, StopIteration, ValueError):
+            rss = None
+        return {"tier_bytes": held, "rss_bytes": rss}
+
     def ping(self) -> int:
         return self.index
 
