@@ -3,12 +3,15 @@
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]
                                            [--unverified] [--rotations 12]
+                                           [--shifts all|step=S|roll=DEG]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
 perspective camera, with random lighting, a plain random background, pixel noise and
 JPEG compression (:mod:`viewdb.bench.photos`, the same generator as ``viewdb bench``'s
 photo protocol; same seed ⇒ same photos). The photo is segmented automatically, as a user's
-would be, and queried with every plan (12 in-plane turns); reported per plan: the CMC
+would be, and queried with every plan (12 in-plane turns; ``--shifts``: one search over
+circular shifts of the upright curve instead, every shift, every S-th, or those near the
+in-plane turn a gravity hint gives, :class:`viewdb.search.shifts.ShiftWindow`); reported per plan: the CMC
 (rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
 each photo with its exact silhouette (rendered depth > 0) as the mask, to separate
 segmentation errors from recognition errors; ``--outline`` also queries without the colour
@@ -36,6 +39,7 @@ import numpy as np
 import viewdb
 from viewdb.bench.photos import PhotoSpec, decoded_photo, photo_series, true_silhouette
 from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
+from viewdb.search.shifts import ShiftWindow
 
 
 def direction(azimuth: float, elevation: float) -> np.ndarray:
@@ -86,6 +90,9 @@ def main() -> None:
     parser.add_argument("--rotations", type=int, default=12,
                         help="in-plane turns of the silhouette tried (1: upright only; the photos "
                              "are upright, as a camera that knows gravity would take them)")
+    parser.add_argument("--shifts", default=None,
+                        help="search circular shifts of the upright curve instead of turns: 'all' (every "
+                             "shift), 'step=S' (every S-th) or 'roll=DEG' (a gravity hint)")
     parser.add_argument("--true-mask", action="store_true", help="also query with the exact silhouette")
     parser.add_argument("--pnp", action="store_true",
                         help="also pose the pose photos with the camera's intrinsics (PnP, or the "
@@ -97,6 +104,7 @@ def main() -> None:
                         help="also query without the shape re-ranking (outline and colour)")
     args = parser.parse_args()
     plans = args.plans.split(",")
+    search = shift_options(args.shifts)
     db = viewdb.open(args.db, read_only=True)
     names = [o.name for o in db.objects()]
     runs = (plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
@@ -120,7 +128,7 @@ def main() -> None:
                 result = db.query(photo, k=args.k, plan=plan, pose=False, rotations=args.rotations,
                                   mask=exact if run.endswith("+mask") else None,
                                   colour=not run.endswith("+outline"),
-                                  verify=not run.endswith(("+outline", "+unverified")))
+                                  verify=not run.endswith(("+outline", "+unverified")), **search)
                 found = [m.object for m in result.results]
                 rank = found.index(name) + 1 if name in found else 0
             except viewdb.ViewDBError as exc:
@@ -158,8 +166,9 @@ def main() -> None:
     for run in runs:
         r = np.array(ranks[run])
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
+        turns = f"{args.rotations} turns" if args.shifts is None else f"shifts {args.shifts}"
         print(f"{run:14s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
-              f"(segmentation + {args.rotations} turns{STAGES[run.split('+')[-1]]}, no pose)")
+              f"(segmentation + {turns}{STAGES[run.split('+')[-1]]}, no pose)")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "
@@ -179,6 +188,20 @@ def main() -> None:
 #: What a run's query does after the search, by the run's suffix.
 STAGES = {"outline": "", "unverified": " + colour", "mask": " + colour + shape fit"}
 STAGES.update({p: " + colour + shape fit" for p in ("server", "cs1", "cs2")})
+
+
+def shift_options(text: str | None) -> dict:
+    """``db.query`` keywords for ``--shifts``."""
+    if text is None:
+        return {}
+    if text == "all":
+        return {"shifts": ShiftWindow()}
+    name, _, value = text.partition("=")
+    if name == "step":
+        return {"shifts": ShiftWindow(step=int(value))}
+    if name == "roll":
+        return {"roll": float(value)}
+    raise SystemExit(f"--shifts: expected all, step=S or roll=DEG, got {text!r}")
 
 
 def median(values) -> float:

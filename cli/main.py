@@ -359,6 +359,12 @@ def query(
         int, typer.Option(help="In-plane turns of the silhouette tried (1 = upright only).", min=1, max=72)
     ] = 12,
     band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
+    roll: Annotated[float | None, typer.Option(
+        help="Gravity hint: the camera's roll in degrees (the in-plane turn that makes the photo "
+             "upright, e.g. from an IMU); the search then covers only the turns within the "
+             "roll tolerance of it, instead of --rotations.", callback=_number(-360, 360))] = None,
+    upright: Annotated[bool, typer.Option(
+        "--upright", help="The photo is upright (gravity down): --roll 0.")] = False,
     no_pose: Annotated[bool, typer.Option("--no-pose", help="Skip pose estimation.")] = False,
     pose_top: Annotated[int, typer.Option(
         help="Pose the best N results (default: the top one; -k N poses all; 0 = --no-pose).",
@@ -407,6 +413,9 @@ def query(
     if label_map is not None and mask is not None:
         raise typer.BadParameter("give --mask or --label-map, not both", param_hint="--mask")
     cam = _intrinsics(intrinsics)
+    if upright and roll is not None:
+        raise typer.BadParameter("give --roll DEG or --upright, not both", param_hint="--upright")
+    roll = 0.0 if upright else roll
     if server is not None:
         if client is None or db is not None:
             raise typer.BadParameter("with --server give --client FILE (and no --db)",
@@ -418,7 +427,7 @@ def query(
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
                                 label_map=label_map, label=label, colour=not no_colour,
-                                verify=not no_verify, pose_top=pose_top)
+                                verify=not no_verify, pose_top=pose_top, roll=roll)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -428,7 +437,8 @@ def query(
                 result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
                                    label_map=label_map, label=label, rerank=rerank,
-                                   colour=not no_colour, verify=not no_verify, pose_top=pose_top)
+                                   colour=not no_colour, verify=not no_verify, pose_top=pose_top,
+                                   roll=roll)
             finally:
                 if side is not None:
                     side.close()
@@ -610,8 +620,8 @@ def demo(
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     _say(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
     query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
-          no_pose=False, pose_top=1, intrinsics=None, label_map=None, label=None, rerank=False,
-          as_json=False)
+          roll=None, upright=False, no_pose=False, pose_top=1, intrinsics=None, label_map=None, label=None,
+          rerank=False, as_json=False)
 
 
 def _demo_photo(db_path: Path, name: str, out_path: Path) -> None:

@@ -335,3 +335,34 @@ def naive_box_by_vertices(lower, upper, F) -> tuple[np.ndarray, np.ndarray]:
     )
     vals = verts @ np.asarray(F).T
     return vals.min(axis=0), vals.max(axis=0)
+
+
+# ---------------------------------------------------------------------------------------
+# search over several query curves (in-plane shifts)
+# ---------------------------------------------------------------------------------------
+
+__all__ += ["naive_knn_over_curves", "naive_shifted"]
+
+
+def naive_shifted(q, s: int) -> list[float]:
+    """The curve started at sample s: out[i] = q[(i + s) mod N]."""
+    n = len(q)
+    return [float(q[(i + s) % n]) for i in range(n)]
+
+
+def naive_knn_over_curves(queries, curves, owner, names, k: int, r: int):
+    """Top-k distinct objects by the smallest DTW of any query curve against any stored
+    curve or its mirror (c'[i] = c[-i mod N]), every pair computed: [(distance, name,
+    view, mirrored, query)], best first (ties: name)."""
+    best: dict[int, tuple[float, int, bool, int]] = {}
+    for view, c in enumerate(curves):
+        n = len(c)
+        mirrored = [float(c[(-i) % n]) for i in range(n)]
+        for t, q in enumerate(queries):
+            for flip, cc in ((False, c), (True, mirrored)):
+                d = naive_dtw(q, cc, r)
+                o = int(owner[view])
+                if o not in best or d < best[o][0]:
+                    best[o] = (d, view, flip, t)
+    ranked = sorted(((d, names[o], v, m, t) for o, (d, v, m, t) in best.items()), key=lambda x: (x[0], x[1]))
+    return ranked[:k]

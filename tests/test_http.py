@@ -119,6 +119,26 @@ def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files,
                     assert there.bytes_sent > 0 and there.bytes_received > 0
 
 
+def test_shift_searches_over_http_equal_the_local_ones(tiered_db, files, remote):
+    _, client_path = files
+    rng = np.random.default_rng(8)
+    with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
+        for curve in _curves(full, rng, 6):
+            for window in (viewdb.ShiftWindow(), viewdb.ShiftWindow(int(rng.integers(128)), 9, 2)):
+                for plan in ("server", "cs1", "cs2"):
+                    local = full.recognise(curve, 3, plan=plan, client=client, shifts=window)
+                    there = client.recognise(curve, 3, plan=plan, server=remote, shifts=window)
+                    assert there.results == local.results, (plan, window)
+                    assert all(c.shift is not None for c in there.results)
+        img = photo(full, "l_bracket", 120, 40, 35)
+        for options in ({"shifts": viewdb.ShiftWindow(step=4)}, {"roll": 35.0}):
+            kw = dict(k=2, plan="cs1", pose=False, colour=False, verify=False, **options)
+            local = full.query(img, client=client, **kw)
+            there = client.query(img, server=remote, **kw)
+            assert there.to_dict()["results"] == local.to_dict()["results"], options
+            assert there.transfer["round_trips"] == 1  # one search, not one per turn
+
+
 def test_walk_names_each_object_once_however_often_the_client_does(server):
     cand = {"object": "car", "distance": 0.5, "azimuth": 30.0, "elevation": 30.0, "mirrored": False}
     other = {**cand, "object": "mug"}

@@ -27,6 +27,7 @@ from .config import (
     PosingConfig,
     RecognitionConfig,
     RenderConfig,
+    SearchConfig,
     SiftConfig,
     SkimConfig,
 )
@@ -54,6 +55,7 @@ from .recognition.retrieval import Recognition
 from .recognition.server_tier import Exchange, ServerTier
 from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
+from .search.shifts import ShiftWindow
 from .storage.catalogue import SearchHit
 from .storage.integrity import CheckReport
 
@@ -99,10 +101,12 @@ __all__ = [
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
+    "SearchConfig",
     "SearchHit",
     "SearchStats",
     "ServerError",
     "ServerTier",
+    "ShiftWindow",
     "SiftConfig",
     "SkimConfig",
     "StorageError",

@@ -37,6 +37,7 @@ from .recognition.retrieval import Recognition, recognise_curve
 from .recognition.server_tier import ServerTier
 from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
+from .search.shifts import ShiftWindow
 from .storage.catalogue import SearchHit, StoredCatalogue
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store, missing_schema
@@ -194,6 +195,8 @@ class ViewDB:
         colour: bool = True,
         verify: bool = True,
         pose_top: int | None = 1,
+        shifts: ShiftWindow | None = None,
+        roll: float | None = None,
         options: QueryOptions | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses
@@ -209,7 +212,10 @@ class ViewDB:
         are posed by SIFT or by outline. ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix,
         or a JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the
         mesh file's own frame and units; with them ``rerank`` re-ranks the k results by the
-        IoU of their perspective silhouette fit. ``options`` gives all of these as one
+        IoU of their perspective silhouette fit. ``shifts`` searches these circular shifts of
+        the upright curve in one search instead of ``rotations`` turned silhouettes
+        (:class:`~viewdb.search.shifts.ShiftWindow`); ``roll`` (a gravity hint, degrees) only
+        those near that in-plane turn. ``options`` gives all of these as one
         :class:`~viewdb.recognition.options.QueryOptions` instead.
 
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
@@ -219,7 +225,7 @@ class ViewDB:
         if options is None:
             options = QueryOptions(k=k, plan=plan, band=band, rotations=rotations, pose=pose,
                                    pose_top=pose_top, intrinsics=intrinsics, rerank=rerank,
-                                   colour=colour, verify=verify)
+                                   colour=colour, verify=verify, shifts=shifts, roll=roll)
         server_tier, client_tier = self._tiers(options.plan, client, server)
         return run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
                          mask=mask, label_map=label_map, label=label)
@@ -227,7 +233,7 @@ class ViewDB:
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
         client: ViewDB | None = None, server: ServerTier | None = None,
-        prior: Sequence[Candidate] = (),
+        prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``;
         :mod:`viewdb.recognition.retrieval`).
@@ -241,10 +247,11 @@ class ViewDB:
         their distances bound the search as a CS1 client's do, so an object that cannot
         beat them is left out; merging the results of several curves, each searched with
         the merged results so far as ``prior``, gives exactly the merge of their unbounded
-        searches.
+        searches. ``shifts``: the distance is the smallest over these circular shifts of the
+        curve, in one search (each result's ``shift`` is the start that matched).
         """
         q = self._catalogue.query_curve(curve, k, "full" if server is None else "sparse")
-        return recognise_curve(q, k, band, plan, *self._tiers(plan, client, server), prior)
+        return recognise_curve(q, k, band, plan, *self._tiers(plan, client, server), prior, shifts)
 
     def _tiers(
         self, plan: str, client: ViewDB | None, server: ServerTier | None
@@ -264,13 +271,16 @@ class ViewDB:
         return LocalServerTier(self._catalogue, count_bytes=False)
 
     def client_candidates(
-        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6,
+        shifts: ShiftWindow | None = None,
     ) -> tuple[list[Candidate], SearchStats]:
-        """The client half of CS1/CS2: the k nearest objects on this file's sparse tier."""
-        return self._catalogue.nearest_objects(curve, k, band, "sparse")
+        """The client half of CS1/CS2: the k nearest objects on this file's sparse tier
+        (over ``shifts`` of the curve, as :meth:`search`)."""
+        return self._catalogue.nearest_objects(curve, k, band, "sparse", shifts)
 
     def search(
-        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full"
+        self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full",
+        shifts: ShiftWindow | None = None,
     ) -> tuple[list[SearchHit], SearchStats]:
         """The ``k`` objects whose views in ``tier`` are nearest to a distance curve.
 
@@ -278,10 +288,13 @@ class ViewDB:
         same objects and distances as a scan of every view of the tier with DTW
         (Sakoe–Chiba band of ``band`` samples) against the curve and its mirror.
         ``tier`` is ``"full"`` (every stored view) or ``"sparse"`` (the client grid).
+        ``shifts``: the distance is the smallest over these circular shifts of the curve
+        (:class:`~viewdb.search.shifts.ShiftWindow`, e.g. ``ShiftWindow()`` for every
+        in-plane turn), in one search; each hit's ``shift`` is the start that matched.
         """
-        found, stats = self._catalogue.nearest_objects(curve, k, band, tier)
-        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance)
-                for c in found]
+        found, stats = self._catalogue.nearest_objects(curve, k, band, tier, shifts)
+        hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance,
+                          c.shift) for c in found]
         return hits, stats
 
     def objects_within(

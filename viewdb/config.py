@@ -14,7 +14,8 @@ from typing import Any
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig",
     "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
-    "RenderConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig",
+    "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
+    "SkimConfig",
     "WebConfig",
     "default_client_gap", "finite", "integer",
 ]
@@ -576,12 +577,31 @@ class RecognitionConfig:
     #: shape only when they are at least this share of the silhouette's area
     #: (:func:`viewdb.recognition.shapes.completed_mask`).
     hidden_min_share: float = 0.02
+    #: With a gravity hint (``roll``), the in-plane turns searched: those within this many
+    #: degrees of the hint's (:func:`viewdb.search.shifts.turn_window`).
+    roll_tolerance: float = 15.0
 
     def __post_init__(self) -> None:
         if self.pool < 1:
             raise ValueError(f"pool must be at least 1, got {self.pool}")
         if not 0.0 <= self.hidden_min_share <= 1.0:
             raise ValueError(f"hidden_min_share must be in [0, 1], got {self.hidden_min_share}")
+        if not 0.0 <= self.roll_tolerance <= 180.0:
+            raise ValueError(f"roll_tolerance must be in [0, 180], got {self.roll_tolerance}")
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The search over a stack of query curves (:func:`viewdb.search.knn.knn_stack`, the
+    circular shifts of a curve). Query-time settings, not stored in a file."""
+
+    #: Consecutive curves (shifts) bounded together by one wedge before they are tried one
+    #: by one (``benchmarks/shift_search.py`` measured the choice).
+    shift_block: int = 8
+
+    def __post_init__(self) -> None:
+        if self.shift_block < 1:
+            raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
 
 
 @dataclass(frozen=True)

@@ -100,7 +100,9 @@ from numpy.typing import NDArray
 
 from ..errors import FeatureError
 
-__all__ = ["MIN_AREA", "distance_curve", "fourier_point", "largest_contour", "mirror_curve"]
+__all__ = [
+    "MIN_AREA", "distance_curve", "fourier_point", "largest_contour", "mirror_curve", "sample_bearings",
+]
 
 #: Smallest area (square pixels) the chosen contour must enclose.  Any region of at most
 #: three pixels encloses less (a lone pixel's diamond 0.5, a row of k pixels k - 1/2).
@@ -220,6 +222,16 @@ def largest_contour(mask: np.ndarray) -> NDArray[np.float64]:
 
 def _curve_from_lattice_contour(uv: NDArray[np.int64], n_samples: int) -> NDArray[np.float64]:
     """Centroid distance curve of a clockwise lattice polygon (integer vertices)."""
+    px, py, cx, cy = _samples_of_lattice_contour(uv, n_samples)
+    d = np.hypot(px - cx, py - cy)
+    return d / d.mean()
+
+
+def _samples_of_lattice_contour(
+    uv: NDArray[np.int64], n_samples: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float]:
+    """The sample points ``(x, y)`` of the distance curve of a clockwise lattice polygon
+    and its centroid, in lattice units."""
     u, v = uv[:, 0], uv[:, 1]
     un, vn = np.roll(u, -1), np.roll(v, -1)
     du, dv = un - u, vn - v
@@ -257,8 +269,7 @@ def _curve_from_lattice_contour(uv: NDArray[np.int64], n_samples: int) -> NDArra
     f = (pos - cum[j]) / seg[j]
     px = u[j] + f * du[j]
     py = v[j] + f * dv[j]
-    d = np.hypot(px - cx, py - cy)
-    return d / d.mean()
+    return px, py, cx, cy
 
 
 def distance_curve(mask: np.ndarray, n_samples: int = 128) -> NDArray[np.float64]:
@@ -294,6 +305,25 @@ def distance_curve(mask: np.ndarray, n_samples: int = 128) -> NDArray[np.float64
         raise ValueError(f"n_samples must be at least 1, got {n_samples}")
     uv, _, _ = _largest_lattice_contour(np.asarray(mask))
     return _curve_from_lattice_contour(uv, n_samples)
+
+
+def sample_bearings(mask: np.ndarray, n_samples: int = 128) -> NDArray[np.float64]:
+    """Where each sample of :func:`distance_curve` lies, seen from the centroid.
+
+    Returns float64 ``(n_samples,)``: the direction of sample ``i`` from the contour's
+    area centroid in degrees clockwise from up on screen, in ``[0, 360)`` (sample 0, on
+    the vertical line above the centroid, is at 0 for a region that contains its
+    centroid's vertical line up to the contour). The silhouette turned clockwise on
+    screen by ``a`` degrees has its curve start at the sample of bearing ``-a`` (mod 360):
+    the in-plane turns a circular shift of the curve stands for
+    (:mod:`viewdb.search.shifts`). Raises as :func:`distance_curve`.
+    """
+    n_samples = int(n_samples)
+    if n_samples < 1:
+        raise ValueError(f"n_samples must be at least 1, got {n_samples}")
+    uv, _, _ = _largest_lattice_contour(np.asarray(mask))
+    px, py, cx, cy = _samples_of_lattice_contour(uv, n_samples)
+    return np.degrees(np.arctan2(px - cx, cy - py)) % 360.0
 
 
 def fourier_point(curve: np.ndarray, m: int) -> NDArray[np.complex128]:

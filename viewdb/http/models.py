@@ -30,6 +30,7 @@ __all__ = [
     "PoseRequestModel",
     "RefineRequestModel",
     "ServerReplyModel",
+    "ShiftWindowModel",
     "ViewsReplyModel",
     "WalkRequestModel",
     "WebQueryFormModel",
@@ -61,12 +62,23 @@ class CandidateModel(_Strict):
         description="the view is a perspective silhouette from this many bounding radii "
                     "(absent: an orthographic view)",
     )
+    shift: int | None = Field(
+        default=None, ge=0,
+        description="the query curve matched started at this sample (a shift search; absent: "
+                    "the curve as given)",
+    )
 
 
-class RefineRequestModel(_Strict):
-    """CS1: the query's distance curve and the client's top-k on its sparse tier (an empty
-    ``client`` list gives the ``server`` plan: exact k-NN on the full tier)."""
+class ShiftWindowModel(_Strict):
+    """Circular shifts of the query curve: every ``step``-th from centre - half_width to
+    centre + half_width (mod the curve's length), or all round (half_width null)."""
 
+    centre: int = Field(default=0, ge=0)
+    half_width: int | None = Field(default=None, ge=0)
+    step: int = Field(default=1, ge=1)
+
+
+class _CurveRequest(_Strict):
     curve: list[Sample] = Field(description="the server's curve_samples numbers (see /info), each "
                                             "in [0, curve_samples] (a curve has mean 1)",
                                 min_length=8)
@@ -75,7 +87,16 @@ class RefineRequestModel(_Strict):
     client: list[CandidateModel] = Field(max_length=MAX_K)
 
 
-class WalkRequestModel(RefineRequestModel):
+class RefineRequestModel(_CurveRequest):
+    """CS1: the query's distance curve and the client's top-k on its sparse tier (an empty
+    ``client`` list gives the ``server`` plan: exact k-NN on the full tier)."""
+
+    shifts: ShiftWindowModel | None = Field(
+        default=None, description="search the smallest distance over these circular shifts of "
+                                  "the curve (absent: the curve as given)")
+
+
+class WalkRequestModel(_CurveRequest):
     """CS2: as for CS1, plus the client file's grid gap the walk starts from."""
 
     client_gap: float = Field(gt=0, le=180)

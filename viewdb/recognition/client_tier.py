@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..search.plans import Candidate
+from ..search.shifts import ShiftWindow
 from ..storage.catalogue import StoredCatalogue
 
 __all__ = ["ClientTier"]
@@ -24,7 +25,10 @@ class ClientTier:
         """The sparse tier's grid gap (what CS2's walk starts from)."""
         return self.catalogue.config.client_gap
 
-    def candidates(self, curve: NDArray[np.floating], k: int, band: int = 6) -> list[Candidate]:
-        """The k nearest objects on the sparse tier, each with its content hash as
-        ``version`` (so a server can tell a stale client file's bounds)."""
-        return self.catalogue.nearest_objects(curve, k, band, "sparse")[0]
+    def candidates(
+        self, curve: NDArray[np.floating], k: int, band: int = 6, shifts: ShiftWindow | None = None
+    ) -> list[Candidate]:
+        """The k nearest objects on the sparse tier (over ``shifts`` of the curve), each
+        with its content hash as ``version`` (so a server can tell a stale client file's
+        bounds)."""
+        return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts)[0]

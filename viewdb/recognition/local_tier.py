@@ -85,7 +85,8 @@ class LocalServerTier:
             versions = reader.object_versions()
             found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
             angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict())
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None),
+                           stats.to_dict())
 
     def walk(self, request: WalkRequest) -> tuple[ServerReply, Exchange]:
         """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views.

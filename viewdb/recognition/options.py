@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,6 +13,7 @@ from ..errors import QueryError
 from ..pose.estimate import PoseConfig
 from ..pose.intrinsics import Intrinsics, parse_intrinsics
 from ..search.plans import MAX_BAND, MAX_K, PLANS
+from ..search.shifts import ShiftWindow
 
 __all__ = ["QueryOptions"]
 
@@ -33,6 +35,13 @@ class QueryOptions:
     band: int = 6
     #: In-plane turns of the silhouette searched (evenly spaced; 1 = upright only).
     rotations: int = 12
+    #: Instead of ``rotations``: one search over these circular shifts of the upright
+    #: curve (:class:`~viewdb.search.shifts.ShiftWindow`; ``ShiftWindow()``: every turn).
+    shifts: ShiftWindow | None = None
+    #: A gravity hint: the in-plane turn (degrees, clockwise on screen, as a match's
+    #: ``inplane``) that makes the photo upright (0: upright); one search over the shifts
+    #: within ``recognition.roll_tolerance`` of it.
+    roll: float | None = None
     #: Pose the results (needs the meshes: a full file or a server).
     pose: bool = True
     #: Pose only the best this many results (None: all k). The common question is "what is
@@ -63,6 +72,13 @@ class QueryOptions:
             raise QueryError(f"band must be in [0, {MAX_BAND}], got {self.band}")
         if self.rotations < 1:
             raise QueryError(f"rotations must be at least 1, got {self.rotations}")
+        if self.shifts is not None and not isinstance(self.shifts, ShiftWindow):
+            raise QueryError(f"shifts must be a ShiftWindow, got {self.shifts!r}")
+        if self.roll is not None and (isinstance(self.roll, bool) or not isinstance(self.roll, (int, float))
+                                      or not math.isfinite(self.roll)):
+            raise QueryError(f"roll must be a finite number of degrees, got {self.roll!r}")
+        if self.roll is not None and self.shifts is not None:
+            raise QueryError("give either shifts or a roll, not both")
         if self.pose_top is not None and self.pose_top < 0:
             raise QueryError(f"pose_top must be at least 0, got {self.pose_top}")
         if self.intrinsics is not None:

@@ -32,10 +32,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.features import distance_curve, sample_bearings
 from ..config import RecognitionConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..search.plans import Candidate
+from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
 from .colour import colour_signature, has_colour, rerank
 from .image import LoadedImage, load_image
@@ -87,6 +89,9 @@ class QueryShape:
     curves: list[tuple[float, NDArray[np.float64]]] = field(repr=False)
     #: Each turn's curve of the silhouette as segmented (the pose's nearest views).
     by_angle: dict[float, NDArray[np.float64]] = field(repr=False)
+    #: For a shift search (``curves`` upright only): each curve's sample bearings
+    #: (:func:`~viewdb.catalogue.features.sample_bearings`), which turn a shift stands for.
+    bearings: list[NDArray[np.float64]] | None = field(default=None, repr=False)
 
 
 def segment_photo(
@@ -112,12 +117,19 @@ def segment_query(
     image: str | Path | NDArray[Any] | LoadedImage, samples: int, rotations: int, *,
     mask: NDArray[Any] | str | Path | None = None, label_map: NDArray[Any] | str | Path | None = None,
     label: int | None = None, hidden_min_share: float = RecognitionConfig().hidden_min_share,
+    upright_only: bool = False,
 ) -> QueryShape:
-    """Stages 1–2: segment the photo and make its curves (``samples`` per curve)."""
+    """Stages 1–2: segment the photo and make its curves (``samples`` per curve);
+    ``upright_only``: the upright curves alone, with their bearings, for a shift search."""
     loaded, seg, view = segment_photo(image, mask=mask, label_map=label_map, label=label)
+    completed = completed_mask(seg.mask, view.ignore, hidden_min_share)
+    if upright_only:
+        shapes = [seg.mask] + ([completed] if completed is not None else [])
+        curves = [(0.0, distance_curve(m, samples)) for m in shapes]
+        return QueryShape(loaded, seg, view, curves, dict(curves[:1]),
+                          [sample_bearings(m, samples) for m in shapes])
     plain = rotated_curves(seg.mask, samples, rotations)
     curves = list(plain)
-    completed = completed_mask(seg.mask, view.ignore, hidden_min_share)
     if completed is not None:
         curves += rotated_curves(completed, samples, rotations)
     return QueryShape(loaded, seg, view, curves, dict(plain))
@@ -131,14 +143,31 @@ def _search(
     merged result is unchanged); the pool and the client's and the server's time."""
     per_curve: list[tuple[float, list[Candidate]]] = []
     client_ms = server_ms = 0.0
-    for angle, curve in shape.curves:
+    for i, (angle, curve) in enumerate(shape.curves):
         prior = [c for c, _ in merge(per_curve, pool)]
-        found = recognise_curve(curve, pool, options.band, options.plan, server, client, prior)
-        per_curve.append((angle, found.results))
+        window = _window(shape, i, options)
+        found = recognise_curve(curve, pool, options.band, options.plan, server, client, prior, window)
+        if window is None:
+            per_curve.append((angle, found.results))
+        else:  # each result at the in-plane turn its shift stands for
+            assert shape.bearings is not None
+            for c in found.results:
+                turn = shift_turn(shape.bearings[i], c.shift or 0)
+                per_curve.append((turn, [c]))
+                shape.by_angle.setdefault(turn, shifted(curve, c.shift or 0))
         client_ms += found.client_ms
         server_ms += found.server_ms
         traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
     return merge(per_curve, pool), client_ms, server_ms
+
+
+def _window(shape: QueryShape, i: int, options: QueryOptions) -> ShiftWindow | None:
+    """The shifts curve ``i`` is searched over: ``options.shifts``, those near the gravity
+    hint's turn, or None (the curve as given: one of the turned curves)."""
+    if options.roll is not None:
+        assert shape.bearings is not None
+        return turn_window(shape.bearings[i], options.roll, options.recognition.roll_tolerance)
+    return options.shifts
 
 
 #: Per object: (colour distance or fit, re-ranked score).
@@ -219,7 +248,8 @@ def run_query(
     start = time.perf_counter()
     traffic = _Traffic()
     shape = segment_query(image, samples, options.rotations, mask=mask, label_map=label_map, label=label,
-                          hidden_min_share=options.recognition.hidden_min_share)
+                          hidden_min_share=options.recognition.hidden_min_share,
+                          upright_only=options.shifts is not None or options.roll is not None)
     segmented = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
     pool = max(options.k, options.recognition.pool) if recolour or options.verify else options.k

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..errors import QueryError
 from ..search.plans import PLANS, Candidate, RefineRequest, WalkRequest
+from ..search.shifts import ShiftWindow
 from .client_tier import ClientTier
 from .server_tier import ServerTier
 
@@ -56,25 +57,26 @@ def best_of(mine: Sequence[Candidate], prior: Sequence[Candidate], k: int) -> li
 
 def recognise_curve(
     curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
-    client: ClientTier | None, prior: Sequence[Candidate] = (),
+    client: ClientTier | None, prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
 ) -> Recognition:
     """The k objects ``curve`` shows by ``plan`` (module doc). ``client`` runs the client
     half of ``cs1``/``cs2`` (unused by ``server``). ``prior``: the best objects already
     found for the same photo by other curves; their distances bound the search as a CS1
-    client's do (``server``, ``cs1``)."""
+    client's do (``server``, ``cs1``). ``shifts``: both halves search the smallest distance
+    over these circular shifts of the curve (:class:`~viewdb.search.shifts.ShiftWindow`)."""
     if plan not in PLANS:
         raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
     if plan != "server" and client is None:
         raise QueryError(f"the {plan} plan needs a client tier")
     q = np.asarray(curve, dtype=np.float64)
     start = time.perf_counter()
-    mine = [] if client is None or plan == "server" else client.candidates(q, k, band)
+    mine = [] if client is None or plan == "server" else client.candidates(q, k, band, shifts)
     client_ms = (time.perf_counter() - start) * 1e3
     if plan == "cs2":
         assert client is not None
         reply, exchange = server.walk(WalkRequest(q, band, k, client.client_gap, mine))
     else:
-        reply, exchange = server.refine(RefineRequest(q, band, k, best_of(mine, prior, k)))
+        reply, exchange = server.refine(RefineRequest(q, band, k, best_of(mine, prior, k), shifts))
     return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                        exchange.sent, exchange.received, max(exchange.wall_ms - exchange.server_ms, 0.0),
                        exchange.trips)

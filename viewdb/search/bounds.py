@@ -722,14 +722,16 @@ def envelope_box(
     Parameters
     ----------
     L, U : numpy.ndarray
-        Envelope ``(N,)`` with ``L <= U`` (from :func:`envelope`).
+        Envelope ``(N,)`` with ``L <= U`` (from :func:`envelope`), or several envelopes
+        as the rows of ``(T, N)`` arrays.
     F : numpy.ndarray
         ``(d, N)`` coordinate map (from :func:`fourier_coordinates`).
 
     Returns
     -------
     (lo, hi) : tuple of numpy.ndarray
-        float64 ``(d,)``: ``lo_k = sum_t min(F_kt L_t, F_kt U_t)`` and
+        float64 ``(d,)`` (``(T, d)`` for several envelopes, one row each):
+        ``lo_k = sum_t min(F_kt L_t, F_kt U_t)`` and
         ``hi_k = sum_t max(F_kt L_t, F_kt U_t)``, the min and max of ``F_k . x`` over
         ``L <= x <= U`` (a linear function on a box attains its extremes at a vertex,
         chosen per ``t`` by the sign of ``F_kt``), each rounded outward by
@@ -738,22 +740,23 @@ def envelope_box(
         coordinates (the second term covers the all-zero rows, which an FFT only
         reproduces up to rounding).
     """
-    La = _seq(L, "L")
-    Ua = _seq(U, "U")
+    La = _seq(L, "L", ndim=np.ndim(L) if np.ndim(L) in (1, 2) else 1)
+    Ua = _seq(U, "U", ndim=La.ndim)
     _same_shape(("L", La), ("U", Ua))
-    if not _ordered(La, Ua):
+    if not _ordered(La.reshape(-1), Ua.reshape(-1)):
         raise ValueError("envelope must have L <= U")
     Fa = _seq(F, "F", ndim=2)
-    if Fa.shape[1] != La.shape[0]:
-        raise ValueError(f"F must have {La.shape[0]} columns, got shape {Fa.shape}")
+    if Fa.shape[1] != La.shape[-1]:
+        raise ValueError(f"F must have {La.shape[-1]} columns, got shape {Fa.shape}")
     pos = np.maximum(Fa, 0.0)
     neg = np.minimum(Fa, 0.0)
-    lo = pos @ La + neg @ Ua
-    hi = pos @ Ua + neg @ La
+    lo = La @ pos.T + Ua @ neg.T
+    hi = Ua @ pos.T + La @ neg.T
     size = np.maximum(np.abs(La), np.abs(Ua))
     # |error| of F_k . x (dot product or FFT) <= ~ N eps sum_t |F_kt| |x_t|, plus a floor
     # for rows that are exactly 0 in F (Im X_0, Im X_{N/2}) but not in an FFT result
-    slack = (4.0 * La.shape[0] * np.finfo(np.float64).eps) * (np.abs(Fa) @ size + size.max())
+    slack = (4.0 * La.shape[-1] * np.finfo(np.float64).eps) * (
+        size @ np.abs(Fa).T + size.max(axis=-1, keepdims=True))
     return lo - slack, hi + slack
 
 

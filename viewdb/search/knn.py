@@ -33,13 +33,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.features import mirror_curve
+from ..config import SearchConfig
 from .bounds import (
     _group_keys_kernel,
     dtw,
@@ -52,7 +53,9 @@ from .bounds import (
     paa_means,
 )
 from .grouping import INDEXED_COEFFICIENTS, group_points, indexed_coordinates, indexed_rows, padded_mbr
+from .multirefine import FULL, refine_stack
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, WIDEN_ABS, WIDEN_REL, refine_groups
+from .shifts import CurveQuery, ShiftWindow, shifted_curves
 
 __all__ = [
     "Neighbour",
@@ -62,6 +65,7 @@ __all__ = [
     "TierSource",
     "brute_force_knn",
     "knn",
+    "knn_stack",
     "objects_within",
 ]
 
@@ -71,12 +75,15 @@ INITIAL_RADIUS = 0.125
 
 @dataclass(frozen=True)
 class Neighbour:
-    """One result: an object, its best view (an id of the source) and the exact distance."""
+    """One result: an object, its best view (an id of the source) and the exact distance;
+    ``shift``: the start sample of the query curve that matched (a shift search,
+    :func:`knn`), or the row of the stack's curve (:func:`knn_stack`); 0 otherwise."""
 
     object: str
     view: int
     distance: float
     mirrored: bool
+    shift: int = 0
 
 
 @dataclass
@@ -176,6 +183,13 @@ class TierSource(Protocol):
         views; the rows of ``groups`` are filled in (others may not be)."""
         ...
 
+    def group_boxes(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Every group's MBR (``lo``, ``hi``: ``(n_groups, d)``) and per-sample curve range
+        (``(n_groups, N)`` each), float64."""
+        ...
+
     def view_id(self, row: int) -> int: ...
 
     def object_name(self, index: int) -> str: ...
@@ -255,6 +269,11 @@ class TierArrays:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         return self._curves, self._coords, self._means
 
+    def group_boxes(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        return self.mbr_lo, self.mbr_hi, self.curve_lo, self.curve_hi
+
     def view_id(self, row: int) -> int:
         return int(self._rows[row])
 
@@ -292,6 +311,8 @@ def knn(
     upper: float = math.inf,
     known: Mapping[int, float] | None = None,
     initial_radius: float = INITIAL_RADIUS,
+    shifts: ShiftWindow | None = None,
+    block: int | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`.
 
@@ -301,77 +322,156 @@ def knn(
     → the client's distance). Groups whose key exceeds ``upper`` are never fetched; the
     result is unchanged as long as the bounds hold.
 
+    ``shifts``: the distance is the smallest over the circular shifts of the query in the
+    window (:class:`~viewdb.search.shifts.ShiftWindow`; ``ShiftWindow()`` is every shift),
+    found in one search (:func:`knn_stack`, ``block`` curves per block, default
+    :class:`~viewdb.config.SearchConfig`'s); each result's ``shift`` is the start sample
+    that matched, and ``upper``/``known`` must be distances under the same window. None:
+    the curve as given, by the fixed-start search below.
+
     Candidate groups are refined in the order of their keys by the compiled loop of
     :func:`~viewdb.search.refine.refine_groups` (each group's views in the order of their
     own keys, the UCR cascade, DTW abandoning past ``min(U, b_o)``); see the module doc
     for the range browsing that feeds it and why the result is exact.
     """
-    start = time.perf_counter()
-    stats = SearchStats()
+    if shifts is not None:
+        q = np.asarray(query, dtype=np.float64)
+        starts = shifts.shifts(len(q))
+        found, stats = knn_stack(shifted_curves(q, starts), source, k, r, upper=upper, known=known,
+                                 initial_radius=initial_radius, block=block)
+        return [replace(nb, shift=int(starts[nb.shift])) for nb in found], stats
     qb = QueryBoxes.of(query, r)
     envelope_pair = (qb.lower, qb.upper)
     mirrored_pair = (qb.mirrored_lower, qb.mirrored_upper)
-    bound = np.full(source.n_objects, math.inf)
-    for o, d in (known or {}).items():
-        bound[o] = min(bound[o], float(d))
-    exact = np.full(source.n_objects, math.inf)
-    exact_row = np.full(source.n_objects, -1, dtype=np.int64)
-    exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
-    cap = upper * (1.0 + WIDEN_REL) + WIDEN_ABS if math.isfinite(upper) else math.inf
-    counters = np.zeros(4, dtype=np.int64)
-    views = int(source.group_count.sum())
-    heap = (np.empty(2 * views), np.empty(2 * views, dtype=np.int64), np.zeros(1, dtype=np.int64))
-    seen = np.zeros(source.n_groups, dtype=np.bool_)
-    order = np.zeros(0, dtype=np.int64)
-    keys = np.zeros(0, dtype=np.float64)
-    pos = ready = 0
-    chunk = CHUNK
-    radius = -math.inf
-    exhausted = source.n_groups == 0
-    status = EXHAUSTED
-    while True:
-        if status in (EXHAUSTED, RADIUS):
-            if exhausted:
-                break
-            # browse further: every group within the (grown) radius joins the candidates
-            smallest = min(float(keys[pos]) if pos < len(keys) else math.inf,
-                           float(heap[0][0]) if heap[2][0] else math.inf)
-            # a known bound (a CS1 client's, earlier turns') is the radius at once: one
-            # browse lists every group that may matter, instead of doubling up to it
-            radius = min(max(2.0 * radius, smallest if math.isfinite(smallest) else 0.0,
-                             initial_radius, cap if math.isfinite(cap) else -math.inf), cap)
-            stats.expansions += 1
-            found, found_keys = source.groups_within(qb, radius, seen)
-            seen[found] = True
-            keep = found_keys <= cap
-            order = np.concatenate([order[pos:], found[keep]])
-            keys = np.concatenate([keys[pos:], found_keys[keep]])
-            by_key = np.argsort(keys, kind="stable")
-            order, keys, pos, ready = order[by_key], keys[by_key], 0, 0
-            exhausted = bool(seen.all()) or radius >= cap
-        if ready < len(order) and (status == NEED or ready <= pos):
-            # chunks double while a search goes on (read rows stay loaded for the next)
-            end = min(len(order), max(ready, pos) + chunk)
-            curves, coords, means = source.rows(order[ready:end])
-            ready, chunk = end, min(2 * chunk, MAX_CHUNK)
-        else:
-            curves, coords, means = source.rows(order[:0])
-        pos, status = refine_groups(
+
+    def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
+        return refine_groups(
             qb.curve, r, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
-            qb.segments, qb.mirrored_segments,
-            order, keys, pos, ready, math.inf if exhausted else radius,
+            qb.segments, qb.mirrored_segments, order, keys, pos, ready, stop_key,
             source.group_start, source.group_count, source.group_owner, source.row_owner,
-            curves, coords, means, bound, exact, exact_row, exact_mirrored, k, cap, counters, heap,
+            *rows, search.bound, search.exact, search.exact_row, search.exact_mirrored, k,
+            search.cap, search.counters, search.heap,
         )
-        if status == DONE:
-            break
-    stats.groups_visited, stats.points_visited, stats.lb_keogh, stats.dtw = (int(x) for x in counters)
-    hits = sorted((float(exact[o]), source.object_name(int(o)), int(o))
-                  for o in np.flatnonzero(np.isfinite(exact)))[:k]
-    result = [Neighbour(name, source.view_id(int(exact_row[o])), d, bool(exact_mirrored[o]))
-              for d, name, o in hits]
-    stats.seconds = time.perf_counter() - start
-    return result, stats
+
+    return _Search(source, k, upper, known, 2).run(qb, step, initial_radius)
+
+
+def knn_stack(
+    curves: NDArray[np.floating],
+    source: TierSource,
+    k: int,
+    r: int,
+    *,
+    upper: float = math.inf,
+    known: Mapping[int, float] | None = None,
+    initial_radius: float = INITIAL_RADIUS,
+    block: int | None = None,
+) -> tuple[list[Neighbour], SearchStats]:
+    """The k nearest distinct objects to a stack of query curves ``(T, N)``: a view's
+    distance is the smallest over the curves (and the view's mirror), found in one
+    best-first search (:mod:`viewdb.search.shifts`, :mod:`viewdb.search.multirefine`);
+    each result's ``shift`` is the row of the curve that matched. Exactly
+    :func:`brute_force_knn` of each curve, merged; ``upper``/``known`` as in :func:`knn`."""
+    stack = CurveQuery.of(curves, r, SearchConfig().shift_block if block is None else block)
+    boxes = source.group_boxes()
+    group_arrays = (source.group_start, source.group_count, source.group_owner, source.row_owner)
+
+    def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
+        while True:
+            pos, status = refine_stack(
+                stack, order, keys, pos, ready, stop_key, group_arrays, rows, boxes,
+                (search.bound, search.exact, search.exact_row, search.exact_mirrored,
+                 search.exact_curve, *search.heap), k, search.cap, search.counters,
+            )
+            if status != FULL:
+                return pos, status
+            search.grow()
+
+    return _Search(source, k, upper, known, 4).run(stack, step, initial_radius)
+
+
+class _Search:
+    """The state of one search and its range browsing (module doc): per-object bounds
+    and results, the heap of the compiled refinement, and the loop that lists groups
+    within a growing radius and hands them to a refinement ``step``."""
+
+    def __init__(self, source: TierSource, k: int, upper: float, known: Mapping[int, float] | None,
+                 heap_per_view: int) -> None:
+        self.source, self.k = source, k
+        self.bound = np.full(source.n_objects, math.inf)
+        for o, d in (known or {}).items():
+            self.bound[o] = min(self.bound[o], float(d))
+        self.exact = np.full(source.n_objects, math.inf)
+        self.exact_row = np.full(source.n_objects, -1, dtype=np.int64)
+        self.exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
+        self.exact_curve = np.zeros(source.n_objects, dtype=np.int64)
+        self.cap = upper * (1.0 + WIDEN_REL) + WIDEN_ABS if math.isfinite(upper) else math.inf
+        self.counters = np.zeros(4, dtype=np.int64)
+        views = int(source.group_count.sum())
+        size = max(heap_per_view * views, 64)
+        self.heap = (np.empty(size), np.empty(size, dtype=np.int64), np.zeros(1, dtype=np.int64))
+
+    def grow(self) -> None:
+        """Double the heap's capacity (its entries and size kept)."""
+        keys, codes, size = self.heap
+        n = int(size[0])
+        bigger = (np.empty(2 * len(keys)), np.empty(2 * len(keys), dtype=np.int64), size)
+        bigger[0][:n] = keys[:n]
+        bigger[1][:n] = codes[:n]
+        self.heap = bigger
+
+    def run(self, qb: Any, step: Any, initial_radius: float) -> tuple[list[Neighbour], SearchStats]:
+        start = time.perf_counter()
+        source, stats = self.source, SearchStats()
+        seen = np.zeros(source.n_groups, dtype=np.bool_)
+        order = np.zeros(0, dtype=np.int64)
+        keys = np.zeros(0, dtype=np.float64)
+        pos = ready = 0
+        chunk = CHUNK
+        radius = -math.inf
+        exhausted = source.n_groups == 0
+        status = EXHAUSTED
+        cap = self.cap
+        while True:
+            if status in (EXHAUSTED, RADIUS):
+                if exhausted:
+                    break
+                # browse further: every group within the (grown) radius joins the candidates
+                smallest = min(float(keys[pos]) if pos < len(keys) else math.inf,
+                               float(self.heap[0][0]) if self.heap[2][0] else math.inf)
+                # a known bound (a CS1 client's, earlier turns') is the radius at once: one
+                # browse lists every group that may matter, instead of doubling up to it
+                radius = min(max(2.0 * radius, smallest if math.isfinite(smallest) else 0.0,
+                                 initial_radius, cap if math.isfinite(cap) else -math.inf), cap)
+                stats.expansions += 1
+                found, found_keys = source.groups_within(qb, radius, seen)
+                seen[found] = True
+                keep = found_keys <= cap
+                order = np.concatenate([order[pos:], found[keep]])
+                keys = np.concatenate([keys[pos:], found_keys[keep]])
+                by_key = np.argsort(keys, kind="stable")
+                order, keys, pos, ready = order[by_key], keys[by_key], 0, 0
+                exhausted = bool(seen.all()) or radius >= cap
+            if ready < len(order) and (status == NEED or ready <= pos):
+                # chunks double while a search goes on (read rows stay loaded for the next)
+                end = min(len(order), max(ready, pos) + chunk)
+                rows = source.rows(order[ready:end])
+                ready, chunk = end, min(2 * chunk, MAX_CHUNK)
+            else:
+                rows = source.rows(order[:0])
+            pos, status = step(self, order, keys, pos, ready, math.inf if exhausted else radius, rows)
+            if status == DONE:
+                break
+        stats.groups_visited, stats.points_visited, stats.lb_keogh, stats.dtw = (
+            int(x) for x in self.counters)
+        exact = self.exact
+        hits = sorted((float(exact[o]), source.object_name(int(o)), int(o))
+                      for o in np.flatnonzero(np.isfinite(exact)))[: self.k]
+        result = [Neighbour(name, source.view_id(int(self.exact_row[o])), d,
+                            bool(self.exact_mirrored[o]), int(self.exact_curve[o]))
+                  for d, name, o in hits]
+        stats.seconds = time.perf_counter() - start
+        return result, stats
 
 
 def objects_within(

@@ -35,6 +35,7 @@ from ..config import LIMITS, finite
 from ..errors import QueryError
 from .bounds import dtw
 from .knn import Neighbour, SearchStats, TierSource, knn
+from .shifts import ShiftWindow, shifted
 
 __all__ = [
     "PLANS",
@@ -118,6 +119,9 @@ class Candidate:
     #: The view is a perspective silhouette seen from this many bounding radii (None:
     #: an orthographic view).
     camera_distance: float | None = None
+    #: The query curve matched started at this sample (a shift search,
+    #: :class:`~viewdb.search.shifts.ShiftWindow`); None: the curve as given.
+    shift: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out = {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
@@ -126,6 +130,8 @@ class Candidate:
             out["version"] = self.version
         if self.camera_distance is not None:
             out["camera_distance"] = self.camera_distance
+        if self.shift is not None:
+            out["shift"] = self.shift
         return out
 
     @classmethod
@@ -154,9 +160,12 @@ class Candidate:
             ):
                 raise QueryError(f"candidate camera_distance must be a number greater than 1 and at "
                                  f"most {LIMITS.max_perspective_distance:g}, got {camera!r}"[:160])
+            shift = data.get("shift")
+            if shift is not None:
+                shift = _int(shift, "candidate shift", 0, MAX_SAMPLES - 1)
             return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
                        _finite(data["elevation"], "candidate elevation"), mirrored, version,
-                       None if camera is None else float(camera))
+                       None if camera is None else float(camera), shift)
         except KeyError as exc:
             raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
 
@@ -173,20 +182,39 @@ def _candidates(data: Any, limit: int) -> list[Candidate]:
 MAX_K = 100
 #: Widest Sakoe–Chiba band a request may ask for.
 MAX_BAND = 64
+#: Longest curve a candidate's shift may refer to.
+MAX_SAMPLES = 4096
+
+
+def _shifts(data: Any) -> ShiftWindow | None:
+    """A request's optional shift window (absent or null: the curve as given)."""
+    if data is None:
+        return None
+    window = ShiftWindow.from_dict(data)
+    for name in ("centre", "half_width", "step"):
+        value = getattr(window, name)
+        if value is not None and not 0 <= value < MAX_SAMPLES:
+            raise QueryError(f"shifts {name} must be in [0, {MAX_SAMPLES - 1}], got {value}")
+    return window
 
 
 @dataclass(frozen=True)
 class RefineRequest:
-    """CS1, client → server: the query curve and the client's top-k on its sparse tier."""
+    """CS1, client → server: the query curve and the client's top-k on its sparse tier
+    (searched over the same ``shifts`` of the curve; None: the curve as given)."""
 
     curve: NDArray[np.float64] = field(repr=False)
     band: int
     k: int
     client: list[Candidate]
+    shifts: ShiftWindow | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"curve": [float(x) for x in self.curve], "band": self.band, "k": self.k,
-                "client": [c.to_dict() for c in self.client]}
+        out = {"curve": [float(x) for x in self.curve], "band": self.band, "k": self.k,
+               "client": [c.to_dict() for c in self.client]}
+        if self.shifts is not None:
+            out["shifts"] = self.shifts.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, data: Any, samples: int | None = None) -> RefineRequest:
@@ -194,7 +222,8 @@ class RefineRequest:
             raise QueryError("request must be an object")
         try:
             return cls(_curve(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
-                       _int(data["k"], "k", 1, MAX_K), _candidates(data["client"], MAX_K))
+                       _int(data["k"], "k", 1, MAX_K), _candidates(data["client"], MAX_K),
+                       _shifts(data.get("shifts")))
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -254,11 +283,18 @@ def refine(
     candidate whose object the server lacks, or whose ``version`` differs from the
     server's (``versions``: object name → content hash; a client file exported before
     the object was replaced) is not used, so a stale client file makes the answer no
-    less exact, only the bounds looser."""
+    less exact, only the bounds looser. Nor is a candidate whose ``shift`` lies outside
+    the request's shift window: its distance is not one the window allows.
+
+    With ``request.shifts`` the distance is the smallest over those shifts of the curve
+    (:func:`~viewdb.search.knn.knn`), the client's too."""
+    n = len(request.curve)
+    allowed = {0} if request.shifts is None else set(request.shifts.shifts(n).tolist())
     client = sorted(
         (c for c in request.client
          if source.object_index(c.object) is not None
-         and (c.version is None or versions is None or versions.get(c.object) == c.version)),
+         and (c.version is None or versions is None or versions.get(c.object) == c.version)
+         and (c.shift is None or c.shift in allowed)),
         key=lambda c: c.distance,
     )
     upper = client[request.k - 1].distance if len(client) >= request.k else math.inf
@@ -267,7 +303,8 @@ def refine(
         index = source.object_index(c.object)
         if index is not None:
             known[index] = min(c.distance, known.get(index, math.inf))
-    return knn(request.curve, source, request.k, request.band, upper=upper, known=known)
+    return knn(request.curve, source, request.k, request.band, upper=upper, known=known,
+               shifts=request.shifts)
 
 
 def next_gap(gap: float, server_gap: float) -> float:
@@ -293,17 +330,19 @@ def walk(
     without a silhouette). At each grid gap, from the client's gap halved down to
     ``server_gap``, the walk moves to the best of the current view's 8 neighbours until
     none is better, then halves the gap. Returns the top-k objects by their best view.
+    A candidate found by a shift search (its ``shift``) is walked with the query curve
+    started at that sample.
     """
-    q = request.curve
-    evaluated: dict[tuple[str, float, float], tuple[float, bool]] = {}
+    evaluated: dict[tuple[str, float, float, int], tuple[float, bool]] = {}
 
-    def distance(name: str, h: float, v: float) -> tuple[float, bool]:
-        key = (name, _norm(h), _norm(v))
+    def distance(name: str, h: float, v: float, shift: int) -> tuple[float, bool]:
+        key = (name, _norm(h), _norm(v), shift)
         if key not in evaluated:
-            curve = curve_at(*key)
+            curve = curve_at(*key[:3])
             if curve is None:
                 evaluated[key] = (math.inf, False)
             else:
+                q = shifted(request.curve, shift)
                 d = dtw(q, curve, request.band)
                 dm = dtw(q, mirror_curve(curve), request.band)
                 evaluated[key] = (dm, True) if dm < d else (d, False)
@@ -313,19 +352,20 @@ def walk(
     for cand in request.client:
         h, v = _norm(round(cand.azimuth / server_gap) * server_gap), _norm(
             round(cand.elevation / server_gap) * server_gap)
-        best, mirrored = distance(cand.object, h, v)
+        shift = cand.shift or 0
+        best, mirrored = distance(cand.object, h, v, shift)
         gap = max(request.client_gap, server_gap)
         while gap > server_gap + 1e-9:
             gap = next_gap(gap, server_gap)
             for _ in range(max_steps):
-                moves = [(distance(cand.object, h + dh, v + dv), h + dh, v + dv)
+                moves = [(distance(cand.object, h + dh, v + dv, shift), h + dh, v + dv)
                          for dh in (-gap, 0.0, gap) for dv in (-gap, 0.0, gap) if dh or dv]
                 (d, m), nh, nv = min(moves, key=lambda x: x[0][0])
                 if d >= best:
                     break
                 best, mirrored, h, v = d, m, _norm(nh), _norm(nv)
         if math.isfinite(best):
-            results.append(Candidate(cand.object, best, h, v, mirrored))
+            results.append(Candidate(cand.object, best, h, v, mirrored, shift=cand.shift))
     results.sort(key=lambda c: (c.distance, c.object))
     return _one_per_object(results)[: request.k], {"dtw": float(2 * len(evaluated))}
 
@@ -346,13 +386,15 @@ def neighbours_to_candidates(
     found: Sequence[Neighbour],
     views: Mapping[int, tuple[float, float] | tuple[float, float, float | None]],
     versions: Mapping[str, str] | None = None,
+    shifted: bool = False,
 ) -> list[Candidate]:
     """k-NN results as candidates, given ``view id -> (azimuth, elevation[, camera
-    distance])`` (and the objects' content hashes, ``versions``)."""
+    distance])`` (and the objects' content hashes, ``versions``); ``shifted``: the results
+    of a shift search, whose candidates carry the shift that matched."""
     out = []
     for n in found:
         azimuth, elevation, *camera = views[n.view]
         out.append(Candidate(n.object, n.distance, azimuth, elevation, n.mirrored,
                              None if versions is None else versions.get(n.object),
-                             camera[0] if camera else None))
+                             camera[0] if camera else None, n.shift if shifted else None))
     return out

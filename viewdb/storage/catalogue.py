@@ -33,6 +33,7 @@ from ..errors import FeatureError, NotFound, QueryError
 from ..search.knn import SearchStats, TierArrays, knn, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
 from ..search.refine import scan_all
+from ..search.shifts import ShiftWindow
 from .appearances import decode_record
 from .store import ObjectRow, Store
 from .tiers import TIERS, TierReader
@@ -81,6 +82,8 @@ class SearchHit:
     #: The view is a perspective silhouette from this many bounding radii (None: an
     #: orthographic view).
     camera_distance: float | None = None
+    #: The query curve matched started at this sample (a shift search; None: as given).
+    shift: int | None = None
 
 
 class StoredCatalogue:
@@ -319,19 +322,21 @@ class StoredCatalogue:
         return self._reader
 
     def nearest_objects(
-        self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full"
+        self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full",
+        shifts: ShiftWindow | None = None,
     ) -> tuple[list[Candidate], SearchStats]:
         """Algorithm 2 on one tier, in one read snapshot: the ``k`` nearest objects, each
-        with its best view (and the object's content hash as its ``version``)."""
+        with its best view (and the object's content hash as its ``version``); over the
+        circular ``shifts`` of the curve in one search (each with the shift that matched)."""
         q = self.query_curve(curve, k, tier)
         with self.tier_reader().snapshot() as reader:
             source = reader.tier(tier)
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
-            found, stats = knn(q, source, k, band)
+            found, stats = knn(q, source, k, band, shifts=shifts)
             angles = reader.view_projections([n.view for n in found])
             versions = reader.object_versions()
-        return neighbours_to_candidates(found, angles, versions), stats
+        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None), stats
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, band: int = 6, tier: str = "full"

@@ -212,6 +212,12 @@ class StoredTier:
             self._loaded[g] = True
         return self._curves, self._coords, self._means
 
+    def group_boxes(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Every group's MBR and per-sample curve range (read when the tier was opened)."""
+        return self._lo, self._hi, self._curve_lo, self._curve_hi
+
     def view_id(self, row: int) -> int:
         return int(self._views[row])
 
