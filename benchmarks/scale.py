@@ -151,7 +151,8 @@ def main() -> None:
                 assert [c.to_dict() for c in reply.results] == want, "sharded answer differs"
                 dtw += reply.stats["dtw"]
             for q in queries[:20]:  # each shard alone, unbounded: what the bounds save
-                refs = [a.call.remote("refine", q, 6, args.k, {}, math.inf) for a in sharded.actors]
+                body = RefineRequest(q, 6, args.k, []).to_dict()
+                refs = [a.call.remote("refine", body, math.inf) for a in sharded.actors]
                 alone += sum(r["stats"]["dtw"] for r in ray.get(refs)) / 20 * len(queries)
             memory = ray.get([a.call.remote("memory") for a in sharded.actors])
             p50n, p95n = percentiles(ms)

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from viewdb.search.plans import Candidate, RefineRequest
+from viewdb.search.shifts import ShiftWindow
 from viewdb.shards.gather import scatter_gather, top_k
 from viewdb.shards.layout import read_manifest, shard_of, split_catalogue
 from viewdb.shards.shard import Shard
@@ -50,8 +51,10 @@ def _owners(shards):
 def sharded_refine(shards, request, first_round=1):
     owners, versions = _owners(shards)
 
-    def run(at, bound, known):
-        return [shards[s].refine(request.curve, request.band, request.k, known.get(s, {}), bound) for s in at]
+    body = request.to_dict()
+
+    def run(at, bound, client):
+        return [shards[s].refine({**body, "client": [c.to_dict() for c in client.get(s, [])]}, bound) for s in at]
 
     return scatter_gather(request, owners, versions, len(shards), first_round, run)
 
@@ -143,23 +146,29 @@ def test_missing_or_damaged_shards_are_refused_naming_them(splits, tmp_path):
         Shard(damaged, 0).close()
 
 
+WINDOWS = st.sampled_from([None, ShiftWindow(), ShiftWindow(step=8), ShiftWindow(40, 6)])
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.sampled_from(COUNTS), st.integers(1, 8), st.integers(0, 8),
-       st.sampled_from(["server", "cs1", "prior"]), st.integers(1, 3))
-def test_sharded_search_equals_the_single_file_exactly(tiered_db, splits, seed, count, k, band, plan, first):
+       st.sampled_from(["server", "cs1", "prior"]), st.integers(1, 3), WINDOWS)
+def test_sharded_search_equals_the_single_file_exactly(tiered_db, splits, seed, count, k, band, plan, first,
+                                                       window):
     rng = np.random.default_rng(seed)
     with viewdb.open(tiered_db, read_only=True) as db:
         arrays, _ = db.search_tier("full")
         q = arrays.curves[rng.integers(len(arrays.curves))]
         q = np.clip(q * rng.uniform(0.9, 1.1) + rng.normal(0, rng.choice([0.0, 0.02, 0.2]), 128), 0, None)
         client: list[Candidate] = []
+        if window is not None:  # the query turned: a shift search finds it
+            q = np.roll(q, int(rng.integers(0, 128)))
         if plan == "cs1":
-            client, _ = db.client_candidates(q, k, band=band)
+            client, _ = db.client_candidates(q, k, band=band, shifts=window)
         elif plan == "prior":  # bounds from elsewhere: some objects' distances, loosened
-            hits, _ = db.search(q, k + 2, band=band)
+            hits, _ = db.search(q, k + 2, band=band, shifts=window)
             client = [Candidate(h.object, h.distance * rng.uniform(1.0, 1.5), 0.0, 0.0, False)
                       for h in hits if rng.random() < 0.7]
-        request = RefineRequest(q, band, k, client)
+        request = RefineRequest(q, band, k, client, window)
         single, _ = db.server_tier().refine(request)
     sharded = sharded_refine(splits[count][1], request, first)
     assert _rows(sharded.results) == _rows(single.results)
@@ -176,7 +185,7 @@ def test_later_rounds_are_pruned_by_the_first(tiered_db, splits):
         request = RefineRequest(np.clip(q, 0, None), 6, 1, [])
         reply = sharded_refine(shards, request)
         pruned += reply.stats["dtw"]
-        unbounded += sum(s.refine(request.curve, 6, 1, {}, np.inf)["stats"]["dtw"] for s in shards)
+        unbounded += sum(s.refine(request.to_dict(), np.inf)["stats"]["dtw"] for s in shards)
     assert pruned < unbounded
 
 

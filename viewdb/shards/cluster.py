@@ -210,10 +210,12 @@ class ShardedServerTier:
         if len(request.curve) != self.samples:
             raise QueryError(f"query curve must be {self.samples} finite samples")
 
-        def run(shards: list[int], bound: float, known: dict[int, dict[str, float]]) -> list[Any]:
-            return self._gather([self.actors[s].call.remote("refine", request.curve, request.band,
-                                                            request.k, known.get(s, {}), bound)
-                                 for s in shards], shards)
+        body = request.to_dict()
+
+        def run(shards: list[int], bound: float, client: dict[int, list[Candidate]]) -> list[Any]:
+            return self._gather([self.actors[s].call.remote(
+                "refine", {**body, "client": [c.to_dict() for c in client.get(s, [])]}, bound)
+                for s in shards], shards)
 
         return scatter_gather(request, self.owner, self.versions, self.manifest.shards,
                               self.config.first_round, run)

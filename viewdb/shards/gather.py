@@ -19,30 +19,28 @@ import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
-from ..search.plans import Candidate, RefineRequest, ServerReply
+from ..search.plans import Candidate, RefineRequest, ServerReply, usable_client
 
 __all__ = ["client_bounds", "kth_distance", "scatter_gather", "top_k"]
 
-#: ``run(shards, bound, known)``: one round's replies (``ServerReply.to_dict`` shape),
-#: one per shard, each shard's exact search bounded by ``bound`` and its ``known[shard]``.
-RoundRunner = Callable[[list[int], float, dict[int, dict[str, float]]], list[dict[str, Any]]]
+#: ``run(shards, bound, client)``: one round's replies (``ServerReply.to_dict`` shape),
+#: one per shard, each shard's exact search bounded by ``bound`` and by its client
+#: candidates ``client[shard]`` (:func:`~viewdb.search.plans.refine`).
+RoundRunner = Callable[[list[int], float, dict[int, list[Candidate]]], list[dict[str, Any]]]
 
 
 def client_bounds(
-    client: Sequence[Candidate], owners: Mapping[str, int], versions: Mapping[str, str], k: int,
-) -> tuple[float, dict[int, dict[str, float]]]:
-    """The upper bound of the k-th distance the usable candidates give, and per shard the
-    per-object bounds (name → smallest candidate distance). A candidate is usable when
-    its object is in the catalogue (``owners``: name → shard) in the same version
-    (``versions``: name → content hash; a candidate without a version is trusted)."""
-    usable = sorted((c for c in client if c.object in owners
-                     and (c.version is None or versions.get(c.object) == c.version)),
-                    key=lambda c: c.distance)
-    upper = usable[k - 1].distance if len(usable) >= k else math.inf
-    known: dict[int, dict[str, float]] = {}
+    request: RefineRequest, owners: Mapping[str, int], versions: Mapping[str, str],
+) -> tuple[float, dict[int, list[Candidate]]]:
+    """The upper bound of the k-th distance the usable client candidates give
+    (:func:`~viewdb.search.plans.usable_client`: of objects the catalogue holds,
+    ``owners``: name → shard, in the same version, at an allowed shift), and those
+    candidates by shard."""
+    usable = usable_client(request, lambda name: name in owners, versions)
+    upper = usable[request.k - 1].distance if len(usable) >= request.k else math.inf
+    known: dict[int, list[Candidate]] = {}
     for c in usable:
-        mine = known.setdefault(owners[c.object], {})
-        mine[c.object] = min(c.distance, mine.get(c.object, math.inf))
+        known.setdefault(owners[c.object], []).append(c)
     return upper, known
 
 
@@ -68,7 +66,7 @@ def scatter_gather(
     """The exact k nearest objects over ``shards`` shards in two rounds: the first
     ``first_round`` shards (the shard of the client's best candidate first), then the
     rest, bounded by the k-th distance gathered so far and the client's bounds."""
-    upper, known = client_bounds(request.client, owners, versions, request.k)
+    upper, known = client_bounds(request, owners, versions)
     best = min(request.client, key=lambda c: c.distance, default=None)
     start = owners.get(best.object, 0) if best is not None else 0
     order = [(start + i) % shards for i in range(shards)]

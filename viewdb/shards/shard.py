@@ -9,7 +9,6 @@ Replies are plain dicts and lists (what crosses between processes).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,8 +19,14 @@ from numpy.typing import NDArray
 from ..errors import StorageError
 from ..pose.estimate import QueryView
 from ..pose.intrinsics import Intrinsics
-from ..search.knn import knn
-from ..search.plans import Candidate, ServerReply, WalkRequest, neighbours_to_candidates
+from ..search.plans import (
+    Candidate,
+    RefineRequest,
+    ServerReply,
+    WalkRequest,
+    neighbours_to_candidates,
+    refine,
+)
 
 __all__ = ["Shard"]
 
@@ -60,24 +65,22 @@ class Shard:
         """``viewdb info`` of the shard file, as JSON."""
         return self.db.info().to_dict()
 
-    def refine(self, curve: NDArray[np.float64], band: int, k: int,
-               known: dict[str, float], upper: float) -> dict[str, Any]:
-        """The exact k nearest objects of this shard, bounded by ``upper`` (an upper bound
-        of the k-th distance over every shard) and ``known`` (name → an upper bound of
-        that object's distance): every object of this shard whose distance is at most
-        ``upper`` and that ranks among its k best is in the reply, with its exact
-        distance; objects farther than ``upper`` may be left out."""
+    def refine(self, request: dict[str, Any], upper: float) -> dict[str, Any]:
+        """CS1's server half on this shard (:func:`~viewdb.search.plans.refine`; the
+        request as JSON, its client candidates those of this shard's objects), further
+        bounded by ``upper``, an upper bound of the k-th distance over every shard: every
+        object of this shard that ranks among its k best and is no farther than ``upper``
+        is in the reply with its exact distance; farther objects may be left out."""
+        parsed = RefineRequest.from_dict(request, self.samples)
         catalogue = self.tier.catalogue
-        q = catalogue.query_curve(curve, k, "full")
         with catalogue.tier_reader().snapshot() as reader:
             source = reader.tier("full")
-            bounds = {i: d for name, d in known.items() if (i := source.object_index(name)) is not None}
             if source.n_groups == 0:
                 return ServerReply([], {}).to_dict()
-            found, stats = knn(q, source, k, band, upper=upper if math.isfinite(upper) else math.inf,
-                               known=bounds)
+            found, stats = refine(source, parsed, reader.object_versions(), upper)
             angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles), stats.to_dict()).to_dict()
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=parsed.shifts is not None),
+                           stats.to_dict()).to_dict()
 
     def walk(self, request: dict[str, Any]) -> dict[str, Any]:
         """CS2's walk from the client candidates of this shard's objects."""
