@@ -30,7 +30,6 @@ from rich.table import Table
 from rich.text import Text
 
 import viewdb
-import viewdb.bench as viewdb_bench
 import viewdb.config as viewdb_config
 from viewdb.typed import Intrinsics
 
@@ -172,7 +171,7 @@ def ingest(
     ] = False,
     max_faces: Annotated[
         int, typer.Option(help="Refuse meshes with more triangles (0 = no cap).", min=0)
-    ] = viewdb.DEFAULT_MAX_FACES,
+    ] = viewdb_config.DEFAULT_MAX_FACES,
     allow_missing_textures: Annotated[
         bool, typer.Option("--allow-missing-textures",
                            help="Ingest meshes whose texture files are missing, untextured.")
@@ -376,7 +375,8 @@ def query(
     ] = None,
     label_map: Annotated[
         Path | None, typer.Option(help="Label image (one integer label per pixel, 0 = background); "
-                                       "with --label picks one object.", dir_okay=False)
+                                       "with --label picks one object, with --all every labelled one.",
+                                  dir_okay=False)
     ] = None,
     label: Annotated[int | None, typer.Option(help="The object's label in --label-map.", min=1)] = None,
     rerank: Annotated[bool, typer.Option(
@@ -399,12 +399,26 @@ def query(
         help="With --server: seconds each exchange with the server may take in all (connecting "
              "and each read are bounded by it too).", callback=_number(0.001, 86400))
     ] = viewdb_config.HttpConfig().total_timeout,
+    box: Annotated[list[str] | None, typer.Option(
+        "--box", help="An object's box x1,y1,x2,y2 in pixels (repeatable: one object each).",
+        metavar="X1,Y1,X2,Y2")] = None,
+    point: Annotated[list[str] | None, typer.Option(
+        "--point", help="A pixel x,y on an object (repeatable: one object each).", metavar="X,Y")] = None,
+    every: Annotated[bool, typer.Option(
+        "--all", help="Every object that stands out from the background (with --label-map: every "
+                      "label).")] = False,
+    max_objects: Annotated[int | None, typer.Option(
+        help="With --all: at most this many objects, the largest (default 8).", min=1)] = None,
+    overlay: Annotated[Path | None, typer.Option(
+        help="Write the photo with each object's posed mesh drawn over it (PNG).", dir_okay=False,
+        metavar="OUT.png")] = None,
 ) -> None:
     """Recognise the object a photo shows and estimate its pose.
 
     Locally on --db (the client half of cs1/cs2 on --client if given), or remotely:
     --client FILE --server URL runs the client half on the client file and calls the
-    server for the rest (and the pose).
+    server for the rest (and the pose). --box, --point (each repeatable) and --all
+    recognise several objects of one photo; the JSON then lists them in "objects".
     """
     if plan not in ("server", "cs1", "cs2"):
         raise typer.BadParameter("must be server, cs1 or cs2", param_hint="--plan")
@@ -416,6 +430,9 @@ def query(
     if upright and roll is not None:
         raise typer.BadParameter("give --roll DEG or --upright, not both", param_hint="--upright")
     roll = 0.0 if upright else roll
+    prompts = _prompts(box, point, every, max_objects, mask, label, label_map)
+    if overlay is not None:
+        _check_overlay(overlay, server)
     if server is not None:
         if client is None or db is not None:
             raise typer.BadParameter("with --server give --client FILE (and no --db)",
@@ -427,7 +444,7 @@ def query(
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
                                 label_map=label_map, label=label, colour=not no_colour,
-                                verify=not no_verify, pose_top=pose_top, roll=roll)
+                                verify=not no_verify, pose_top=pose_top, roll=roll, **prompts)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -438,21 +455,93 @@ def query(
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
                                    label_map=label_map, label=label, rerank=rerank,
                                    colour=not no_colour, verify=not no_verify, pose_top=pose_top,
-                                   roll=roll)
+                                   roll=roll, **prompts)
+                if overlay is not None:
+                    _write_png(overlay, result.overlay())
             finally:
                 if side is not None:
                     side.close()
     if as_json:
         _echo_json(result.to_dict())
         return
+    _print_result(result)
+
+
+def _prompts(box: list[str] | None, point: list[str] | None, every: bool, max_objects: int | None,
+             mask: Path | None, label: int | None, label_map: Path | None) -> dict[str, Any]:
+    """The prompt arguments of ``ViewDB.query``, parsed (a malformed one is a usage error)."""
+    if every and (box or point):
+        raise typer.BadParameter("give --box/--point prompts or --all, not both", param_hint="--all")
+    if (box or point or every) and mask is not None:
+        raise typer.BadParameter("--mask is one object: use --label-map with --all, or prompts alone",
+                                 param_hint="--mask")
+    if every and label is not None:
+        raise typer.BadParameter("--all queries every label: drop --label", param_hint="--label")
+    if (box or point) and label_map is not None:
+        raise typer.BadParameter("--label-map with prompts: give --label, or --all", param_hint="--label-map")
+    if max_objects is not None and not every:
+        raise typer.BadParameter("--max-objects goes with --all", param_hint="--max-objects")
+    try:
+        boxes = [viewdb.parse_box(b) for b in box or ()]
+        points = [viewdb.parse_point(p) for p in point or ()]
+    except viewdb.QueryError as exc:
+        raise typer.BadParameter(exc.message, param_hint="--box" if box else "--point") from None
+    return {"boxes": boxes, "points": points, "every": every, "max_objects": max_objects}
+
+
+def _check_overlay(path: Path, server: str | None) -> None:
+    """Refuse an overlay that cannot be written before the query runs."""
+    if server is not None:
+        raise typer.BadParameter("--overlay needs the meshes: query the full file with --db",
+                                 param_hint="--overlay")
+    if path.suffix.lower() != ".png":
+        raise typer.BadParameter(f"{path}: the overlay is written as PNG: name it *.png",
+                                 param_hint="--overlay")
+    if not path.parent.is_dir():
+        raise viewdb.ViewDBError("the folder to write the overlay in does not exist", path)
+
+
+def _write_png(path: Path, rgb: Any) -> None:
+    """Write an RGB image as PNG in one step (a temporary file renamed over ``path``)."""
+    import cv2
+
+    ok, data = cv2.imencode(".png", rgb[:, :, ::-1])
+    if not ok:
+        raise viewdb.ViewDBError("cannot encode the overlay as PNG", path)
+    try:
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", delete=False) as f:
+            temporary = Path(f.name)
+            f.write(data.tobytes())
+        temporary.replace(path)
+    except OSError as exc:
+        if "temporary" in locals():
+            temporary.unlink(missing_ok=True)
+        raise viewdb.ViewDBError(f"cannot write the overlay: {exc.strerror or exc}", path) from exc
+
+
+def _print_result(result: viewdb.QueryResult) -> None:
     t = result.timing_ms
     network = f", network {t['network']:.0f}" if "network" in t else ""
     _say(f"{result.image}: plan {result.plan}, segmented by {result.segmentation}; "
          f"{t['total']:.0f} ms (segment {t['segment']:.0f}, client {t['client']:.0f}, "
          f"server {t['server']:.0f}, colour {t['colour']:.0f}, verify {t['verify']:.0f}, "
          f"pose {t['pose']:.0f}{network})")
+    if result.objects is None:
+        _results_table(result.results)
+        return
+    for i, o in enumerate(result.objects, 1):
+        region = o.region
+        prompt = f" from {region.prompt}" if region.prompt is not None else (
+            f" (label {region.label})" if region.label is not None else "")
+        x1, y1, x2, y2 = region.box
+        _say(f"object {i}{prompt}: box {x1},{y1},{x2},{y2}, {region.area} pixels, segmented by "
+             f"{region.segmentation.method}; {o.timing_ms.get('total', 0.0):.0f} ms")
+        _results_table(o.results)
+
+
+def _results_table(results: list[viewdb.QueryMatch]) -> None:
     rows = []
-    for r in result.results:
+    for r in results:
         p = r.pose
         rows.append([
             str(r.rank), r.object, f"{r.distance:.3f}", "-" if r.colour is None else f"{r.colour:.2f}",
@@ -676,6 +765,8 @@ def bench(
 ) -> None:
     """Reproduce the paper's experiments: S1–S6 CMC curves, time against the client gap
     for k = 1..k, index sizes. Resumable: run the same command again to continue."""
+    import viewdb.bench as viewdb_bench
+
     config = viewdb_bench.BenchConfig(
         models=models, out=out_dir, queries=queries, seed=seed, gaps=_floats(gaps, "--gaps"),
         k=k, jobs=jobs, subset=subset, cache=cache, gap=gap, client_gap=client_gap,

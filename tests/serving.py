@@ -141,13 +141,17 @@ def request(url: str, method: str, path: str, body: bytes | str | Any = None, *,
         return response.status, raw
 
 
-def multipart(fields: dict[str, str], files: dict[str, tuple[str, bytes, str]]) -> tuple[bytes, dict[str, str]]:
-    """A multipart/form-data body and its headers: ``fields`` name → text, ``files``
-    name → (file name, bytes, content type), as a browser's form upload sends them."""
+def multipart(fields: dict[str, str | list[str]], files: dict[str, tuple[str, bytes, str]]
+              ) -> tuple[bytes, dict[str, str]]:
+    """A multipart/form-data body and its headers: ``fields`` name → text (a list: the
+    field repeated), ``files`` name → (file name, bytes, content type), as a browser's
+    form upload sends them."""
     boundary = f"viewdb{os.urandom(12).hex()}"
     parts = []
-    for name, value in fields.items():
-        parts.append(f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"\r\n\r\n{value}\r\n'.encode())
+    for name, values in fields.items():
+        for value in values if isinstance(values, list) else [values]:
+            parts.append(f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"\r\n\r\n{value}\r\n'
+                         .encode())
     for name, (filename, data, kind) in files.items():
         head = (f'--{boundary}\r\nContent-Disposition: form-data; name="{name}"; filename="{filename}"\r\n'
                 f"Content-Type: {kind}\r\n\r\n").encode()

@@ -84,7 +84,7 @@ def bad_files(tmp_path_factory) -> dict[str, Path]:
     return {"notes": notes, "huge": huge, "wall": empty_scene}
 
 
-def post_photo(url: str, path: Path, token: str | None = TOKEN, **fields: str) -> tuple[int, object]:
+def post_photo(url: str, path: Path, token: str | None = TOKEN, **fields: str | list[str]) -> tuple[int, object]:
     body, headers = multipart(fields, {"photo": (path.name, path.read_bytes(), "application/octet-stream")})
     return request(url, "POST", "/query", body, headers=headers, token=token)
 
@@ -149,6 +149,32 @@ def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_p
                                            top["thumbnail"]).groups())
     view = db.render("mug", h, v)
     assert np.array_equal(thumb[:, :, :3], view.color) and np.array_equal(thumb[:, :, 3] > 0, view.mask)
+
+
+def test_query_with_boxes_answers_each_object(server, db, tmp_path):
+    from viewdb.bench.photos import table_photo
+
+    views = [db.render("car", 40, 20), db.render("mug", 130, 25)]
+    photo, masks = table_photo(views, (560, 260),
+                               [(10, 20), (300, 40)])
+    path = tmp_path / "table.png"
+    cv2.imwrite(str(path), photo[:, :, ::-1])
+    boxes = []
+    for m in masks:
+        ys, xs = np.nonzero(m)
+        boxes.append(f"{xs.min()},{ys.min()},{xs.max() + 1},{ys.max() + 1}")
+    status, answer = post_photo(server.url, path, k="1", box=[boxes[1], boxes[0]])
+    assert status == 200, answer
+    models.WebQueryReplyModel.model_validate(answer)
+    assert answer["results"] == [] and [o["results"][0]["object"] for o in answer["objects"]] == ["mug", "car"]
+    local = db.query(str(path), k=1, boxes=[boxes[1], boxes[0]]).to_dict()
+    for mine, theirs in zip(local["objects"], answer["objects"], strict=True):
+        assert mine["region"] == theirs["region"]
+        assert theirs["results"][0]["overlay"].startswith("data:image/png;base64,")
+    status, reply = post_photo(server.url, path, box=["1,2,3"])
+    assert status == 422 and "box" in reply["error"]
+    status, reply = post_photo(server.url, path, box=["10,10,900,100"])
+    assert status == 422 and "outside the 560x260 image" in reply["error"] and "\n" not in reply["error"]
 
 
 def test_the_echoed_file_name_is_one_printable_line(server, demo_photo):

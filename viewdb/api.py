@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import LIMITS, BuildConfig, RenderConfig, finite, integer
+from .config import LIMITS, BuildConfig, OverlayConfig, RenderConfig, finite, integer
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -31,7 +32,9 @@ from .pose.matched import pose_known
 from .recognition.client_tier import ClientTier
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
+from .recognition.overlay import draw_result
 from .recognition.pipeline import run_query, segment_photo
+from .recognition.regions import Box, Point, Prompts
 from .recognition.results import QueryResult
 from .recognition.retrieval import Recognition, recognise_curve
 from .recognition.server_tier import ServerTier
@@ -198,6 +201,10 @@ class ViewDB:
         shifts: ShiftWindow | None = None,
         roll: float | None = None,
         options: QueryOptions | None = None,
+        boxes: Sequence[str | Sequence[float] | Box] | None = None,
+        points: Sequence[str | Sequence[float] | Point] | None = None,
+        every: bool = False,
+        max_objects: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses
         (:mod:`viewdb.recognition.pipeline`).
@@ -218,6 +225,15 @@ class ViewDB:
         those near that in-plane turn. ``options`` gives all of these as one
         :class:`~viewdb.recognition.options.QueryOptions` instead.
 
+        A photo of several objects: ``boxes`` (``(x1, y1, x2, y2)`` or ``"x1,y1,x2,y2"``,
+        pixels) and ``points`` (``(x, y)`` or ``"x,y"``) each ask for one object, cut out
+        from the prompt; ``every=True`` asks for every object that stands out from the
+        background (or, with ``label_map`` and no ``label``, every label), the largest
+        ``max_objects`` (default 8). Each is recognised and posed as a single-object query
+        is; the answer's ``objects`` hold them, in the prompts' order (boxes, then points;
+        every object: largest first), and its ``results`` is empty
+        (:mod:`viewdb.recognition.regions`).
+
         With ``server`` (:class:`viewdb.http.RemoteServer`), this file is the client file:
         segmentation and the client half run here, the server half and the pose on the
         server; the answer is the one the full file gives locally.
@@ -226,9 +242,24 @@ class ViewDB:
             options = QueryOptions(k=k, plan=plan, band=band, rotations=rotations, pose=pose,
                                    pose_top=pose_top, intrinsics=intrinsics, rerank=rerank,
                                    colour=colour, verify=verify, shifts=shifts, roll=roll)
+        prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
-        return run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
-                         mask=mask, label_map=label_map, label=label)
+        result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
+                           mask=mask, label_map=label_map, label=label, prompts=prompts)
+        if server is not None or self.role != "full":
+            return result
+        return replace(result, drawer=partial(self._draw, intrinsics=options.camera))
+
+    def _draw(self, result: QueryResult, top: int, config: OverlayConfig | None, *,
+              intrinsics: Intrinsics | None) -> NDArray[np.uint8]:
+        """A result of a query on this file drawn over its photo (:meth:`QueryResult.overlay`)."""
+        assert result.photo is not None
+
+        def placement(name: str) -> tuple[NDArray[np.float64], float]:
+            info = self._catalogue.object(name)
+            return np.asarray(info.centre, dtype=np.float64), float(info.scale)
+
+        return draw_result(result.photo, result, self._catalogue.mesh, placement, intrinsics, top, config)
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",

@@ -51,6 +51,11 @@ class InputLimits:
 #: The limits in force.
 LIMITS = InputLimits()
 
+#: Meshes with more triangles than this are refused by default (rendering 1,296 views
+#: of a multi-million-triangle scan takes hours in software GL and the outline gains
+#: nothing at 256 px): decimate such a mesh first, or raise the cap.
+DEFAULT_MAX_FACES = 2_000_000
+
 
 @dataclass(frozen=True)
 class HttpConfig:
@@ -300,8 +305,16 @@ class SegmentationConfig:
     max_object_fraction: float = 0.98
     #: The colour methods work on a copy scaled to at most this many pixels on the longer side.
     work_max_side: int = 1024
-    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``).
+    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``) ...
     default_method: str = "grabcut"
+    #: ... except on a plain background, where the border model alone is as good (GrabCut
+    #: refines nothing there, at five times the time): the border strip's Lab colours lie
+    #: within ``plain_spread`` of their median (99th percentile), or within twice that
+    #: and vary from pixel to pixel as sensor noise does (their variance at most
+    #: ``plain_noise_ratio`` times half the mean squared difference of neighbouring
+    #: pixels; a gradient or blobs vary smoothly, for ratios of 2 to 200).
+    plain_spread: float = 5.0
+    plain_noise_ratio: float = 1.3
     #: Width of the border strip that samples the background, as a share of the shorter side.
     border_strip: float = 0.02
     #: Colour clusters of the background model; clusters holding less than
@@ -321,12 +334,54 @@ class SegmentationConfig:
     bridge_share: float = 0.1
     #: GrabCut iterations.
     grabcut_iterations: int = 4
+    #: How a box prompt is cut out (:mod:`viewdb.recognition.regions`): "grabcut" (GrabCut
+    #: initialised from the box) or "border" (the crop's border colours); chosen by
+    #: ``benchmarks/prompts.py``.
+    box_method: str = "grabcut"
+    #: A box's GrabCut runs on a crop reaching this share of its longer side beyond it ...
+    box_margin: float = 0.1
+    #: ... and at least this many pixels ...
+    box_min_margin: int = 8
+    #: ... scaled to at most this many pixels on the longer side ...
+    box_work_side: int = 640
+    #: ... for this many iterations.
+    box_iterations: int = 5
+    #: A box narrower or lower than this many pixels is refused as degenerate.
+    min_box_side: float = 4.0
+    #: A point prompt starts from a square of this share of the photo's shorter side ...
+    point_start: float = 0.6
+    #: ... with a disc of this share of its shorter side around the point surely object; ...
+    point_seed: float = 0.02
+    #: ... whose sides the object reaches move out by this share of its side ...
+    point_growth: float = 0.5
+    #: ... at most this many times; ...
+    point_steps: int = 5
+    #: ... the object is the region holding the point, or the nearest within this share of
+    #: the square's shorter side.
+    point_reach: float = 0.05
+    #: Most objects a query for every object keeps (the largest); the default of
+    #: ``max_objects``.
+    max_objects: int = 8
+    #: Most prompts one query takes.
+    max_prompts: int = 64
 
     def __post_init__(self) -> None:
         if self.default_method not in ("border", "otsu", "grabcut"):
             raise ValueError(
                 f"default_method must be 'border', 'otsu' or 'grabcut', got {self.default_method!r}"
             )
+        if self.box_method not in ("grabcut", "border"):
+            raise ValueError(f"box_method must be 'grabcut' or 'border', got {self.box_method!r}")
+        if not (self.box_margin >= 0 and self.box_min_margin >= 1 and self.box_work_side >= 16
+                and self.box_iterations >= 1 and self.min_box_side >= 1):
+            raise ValueError("need box_margin >= 0, box_min_margin >= 1, box_work_side >= 16, "
+                             "box_iterations >= 1 and min_box_side >= 1")
+        if not (0 < self.point_start <= 1 and self.point_growth > 0 and self.point_steps >= 1
+                and self.point_reach >= 0):
+            raise ValueError("need 0 < point_start <= 1, point_growth > 0, point_steps >= 1 and "
+                             "point_reach >= 0")
+        if self.max_objects < 1 or self.max_prompts < 1:
+            raise ValueError("need max_objects >= 1 and max_prompts >= 1")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Synthetic photographs: for the realistic query protocol, and quick ones from a view.
 
 :func:`composite_photo` stages a rendered view as a photo: turned in the image plane,
-scaled and shifted, on a plain background (``viewdb demo``'s query, and the tests').
+scaled and shifted, on a plain background (``viewdb demo``'s query, and the tests');
+:func:`table_photo` puts several views side by side on a table-coloured top (photos of
+several objects).
 
 For the realistic query protocol a photo is a stored object seen from a random direction
 off the grid through a **perspective** camera (random field of view and distance), lit by
@@ -30,8 +32,11 @@ from ..errors import RenderError
 
 __all__ = [
     "PhotoSpec", "composite_photo", "decoded_photo", "draw_photo_spec", "encode_jpeg", "photo_series",
-    "render_photo", "true_silhouette",
+    "render_photo", "table_photo", "true_silhouette",
 ]
+
+#: A wooden table top's colour (RGB).
+TABLE = (176, 132, 92)
 
 
 @dataclass(frozen=True)
@@ -181,3 +186,31 @@ def composite_photo(
     photo[:] = background
     photo[mask] = color[mask]
     return photo, mask
+
+
+def table_photo(
+    views: list[RenderedView], size: tuple[int, int], places: list[tuple[int, int]], *,
+    background: tuple[int, int, int] = TABLE, grain: float = 6.0, seed: int = 0,
+) -> tuple[NDArray[np.uint8], list[NDArray[np.bool_]]]:
+    """Several views on a table top: ``size`` (width, height); each view's render pasted
+    with its top-left corner at ``places[i]`` (x, y) over a ``background`` with a soft
+    light gradient and wood-like grain (noise of sd ``grain``, stretched along x); and each
+    object's mask in the photo (a later view covers an earlier one)."""
+    w, h = size
+    rng = np.random.default_rng(seed)
+    shade = np.linspace(0.92, 1.06, w, dtype=np.float32)[None, :, None] * np.linspace(
+        1.04, 0.94, h, dtype=np.float32)[:, None, None]
+    streaks = cv2.resize(rng.normal(0.0, grain, (h, max(2, w // 16))).astype(np.float32), (w, h),
+                         interpolation=cv2.INTER_LINEAR)
+    photo = np.asarray(background, np.float32)[None, None, :] * shade + streaks[:, :, None]
+    photo = np.clip(photo + rng.normal(0.0, 1.5, photo.shape), 0, 255).astype(np.uint8)
+    masks = []
+    for view, (x, y) in zip(views, places, strict=True):
+        vh, vw = view.mask.shape
+        if x < 0 or y < 0 or x + vw > w or y + vh > h:
+            raise ValueError(f"a {vw}x{vh} view at ({x}, {y}) does not fit a {w}x{h} photo")
+        mask = np.zeros((h, w), dtype=bool)
+        mask[y:y + vh, x:x + vw] = view.mask
+        photo[mask] = view.color[view.mask]
+        masks = [m & ~mask for m in masks] + [mask]
+    return photo, masks

@@ -8,7 +8,7 @@ validate against them).
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -198,6 +198,12 @@ class WebQueryFormModel(BaseModel):
     k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
     pose_top: int | None = Field(default=None, ge=0, description="how many of the best results to pose "
                                                                  "(default all k: the page shows each pose)")
+    box: list[str] = Field(default=[], description="an object's box `x1,y1,x2,y2` in the photo's pixels; "
+                                                     "repeat the field for several objects")
+    point: list[str] = Field(default=[], description="a pixel `x,y` on an object; repeatable")
+    all: bool = Field(default=False, description="every object that stands out from the background")
+    max_objects: int | None = Field(default=None, ge=1, description="with `all`: at most this many "
+                                                                     "objects, the largest")
 
 
 class WebViewModel(BaseModel):
@@ -236,6 +242,16 @@ class WebPhotoModel(BaseModel):
     src: str = Field(description="data: URL of the photo as the server read it (upright, shrunk), JPEG")
 
 
+class WebObjectResultModel(BaseModel):
+    """One object of a photo of several: where it is, and its results."""
+
+    region: dict[str, Any] = Field(description="`box` [x1, y1, x2, y2] (end exclusive), `area` in "
+                                               "pixels, and the `prompt` it was cut from")
+    segmentation: str
+    results: list[WebResultModel]
+    timing_ms: dict[str, float]
+
+
 class WebQueryReplyModel(BaseModel):
     """The ``viewdb query --json`` document, plus pictures to show it."""
 
@@ -247,6 +263,8 @@ class WebQueryReplyModel(BaseModel):
     segmentation: str
     transfer: dict[str, int]
     photo: WebPhotoModel
+    objects: list[WebObjectResultModel] | None = Field(
+        default=None, description="a query with prompts or `all`: each object (then `results` is empty)")
 
 
 class WebObjectModel(BaseModel):

@@ -1,12 +1,15 @@
 """The web page of ``viewdb serve`` and the endpoints behind it.
 
-``POST /query``  a photo (multipart field ``photo``) and options (``plan``, ``k``): the
+``POST /query``  a photo (multipart field ``photo``) and options (``plan``, ``k``; for
+                 several objects ``box`` and ``point``, each repeatable, or ``all`` and
+                 ``max_objects``, as ``viewdb query``'s options): the
                  whole query runs on the server (:meth:`viewdb.ViewDB.query` on the full
                  file); the reply is the ``viewdb query --json`` document plus, to show
                  it, the photo as the server decoded it (shrunk, JPEG) and per posed
                  result its overlay (:mod:`viewdb.recognition.overlay`, a transparent PNG
                  laid over that photo; the best posed result's, the others' from
-                 ``POST /overlay``) and the URL of its matched view's picture
+                 ``POST /overlay``) and the URL of its matched view's picture (with
+                 prompts: for each entry of ``objects``)
 ``POST /overlay`` one result's overlay (JSON: the result as ``POST /query`` gave it and
                  the photo's size): a transparent PNG
 ``GET /objects`` every object with its symmetry, views stored and grid, and a picture
@@ -47,11 +50,12 @@ from starlette.exceptions import HTTPException
 
 from ..api import ViewDB
 from ..camera import normalise_angle
-from ..config import OverlayConfig, WebConfig
-from ..errors import ImageError, ViewDBError
+from ..config import OverlayConfig, SegmentationConfig, WebConfig
+from ..errors import ImageError, QueryError, ViewDBError
 from ..recognition.image import DEFAULTS as IMAGE_LIMITS
 from ..recognition.image import load_image
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
+from ..recognition.regions import Prompts
 from ..recognition.verify import physical_view
 from ..search.plans import Candidate
 from . import models
@@ -184,14 +188,16 @@ def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], confi
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
-                 max_pixels: int = IMAGE_LIMITS.max_pixels, pose_top: int | None = None) -> dict[str, Any]:
+                 max_pixels: int = IMAGE_LIMITS.max_pixels, pose_top: int | None = None,
+                 prompts: dict[str, Any] | None = None) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread.
     A photo of more than ``max_pixels`` pixels is refused from its header; the best
-    ``pose_top`` results are posed (None: all k, since the page shows each one's pose)."""
+    ``pose_top`` results are posed (None: all k, since the page shows each one's pose).
+    ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
     rgb, alpha = _decode(data, name, max_pixels)
     image = rgb if alpha is None else np.dstack([rgb, alpha])
     try:
-        result = db.query(image, k=k, plan=plan, pose_top=pose_top).to_dict()
+        result = db.query(image, k=k, plan=plan, pose_top=pose_top, **(prompts or {})).to_dict()
     except ImageError as exc:
         raise ImageError(exc.message, name) from exc
     result["image"] = name
@@ -203,20 +209,41 @@ def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: 
                        "source_width": int(rgb.shape[1]), "source_height": int(rgb.shape[0]),
                        "src": _data_url("image/jpeg", _encode(shown, ".jpg", quality))}
     hashes = {o.name: o.content_hash for o in db.objects()}
+    for entries in [result["results"], *(o["results"] for o in result.get("objects") or [])]:
+        _dress(db, entries, rgb.shape[:2], hashes, config, drawing)
+    result["timing_ms"]["overlay"] = round((time.perf_counter() - start) * 1e3, 3)
+    return _finite(result)
+
+
+def _dress(db: ViewDB, entries: list[dict[str, Any]], shape: tuple[int, int], hashes: dict[str, str],
+           config: WebConfig, drawing: OverlayConfig) -> None:
+    """Each result of one object with its colour, thumbnail and (the best posed one's) overlay."""
     drawn = False
-    for entry in result["results"]:
+    for entry in entries:
         entry["colour"] = "#{:02x}{:02x}{:02x}".format(*_colour(entry.get("rank"), drawing))
         entry["overlay"] = None
         if not drawn and entry.get("pose"):  # the best posed result's; the others on request
-            png = draw_layer(db, entry, rgb.shape[:2], config)
+            png = draw_layer(db, entry, shape, config)
             entry["overlay"] = None if png is None else _data_url("image/png", png)
             drawn = True
         view = entry["view"]
         h, v = physical_view(Candidate(entry["object"], entry["distance"], view["azimuth"],
                                        view["elevation"], bool(view["mirrored"])))
         entry["thumbnail"] = view_url(entry["object"], h, v, hashes.get(entry["object"], ""))
-    result["timing_ms"]["overlay"] = round((time.perf_counter() - start) * 1e3, 3)
-    return _finite(result)
+
+
+def _prompt_fields(form: Any) -> dict[str, Any]:
+    """The ``box``, ``point``, ``all`` and ``max_objects`` fields of the form, parsed."""
+    try:
+        prompts = Prompts.of([str(b) for b in form.getlist("box")], [str(p) for p in form.getlist("point")],
+                             str(form.get("all") or "").lower() in ("1", "true", "yes", "on"),
+                             _int_field(form, "max_objects", 0, 0, 1000) or None)
+    except QueryError as exc:
+        raise HTTPException(422, exc.message) from None
+    if prompts is None:
+        return {}
+    return {"boxes": list(prompts.boxes), "points": list(prompts.points), "every": prompts.every,
+            "max_objects": prompts.max_objects}
 
 
 def _overlay_request(data: Any, max_pixels: int = IMAGE_LIMITS.max_pixels
@@ -270,7 +297,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
                  openapi_extra=models.multipart_body(models.WebQueryFormModel),
                  summary="Recognise the object in a photo and pose it, with pictures to show it")
     async def query(request: Request) -> dict[str, Any]:
-        form = await request.form(max_files=1, max_fields=8)
+        form = await request.form(max_files=1, max_fields=8 + 2 * SegmentationConfig().max_prompts)
         try:
             upload = form.get("photo")
             if not isinstance(upload, UploadFile):
@@ -280,6 +307,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
                 raise HTTPException(422, f"plan must be server, cs1 or cs2, got {plan[:40]!r}")
             k = _int_field(form, "k", 3, 1, config.max_k)
             pose_top = _int_field(form, "pose_top", k, 0, config.max_k)
+            prompts = _prompt_fields(form)
             name = _upload_name(upload)
             data = await upload.read()
         finally:
@@ -288,7 +316,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             raise HTTPException(422, f"{name}: empty file, not an image")
         try:
             out, _ = await run(lambda db: answer_query(db, data, name, plan, k, config, max_pixels,
-                                                                pose_top))
+                                                       pose_top, prompts))
         except ImageError as exc:
             raise HTTPException(422, str(exc)) from exc
         return out

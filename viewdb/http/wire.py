@@ -30,7 +30,14 @@ from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..pose.intrinsics import check_intrinsics
 from ..recognition.colour import BINS
-from ..search.plans import MAX_K, Candidate, _candidates, _curve, _finite, stats_from_dict
+from ..search.plans import (
+    MAX_K,
+    Candidate,
+    candidates_from_json,
+    curve_from_json,
+    json_number,
+    stats_from_dict,
+)
 from ..typed import Intrinsics
 
 __all__ = [
@@ -94,7 +101,7 @@ def _number(x: float) -> float | None:
 
 def _back(x: Any, what: str) -> float:
     """A pose number as sent (null for a non-finite one)."""
-    return math.nan if x is None else _finite(x, f"pose {what}")
+    return math.nan if x is None else json_number(x, f"pose {what}")
 
 
 def pose_to_dict(p: PoseEstimate) -> dict[str, Any]:
@@ -181,14 +188,14 @@ class PoseRequest:
             raise QueryError("request must be an object")
         try:
             raw = _image(data)
-            matches = _candidates(data["matches"], MAX_K)
+            matches = candidates_from_json(data["matches"], MAX_K)
             if not matches:
                 raise QueryError("matches must not be empty")
             curves = data.get("curves")
             if curves is not None:
                 if not isinstance(curves, list) or len(curves) != len(matches):
                     raise QueryError("curves must be null or one per match")
-                curves = [None if c is None else _curve(c) for c in curves]
+                curves = [None if c is None else curve_from_json(c) for c in curves]
             rerank = data.get("rerank", False)
             if not isinstance(rerank, bool):
                 raise QueryError("rerank must be true or false")
@@ -244,8 +251,8 @@ def _views(items: Any) -> list[tuple[str, float, float]]:
         if not isinstance(item, dict) or not isinstance(item.get("object"), str):
             raise QueryError("each view must be an object with an object name")
         try:
-            views.append((item["object"], _finite(item["azimuth"], "azimuth"),
-                          _finite(item["elevation"], "elevation")))
+            views.append((item["object"], json_number(item["azimuth"], "azimuth"),
+                          json_number(item["elevation"], "elevation")))
         except KeyError as exc:
             raise QueryError(f"view lacks {exc.args[0]!r}") from exc
     return views
@@ -296,7 +303,7 @@ class ColourReply:
                 continue
             if not isinstance(item, list) or len(item) != BINS * BINS:
                 raise QueryError(f"each signature must be a list of {BINS * BINS} numbers")
-            values = np.array([_finite(x, "signature") for x in item], np.float32)
+            values = np.array([json_number(x, "signature") for x in item], np.float32)
             if (values < 0).any():
                 raise QueryError("signature values must not be negative")
             out.append(values.reshape(BINS, BINS))
@@ -348,7 +355,7 @@ class FitReply:
             if item is None:
                 out.append(None)
                 continue
-            value = _finite(item, "fit")
+            value = json_number(item, "fit")
             if not 0.0 <= value <= 1.0:
                 raise QueryError(f"each fit must be in [0, 1], not {value}")
             out.append(value)

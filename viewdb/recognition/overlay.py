@@ -43,16 +43,19 @@ from ..config import OverlayConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate
 from ..typed import Intrinsics
+from .results import QueryMatch, QueryResult
 
 __all__ = [
     "OverlayPose",
     "Placement",
     "display_size",
     "draw_overlay",
+    "draw_result",
     "overlay_layer",
     "poses_from_json",
     "project_silhouette",
     "resized_photo",
+    "result_poses",
 ]
 
 #: Colours of the model's x, y and z axes.
@@ -526,3 +529,27 @@ def draw_overlay(
     _paint_all(canvas, (int(photo.shape[0]), int(photo.shape[1])), poses, mesh_of, placement, intrinsics,
                config)
     return canvas.over(base)
+
+
+def result_poses(result: QueryResult, top: int = 1) -> list[OverlayPose]:
+    """The poses of each object's best ``top`` posed results in a query's answer (one
+    object, or each of ``result.objects``), each object's best first."""
+    groups: list[list[QueryMatch]] = (
+        [result.results] if result.objects is None else [o.results for o in result.objects])
+    poses = []
+    for matches in groups:
+        posed = [m for m in matches if m.pose is not None][:top]
+        poses += [OverlayPose.from_estimate(m.object, m.pose, m.score, m.rank) for m in posed
+                  if m.pose is not None]
+    return poses
+
+
+def draw_result(
+    photo: NDArray[np.uint8], result: QueryResult, mesh_of: Callable[[str], NormalisedMesh],
+    placement: Callable[[str], Placement], intrinsics: Intrinsics | None,
+    top: int = 1, config: OverlayConfig | None = None,
+) -> NDArray[np.uint8]:
+    """A query's answer drawn over its photo (:func:`draw_overlay` of :func:`result_poses`):
+    each object's best ``top`` posed results, in its own colour."""
+    return draw_overlay(photo, result_poses(result, top), mesh_of, intrinsics=intrinsics,
+                        placement=placement, config=config)

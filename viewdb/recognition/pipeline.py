@@ -19,6 +19,11 @@ CS2 runs on a :class:`~viewdb.recognition.client_tier.ClientTier`.
 5. **pose** (:mod:`viewdb.pose.matched`): the top results' poses, chosen among their
    candidate same-shape views by SIFT or by outline; with ``rerank`` and intrinsics the
    results are re-ranked by the IoU of their perspective silhouette fit.
+
+A photo of several objects (box or point prompts, every object, every label:
+:mod:`viewdb.recognition.regions`) is decoded once and cut into regions; each region then
+goes through stages 2–5 over the same tiers (:func:`run_regions`), the other regions
+counting as what may hide it.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.features import distance_curve, sample_bearings
-from ..config import RecognitionConfig
+from ..config import RecognitionConfig, SegmentationConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..search.plans import Candidate
@@ -42,14 +47,17 @@ from .client_tier import ClientTier
 from .colour import colour_signature, has_colour, rerank
 from .image import LoadedImage, load_image
 from .options import QueryOptions
-from .results import QueryMatch, QueryResult
+from .regions import Prompts, Region, find_regions
+from .results import ObjectResult, QueryMatch, QueryResult
 from .retrieval import merge, recognise_curve
 from .segmentation import Segmentation, label_mask, segment
 from .server_tier import Exchange, ServerTier
 from .shapes import completed_mask, pose_mask, rotated_curves
 from .verify import physical_view, rerank_by_fit
 
-__all__ = ["QueryShape", "run_query", "segment_photo", "segment_query"]
+__all__ = [
+    "QueryShape", "region_shape", "run_query", "run_regions", "segment_photo", "segment_query", "shape_of",
+]
 
 #: A pool entry: an object's best candidate and the in-plane angle of the curve that found it.
 Pooled = tuple[Candidate, float]
@@ -122,6 +130,16 @@ def segment_query(
     """Stages 1–2: segment the photo and make its curves (``samples`` per curve);
     ``upright_only``: the upright curves alone, with their bearings, for a shift search."""
     loaded, seg, view = segment_photo(image, mask=mask, label_map=label_map, label=label)
+    return shape_of(loaded, seg, view, samples, rotations, hidden_min_share, upright_only)
+
+
+def shape_of(
+    loaded: LoadedImage, seg: Segmentation, view: QueryView, samples: int, rotations: int,
+    hidden_min_share: float = RecognitionConfig().hidden_min_share, upright_only: bool = False,
+) -> QueryShape:
+    """Stage 2: the curves of a segmented object (``samples`` per curve): turned in the
+    image plane, and completed where what may hide it bites into its outline;
+    ``upright_only``: the upright curves alone, with their bearings, for a shift search."""
     completed = completed_mask(seg.mask, view.ignore, hidden_min_share)
     if upright_only:
         shapes = [seg.mask] + ([completed] if completed is not None else [])
@@ -133,6 +151,19 @@ def segment_query(
     if completed is not None:
         curves += rotated_curves(completed, samples, rotations)
     return QueryShape(loaded, seg, view, curves, dict(plain))
+
+
+def _upright_only(options: QueryOptions) -> bool:
+    """A shift search (``shifts`` or ``roll``) searches the upright curves alone."""
+    return options.shifts is not None or options.roll is not None
+
+
+def region_shape(loaded: LoadedImage, region: Region, samples: int, options: QueryOptions) -> QueryShape:
+    """Stages 1–2 for one object of a photo of several: the other objects may hide it."""
+    pose_mask = region.mask if region.pose_mask is None else region.pose_mask
+    view = QueryView(loaded.rgb, pose_mask, region.others)
+    return shape_of(loaded, region.segmentation, view, samples, options.rotations,
+                    options.recognition.hidden_min_share, _upright_only(options))
 
 
 def _search(
@@ -236,21 +267,12 @@ def _matches(
     return [replace(m, rank=i) for i, m in enumerate(matches, 1)]
 
 
-def run_query(
-    image: str | Path | NDArray[Any] | LoadedImage, options: QueryOptions, server: ServerTier,
-    client: ClientTier | None, samples: int, *, mask: NDArray[Any] | str | Path | None = None,
-    label_map: NDArray[Any] | str | Path | None = None, label: int | None = None,
-) -> QueryResult:
-    """Recognise the object a photo shows and estimate its pose (module doc): ``server``
-    answers for the full catalogue, ``client`` runs CS1's and CS2's client half;
-    ``samples`` per distance curve. ``label_map`` + ``label`` pick the object out of a label
-    image (other labelled pixels may hide it), instead of ``mask``."""
+def _recognise(
+    shape: QueryShape, options: QueryOptions, server: ServerTier, client: ClientTier | None,
+    traffic: _Traffic,
+) -> tuple[list[QueryMatch], dict[str, float]]:
+    """Stages 3–5 for one segmented object: its matches and each stage's time (ms)."""
     start = time.perf_counter()
-    traffic = _Traffic()
-    shape = segment_query(image, samples, options.rotations, mask=mask, label_map=label_map, label=label,
-                          hidden_min_share=options.recognition.hidden_min_share,
-                          upright_only=options.shifts is not None or options.roll is not None)
-    segmented = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
     pool = max(options.k, options.recognition.pool) if recolour or options.verify else options.k
     ranked, client_ms, server_ms = _search(shape, options, pool, server, client, traffic)
@@ -267,16 +289,86 @@ def run_query(
     poses = _pose(ranked, shape, options, server, traffic)
     matches = _matches(ranked, poses, colours, fitted, options.rerank_by_iou)
     end = time.perf_counter()
-    remote = {"network": traffic.network_ms, "pose_server": traffic.pose_server_ms} if server.remote else {}
-    name = shape.image.path or (str(image) if isinstance(image, (str, Path)) else "<array>")
+    return matches, {"client": client_ms, "server": server_ms, "colour": (coloured - searched) * 1e3,
+                     "verify": (recognised - coloured) * 1e3, "pose": (end - recognised) * 1e3,
+                     "total": (end - start) * 1e3}
+
+
+def _image_name(image: str | Path | NDArray[Any] | LoadedImage, loaded: LoadedImage) -> str:
+    return loaded.path or (str(image) if isinstance(image, (str, Path)) else "<array>")
+
+
+def _transfer(traffic: _Traffic) -> dict[str, int]:
+    return {"bytes_sent": traffic.sent, "bytes_received": traffic.received, "round_trips": traffic.trips}
+
+
+def _remote(server: ServerTier, traffic: _Traffic) -> dict[str, float]:
+    return {"network": traffic.network_ms, "pose_server": traffic.pose_server_ms} if server.remote else {}
+
+
+def run_query(
+    image: str | Path | NDArray[Any] | LoadedImage, options: QueryOptions, server: ServerTier,
+    client: ClientTier | None, samples: int, *, mask: NDArray[Any] | str | Path | None = None,
+    label_map: NDArray[Any] | str | Path | None = None, label: int | None = None,
+    prompts: Prompts | None = None, segmentation: SegmentationConfig | None = None,
+) -> QueryResult:
+    """Recognise the object a photo shows and estimate its pose (module doc): ``server``
+    answers for the full catalogue, ``client`` runs CS1's and CS2's client half;
+    ``samples`` per distance curve. ``label_map`` + ``label`` pick the object out of a label
+    image (other labelled pixels may hide it), instead of ``mask``. With ``prompts`` (or a
+    label map and ``prompts.every``) each object the prompts ask for is recognised
+    (:func:`run_regions`)."""
+    if prompts is not None:
+        if mask is not None or label is not None:
+            raise QueryError("prompts find the objects themselves: give no mask and no label with them")
+        return run_regions(image, prompts, options, server, client, samples, label_map=label_map,
+                           segmentation=segmentation)
+    start = time.perf_counter()
+    traffic = _Traffic()
+    shape = segment_query(image, samples, options.rotations, mask=mask, label_map=label_map, label=label,
+                          hidden_min_share=options.recognition.hidden_min_share,
+                          upright_only=_upright_only(options))
+    segmented = time.perf_counter()
+    matches, stages = _recognise(shape, options, server, client, traffic)
+    end = time.perf_counter()
+    timing = {"segment": (segmented - start) * 1e3, **stages, "total": (end - start) * 1e3,
+              **_remote(server, traffic)}
     return QueryResult(
-        image=name, plan=options.plan, k=options.k, results=matches,
-        timing_ms={
-            "segment": (segmented - start) * 1e3, "client": client_ms, "server": server_ms,
-            "colour": (coloured - searched) * 1e3, "verify": (recognised - coloured) * 1e3,
-            "pose": (end - recognised) * 1e3, "total": (end - start) * 1e3, **remote,
-        },
-        segmentation=shape.segmentation.method,
-        transfer={"bytes_sent": traffic.sent, "bytes_received": traffic.received,
-                  "round_trips": traffic.trips},
+        image=_image_name(image, shape.image), plan=options.plan, k=options.k, results=matches,
+        timing_ms=timing, segmentation=shape.segmentation.method, transfer=_transfer(traffic),
+        photo=shape.image.rgb,
+    )
+
+
+def run_regions(
+    image: str | Path | NDArray[Any] | LoadedImage, prompts: Prompts, options: QueryOptions,
+    server: ServerTier, client: ClientTier | None, samples: int, *,
+    label_map: NDArray[Any] | str | Path | None = None, segmentation: SegmentationConfig | None = None,
+) -> QueryResult:
+    """Every object the prompts ask for (:func:`viewdb.recognition.regions.find_regions`),
+    each recognised and posed as a single-object query is, from one decode of the photo
+    and over the same tiers; the answer's ``objects`` hold them, its ``results`` is empty."""
+    start = time.perf_counter()
+    traffic = _Traffic()
+    loaded = image if isinstance(image, LoadedImage) else load_image(image)
+    regions = find_regions(loaded, prompts, label_map=label_map, config=segmentation)
+    segmented = time.perf_counter()
+    objects = []
+    totals: dict[str, float] = {}
+    for region in regions:
+        t0 = time.perf_counter()
+        shape = region_shape(loaded, region, samples, options)
+        matches, timing = _recognise(shape, options, server, client, traffic)
+        timing["segment"] = (time.perf_counter() - t0) * 1e3 - timing["total"]  # its curves
+        timing["total"] += timing["segment"]
+        for key, value in timing.items():
+            totals[key] = totals.get(key, 0.0) + value
+        objects.append(ObjectResult(region, matches, timing))
+    end = time.perf_counter()
+    totals.update(segment=totals.get("segment", 0.0) + (segmented - start) * 1e3, total=(end - start) * 1e3,
+                  **_remote(server, traffic))
+    method = "label" if label_map is not None else ("every" if prompts.every else "prompts")
+    return QueryResult(
+        image=_image_name(image, loaded), plan=options.plan, k=options.k, results=[], timing_ms=totals,
+        segmentation=method, transfer=_transfer(traffic), objects=objects, photo=loaded.rgb,
     )

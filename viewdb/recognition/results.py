@@ -1,15 +1,22 @@
 """What a query returns: each recognised object with its view, scores and pose
-(:class:`QueryMatch`), and the whole answer (:class:`QueryResult`, whose ``to_dict`` is
+(:class:`QueryMatch`), each object of a photo of several with its matches
+(:class:`ObjectResult`), and the whole answer (:class:`QueryResult`, whose ``to_dict`` is
 the ``viewdb query --json`` shape of the public contract)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..pose.estimate import PoseEstimate
+import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["QueryMatch", "QueryResult"]
+from ..errors import QueryError
+from ..pose.estimate import PoseEstimate
+from .regions import Region
+
+__all__ = ["ObjectResult", "QueryMatch", "QueryResult"]
 
 
 @dataclass(frozen=True)
@@ -76,8 +83,31 @@ class QueryMatch:
 
 
 @dataclass(frozen=True)
+class ObjectResult:
+    """One object of a photo of several (a prompt's, or one of every object's): where it
+    is and what it was recognised as."""
+
+    region: Region
+    results: list[QueryMatch]
+    #: Its share of the query's time: its curves ("segment"), search, re-rankings, pose.
+    timing_ms: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"region": self.region.to_dict(), "segmentation": self.region.segmentation.method,
+                "results": [r.to_dict() for r in self.results],
+                "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()}}
+
+
+#: Draws a result over its photo: ``(result, top, config) -> RGB image``.
+Drawer = Callable[["QueryResult", int, Any], NDArray[np.uint8]]
+
+
+@dataclass(frozen=True)
 class QueryResult:
-    """The answer to one query (``to_dict`` is the ``viewdb query --json`` shape)."""
+    """The answer to one query (``to_dict`` is the ``viewdb query --json`` shape).
+
+    A query of several objects (prompts, every object) has them in ``objects`` and an
+    empty ``results``; a single-object query has ``objects`` None."""
 
     image: str
     plan: str
@@ -87,11 +117,38 @@ class QueryResult:
     segmentation: str
     #: What went over the (would-be) wire: bytes each way and round trips (CS1/CS2).
     transfer: dict[str, int] = field(default_factory=dict)
+    #: Each object of a query of several, in the prompts' order (every object: largest first).
+    objects: list[ObjectResult] | None = None
+    #: The photo (RGB) the query saw, for :meth:`overlay`.
+    photo: NDArray[np.uint8] | None = field(default=None, repr=False, compare=False)
+    #: Draws the overlay (:meth:`overlay`); None when the meshes are not at hand.
+    drawer: Drawer | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "image": self.image, "plan": self.plan, "k": self.k,
             "results": [r.to_dict() for r in self.results],
             "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
             "segmentation": self.segmentation, "transfer": dict(self.transfer),
         }
+        if self.objects is not None:
+            out["objects"] = [o.to_dict() for o in self.objects]
+        return out
+
+    def overlay(self, *, top: int = 1, config: Any = None) -> NDArray[np.uint8]:
+        """The photo (RGB uint8) with the posed mesh of each object's best ``top`` results
+        drawn over it (:mod:`viewdb.recognition.overlay`; ``config`` an
+        :class:`~viewdb.config.OverlayConfig`). The meshes are read from the file the query
+        ran on: draw while it is open.
+
+        Raises
+        ------
+        QueryError
+            The query ran without the meshes at hand (a client file with a server).
+        """
+        if top < 1:
+            raise QueryError(f"top must be at least 1, got {top}")
+        if self.drawer is None or self.photo is None:
+            raise QueryError("an overlay needs the meshes: query the full database file, not a client "
+                             "file with a server")
+        return self.drawer(self, top, config)

@@ -152,7 +152,7 @@ PAA_SEGMENTS = 32
 
 
 @njit(cache=True, nogil=True)
-def _dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
+def dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
     return _dtw_rest_kernel(q, c, r, best_so_far, np.zeros(q.shape[0]))
 
 
@@ -227,7 +227,7 @@ def _envelope_kernel(q, r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
+def fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
     # squared Fourier_Dist of point ``coords[row]`` to the box [lo, hi]
     s = 0.0
     for j in range(coords.shape[1]):
@@ -238,7 +238,7 @@ def _fourier_dist2(coords, row, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _lb_paa2(means, row, lo, hi, widths, limit2):  # pragma: no cover - compiled
+def lb_paa2(means, row, lo, hi, widths, limit2):  # pragma: no cover - compiled
     # squared LB_PAA of the segment means ``means[row]`` against the segment envelope
     # [lo, hi], abandoned (some value > limit2) as soon as it passes ``limit2``
     s = 0.0
@@ -256,7 +256,7 @@ def _lb_paa2(means, row, lo, hi, widths, limit2):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compiled
+def lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compiled
     # squared LB_Keogh of curve ``curves[row]`` against [lower, upper], abandoned (some
     # value > limit2) as soon as it passes ``limit2``
     s = 0.0
@@ -275,7 +275,7 @@ def _lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compile
 
 @njit(cache=True, nogil=True)
 def _lb_keogh_kernel(lower, upper, c):  # pragma: no cover - compiled
-    return math.sqrt(_lb_keogh2(c.reshape(1, c.shape[0]), 0, lower, upper, np.inf))
+    return math.sqrt(lb_keogh2(c.reshape(1, c.shape[0]), 0, lower, upper, np.inf))
 
 
 @njit(cache=True, nogil=True)
@@ -285,10 +285,10 @@ def _group_bounds_kernel(  # pragma: no cover - compiled
     n = curves.shape[0]
     out = np.empty(2 * n)
     for i in range(n):
-        out[i] = math.sqrt(max(_fourier_dist2(coords, i, blo, bhi),
-                               _lb_keogh2(curves, i, lower, upper, np.inf)))
-        out[n + i] = math.sqrt(max(_fourier_dist2(coords, i, mblo, mbhi),
-                                   _lb_keogh2(curves, i, mlower, mupper, np.inf)))
+        out[i] = math.sqrt(max(fourier_dist2(coords, i, blo, bhi),
+                               lb_keogh2(curves, i, lower, upper, np.inf)))
+        out[n + i] = math.sqrt(max(fourier_dist2(coords, i, mblo, mbhi),
+                                   lb_keogh2(curves, i, mlower, mupper, np.inf)))
     return out
 
 
@@ -327,11 +327,11 @@ def _group_keys_kernel(  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _cascade_dtw_kernel(q, c, r, best_so_far):  # pragma: no cover - compiled
-    return _cascade_env_kernel(q, c, r, best_so_far, q, q, False)
+    return cascade_env_kernel(q, c, r, best_so_far, q, q, False)
 
 
 @njit(cache=True, nogil=True)
-def _cascade_env_kernel(q, c, r, best_so_far, lower, upper, with_envelope):  # pragma: no cover
+def cascade_env_kernel(q, c, r, best_so_far, lower, upper, with_envelope):  # pragma: no cover
     # LB_Keogh the other way round (the candidate's envelope against the query), then DTW
     # abandoned on the cumulative bound of that LB per row (and, given the query's
     # envelope, of the forward LB_Keogh per column: the columns after i + r are reached
@@ -475,7 +475,7 @@ def dtw(q: np.ndarray, c: np.ndarray, r: int, best_so_far: float = math.inf) -> 
     bsf = float(best_so_far)
     if math.isnan(bsf) or bsf < 0:
         raise ValueError(f"best_so_far must be >= 0, got {best_so_far!r}")
-    return float(_dtw_kernel(qa, ca, rr, bsf))
+    return float(dtw_kernel(qa, ca, rr, bsf))
 
 
 def cascade_dtw(q: np.ndarray, c: np.ndarray, r: int, best_so_far: float = math.inf) -> float:
@@ -621,7 +621,7 @@ def lb_paa(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray, means: np.ndarray
     m = _seq(means, "means")
     lo_a, hi_a, w = _seq(lo, "lo"), _seq(hi, "hi"), _seq(widths, "widths")
     _same_shape(("lo", lo_a), ("hi", hi_a), ("widths", w), ("means", m))
-    return math.sqrt(_lb_paa2(m.reshape(1, -1), 0, lo_a, hi_a, w, np.inf))
+    return math.sqrt(lb_paa2(m.reshape(1, -1), 0, lo_a, hi_a, w, np.inf))
 
 
 def lb_keogh_reverse(q: np.ndarray, c: np.ndarray, r: int) -> float:

@@ -48,8 +48,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .bounds import _cascade_env_kernel, _fourier_dist2, _lb_keogh2, _lb_paa2
-from .refine import DONE, EXHAUSTED, NEED, RADIUS, _heap_pop, _heap_push, _kth, _load_row, _widen
+from .bounds import cascade_env_kernel, fourier_dist2, lb_keogh2, lb_paa2
+from .refine import DONE, EXHAUSTED, NEED, RADIUS, heap_pop, heap_push, kth_distance, load_row, widen
 
 __all__ = ["FULL", "refine_stack", "scan_stack"]
 
@@ -101,7 +101,7 @@ def _open_group(  # pragma: no cover - compiled
             kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
                                    wbox_hi[m, b], wedge_lo[m, b], wedge_hi[m, b])
             if kb <= limit2:
-                size = _heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
+                size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
                                   _code(g * n_blocks + b, m, _GB))
     return size
 
@@ -130,12 +130,12 @@ def _push_views(  # pragma: no cover - compiled
     # a GB entry: the group's views against the block, by Fourier_Dist and LB_PAA
     n_blocks = wbox_lo.shape[1]
     for row in range(group_start[g], group_start[g] + group_count[g]):
-        fd = _fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
+        fd = fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
         if fd > limit2:
             continue
-        pd = _lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
+        pd = lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
         if pd <= limit2:
-            size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), key),
+            size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), key),
                               _code(row * n_blocks + b, m, _VB))
     return size
 
@@ -148,12 +148,12 @@ def _push_curves(  # pragma: no cover - compiled
     # a VBC entry: the view against each curve of the block, by the curve's LB_Keogh (a
     # block of one curve: the wedge was that curve's envelope)
     if block_end[b] - block_start[b] == 1:
-        return _heap_push(hkey, hcode, size, key, _code(row * n_curves + block_start[b], m, _VC))
+        return heap_push(hkey, hcode, size, key, _code(row * n_curves + block_start[b], m, _VC))
     for t in range(block_start[b], block_end[b]):
         stats[2] += 1
-        lb = max(key * key, _lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
+        lb = max(key * key, lb_keogh2(curves, row, env_lo[m, t], env_hi[m, t], limit2))
         if lb <= limit2:
-            size = _heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_curves + t, m, _VC))
+            size = heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_curves + t, m, _VC))
     return size
 
 
@@ -173,7 +173,7 @@ def _group_block(  # pragma: no cover - compiled
             return size
         if math.sqrt(kt) > top:
             n_blocks = wbox_lo.shape[1]
-            return _heap_push(hkey, hcode, size, math.sqrt(kt), _code(g * n_blocks + b, m, _GBC))
+            return heap_push(hkey, hcode, size, math.sqrt(kt), _code(g * n_blocks + b, m, _GBC))
     stats[1] += group_count[g]
     return _push_views(g, b, m, top, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi,
                        wseg_lo, wseg_hi, widths, hkey, hcode, size)
@@ -188,12 +188,12 @@ def _view_block(  # pragma: no cover - compiled
     # that is larger than its key; a VBC (or a VB no larger): its curves
     if fresh:
         stats[2] += 1
-        lb = _lb_keogh2(curves, row, wedge_lo[m, b], wedge_hi[m, b], limit2)
+        lb = lb_keogh2(curves, row, wedge_lo[m, b], wedge_hi[m, b], limit2)
         if lb > limit2:
             return size
         if math.sqrt(lb) > top:
             n_blocks = wedge_lo.shape[1]
-            return _heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_blocks + b, m, _VBC))
+            return heap_push(hkey, hcode, size, math.sqrt(lb), _code(row * n_blocks + b, m, _VBC))
     return _push_curves(row, b, m, top, limit2, block_start, block_end, curves, env_lo, env_hi, n_curves,
                         hkey, hcode, size, stats)
 
@@ -204,8 +204,8 @@ def _refine_view(  # pragma: no cover - compiled
     bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U,
 ):
     # a VC entry: the exact DTW (UCR cascade); the object's result and bound; returns U
-    _load_row(curves, row, m == 1, scratch)
-    dist = _cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
+    load_row(curves, row, m == 1, scratch)
+    dist = cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
     if dist > limit:
         return U
     if dist < exact[o] or (dist == exact[o] and _first(
@@ -217,7 +217,7 @@ def _refine_view(  # pragma: no cover - compiled
     if dist < bound[o]:
         bound[o] = dist
         if dist < U:
-            return _kth(bound, k, cap)
+            return kth_distance(bound, k, cap)
     return U
 
 
@@ -247,7 +247,7 @@ def _stack_kernel(  # pragma: no cover - compiled
     n_blocks = block_start.shape[0]
     scratch = np.empty(Q.shape[1])
     room = _room(block_start, block_end, group_count)
-    U = _kth(bound, k, cap)
+    U = kth_distance(bound, k, cap)
     size = hsize[0]
     i = start_at
     status = EXHAUSTED
@@ -266,8 +266,8 @@ def _stack_kernel(  # pragma: no cover - compiled
         if size == 0 and gk == np.inf:
             status = EXHAUSTED
             break
-        if min(gk, top) > _widen(U):
-            status = DONE if _widen(U) <= stop_key else RADIUS
+        if min(gk, top) > widen(U):
+            status = DONE if widen(U) <= stop_key else RADIUS
             break
         if top > gk:  # open the next group
             if gk > stop_key:
@@ -275,7 +275,7 @@ def _stack_kernel(  # pragma: no cover - compiled
                 break
             g = order[i]
             i += 1
-            limit = _widen(min(U, bound[group_owner[g]]))
+            limit = widen(min(U, bound[group_owner[g]]))
             if gk <= limit:
                 stats[0] += 1
                 size = _open_group(g, gk, limit * limit, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo,
@@ -285,14 +285,14 @@ def _stack_kernel(  # pragma: no cover - compiled
             status = RADIUS
             break
         code = hcode[0]
-        size = _heap_pop(hkey, hcode, size)
+        size = heap_pop(hkey, hcode, size)
         kind = code & 7
         m = (code >> 3) & 1
         payload = code >> 4
         per = n_curves if kind == _VC else n_blocks
         row, b = payload // per, payload % per  # (group, block) for a GB entry
         o = group_owner[row] if kind == _GB or kind == _GBC else row_owner[row]
-        limit = _widen(min(U, bound[o]))
+        limit = widen(min(U, bound[o]))
         if top > limit:
             continue
         if kind == _GB or kind == _GBC:
@@ -338,9 +338,9 @@ def _scan_stack_kernel(Q, lower, upper, curves, r, out):  # pragma: no cover - c
     for row in range(curves.shape[0]):
         best = np.inf
         for m in range(2):
-            _load_row(curves, row, m == 1, scratch)
+            load_row(curves, row, m == 1, scratch)
             for t in range(Q.shape[0]):
-                d = _cascade_env_kernel(Q[t], scratch, r, best, lower[t], upper[t], True)
+                d = cascade_env_kernel(Q[t], scratch, r, best, lower[t], upper[t], True)
                 if d < best:
                     best = d
         out[row] = best

@@ -51,7 +51,7 @@ __all__ = [
 PLANS = ("server", "cs1", "cs2")
 
 
-def _finite(x: Any, what: str, low: float = -math.inf, high: float = math.inf) -> float:
+def json_number(x: Any, what: str, low: float = -math.inf, high: float = math.inf) -> float:
     """A JSON number (not a string or a boolean) that is finite and in ``[low, high]``."""
     try:
         return finite(x, what, low, high)
@@ -81,7 +81,7 @@ def _int(x: Any, what: str, low: int, high: int) -> int:
     return int(x)
 
 
-def _curve(x: Any, samples: int | None = None) -> NDArray[np.float64]:
+def curve_from_json(x: Any, samples: int | None = None) -> NDArray[np.float64]:
     """A distance curve: a list of numbers (not strings or booleans), each finite and in
     ``[0, n]`` (a curve has mean 1, so no sample of an ``n``-sample curve exceeds ``n``)."""
     numeric = (isinstance(x, np.ndarray) and x.dtype.kind in "iuf") or (
@@ -145,7 +145,7 @@ class Candidate:
             mirrored = data.get("mirrored", False)
             if not isinstance(mirrored, bool):
                 raise QueryError("candidate mirrored must be true or false")
-            distance = _finite(data["distance"], "candidate distance")
+            distance = json_number(data["distance"], "candidate distance")
             if distance < 0:
                 raise QueryError("candidate distance must be >= 0")
             version = data.get("version")
@@ -156,21 +156,21 @@ class Candidate:
             camera = data.get("camera_distance")
             if camera is not None and (
                 isinstance(camera, bool) or not isinstance(camera, (int, float))
-                or not 1 < _finite(camera, "candidate camera_distance") <= LIMITS.max_perspective_distance
+                or not 1 < json_number(camera, "candidate camera_distance") <= LIMITS.max_perspective_distance
             ):
                 raise QueryError(f"candidate camera_distance must be a number greater than 1 and at "
                                  f"most {LIMITS.max_perspective_distance:g}, got {camera!r}"[:160])
             shift = data.get("shift")
             if shift is not None:
                 shift = _int(shift, "candidate shift", 0, MAX_SAMPLES - 1)
-            return cls(name, distance, _finite(data["azimuth"], "candidate azimuth"),
-                       _finite(data["elevation"], "candidate elevation"), mirrored, version,
+            return cls(name, distance, json_number(data["azimuth"], "candidate azimuth"),
+                       json_number(data["elevation"], "candidate elevation"), mirrored, version,
                        None if camera is None else float(camera), shift)
         except KeyError as exc:
             raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
 
 
-def _candidates(data: Any, limit: int) -> list[Candidate]:
+def candidates_from_json(data: Any, limit: int) -> list[Candidate]:
     if not isinstance(data, list):
         raise QueryError("candidates must be a list")
     if len(data) > limit:
@@ -221,8 +221,8 @@ class RefineRequest:
         if not isinstance(data, dict):
             raise QueryError("request must be an object")
         try:
-            return cls(_curve(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
-                       _int(data["k"], "k", 1, MAX_K), _candidates(data["client"], MAX_K),
+            return cls(curve_from_json(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
+                       _int(data["k"], "k", 1, MAX_K), candidates_from_json(data["client"], MAX_K),
                        _shifts(data.get("shifts")))
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
@@ -247,11 +247,11 @@ class WalkRequest:
         if not isinstance(data, dict):
             raise QueryError("request must be an object")
         try:
-            gap = _finite(data["client_gap"], "client_gap")
+            gap = json_number(data["client_gap"], "client_gap")
             if not 0 < gap <= 180:
                 raise QueryError(f"client_gap must be in (0, 180], got {gap}")
-            return cls(_curve(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
-                       _int(data["k"], "k", 1, MAX_K), gap, _candidates(data["client"], MAX_K))
+            return cls(curve_from_json(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
+                       _int(data["k"], "k", 1, MAX_K), gap, candidates_from_json(data["client"], MAX_K))
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -270,7 +270,7 @@ class ServerReply:
     def from_dict(cls, data: Any) -> ServerReply:
         if not isinstance(data, dict) or not isinstance(data.get("results"), list):
             raise QueryError("reply must be an object with a results list")
-        return cls(_candidates(data["results"], MAX_K), stats_from_dict(data.get("stats")))
+        return cls(candidates_from_json(data["results"], MAX_K), stats_from_dict(data.get("stats")))
 
 
 def usable_client(

@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .bounds import _cascade_env_kernel, _dtw_kernel, _fourier_dist2, _lb_keogh2, _lb_paa2
+from .bounds import cascade_env_kernel, dtw_kernel, fourier_dist2, lb_keogh2, lb_paa2
 
 __all__ = ["DONE", "EXHAUSTED", "NEED", "RADIUS", "WIDEN_ABS", "WIDEN_REL", "refine_groups", "scan_all"]
 
@@ -61,7 +61,7 @@ WIDEN_ABS = 1e-12
 
 
 @njit(cache=True, nogil=True)
-def _widen(x):  # pragma: no cover - compiled
+def widen(x):  # pragma: no cover - compiled
     return x * (1.0 + WIDEN_REL) + WIDEN_ABS
 
 
@@ -76,7 +76,7 @@ def _first(row, mirrored, other_row, other_mirrored):  # pragma: no cover - comp
 
 
 @njit(cache=True, nogil=True)
-def _kth(bound, k, cap):  # pragma: no cover - compiled
+def kth_distance(bound, k, cap):  # pragma: no cover - compiled
     # the k-th smallest of ``bound`` (inf if fewer than k are finite), at most ``cap``
     if bound.shape[0] < k:
         return cap
@@ -85,7 +85,7 @@ def _kth(bound, k, cap):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _load_row(curves, row, mirrored, out):  # pragma: no cover - compiled
+def load_row(curves, row, mirrored, out):  # pragma: no cover - compiled
     # the curve of ``row`` (or its mirror, c'[i] = c[-i mod N]) as float64 into ``out``
     n = out.shape[0]
     if mirrored:
@@ -98,7 +98,7 @@ def _load_row(curves, row, mirrored, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _heap_push(hkey, hcode, size, key, code):  # pragma: no cover - compiled
+def heap_push(hkey, hcode, size, key, code):  # pragma: no cover - compiled
     i = size
     while i > 0:
         parent = (i - 1) // 2
@@ -113,7 +113,7 @@ def _heap_push(hkey, hcode, size, key, code):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _heap_pop(hkey, hcode, size):  # pragma: no cover - compiled
+def heap_pop(hkey, hcode, size):  # pragma: no cover - compiled
     # removes the root (read it before calling); returns the new size
     size -= 1
     key = hkey[size]
@@ -147,7 +147,7 @@ def _refine_kernel(  # noqa: C901, PLR0915  # pragma: no cover - compiled
 ):
     n_samples = q.shape[0]
     scratch = np.empty(n_samples)
-    U = _kth(bound, k, cap)
+    U = kth_distance(bound, k, cap)
     size = hsize[0]
     i = start_at
     status = EXHAUSTED
@@ -163,36 +163,36 @@ def _refine_kernel(  # noqa: C901, PLR0915  # pragma: no cover - compiled
         if size == 0 and gk == np.inf:  # the caller may know more groups
             status = EXHAUSTED
             break
-        if min(gk, top) > _widen(U):
+        if min(gk, top) > widen(U):
             # nothing known can enter the result; groups not yet listed have keys above
             # the radius, so they cannot either once U is within it
-            status = DONE if _widen(U) <= stop_key else RADIUS
+            status = DONE if widen(U) <= stop_key else RADIUS
             break
         if top <= gk:  # refine the view (or mirror) with the smallest key
             if top > stop_key:
                 status = RADIUS
                 break
             code = hcode[0]
-            size = _heap_pop(hkey, hcode, size)
+            size = heap_pop(hkey, hcode, size)
             row = code >> 2
             mirrored = (code & 1) == 1
             o = row_owner[row]
-            limit = _widen(min(U, bound[o]))
+            limit = widen(min(U, bound[o]))
             if top > limit:
                 continue  # it can neither enter the result nor improve its object
             if (code & 2) == 0:  # a Fourier point: its curve's LB_Keogh comes next
                 stats[2] += 1
-                lb = _lb_keogh2(curves, row, mlower if mirrored else lower,
+                lb = lb_keogh2(curves, row, mlower if mirrored else lower,
                                 mupper if mirrored else upper, limit * limit)
                 if lb > limit * limit:
                     continue
                 lb = math.sqrt(lb)
                 if lb > top:  # queue the curve behind what is now smaller
-                    size = _heap_push(hkey, hcode, size, lb, code | 2)
+                    size = heap_push(hkey, hcode, size, lb, code | 2)
                     continue
-            _load_row(curves, row, mirrored, scratch)
+            load_row(curves, row, mirrored, scratch)
             stats[3] += 1
-            dist = _cascade_env_kernel(q, scratch, r, limit, lower, upper, True)
+            dist = cascade_env_kernel(q, scratch, r, limit, lower, upper, True)
             if dist > limit:
                 continue  # abandoned
             if dist < exact[o] or (dist == exact[o] and _first(row, mirrored, exact_row[o],
@@ -203,7 +203,7 @@ def _refine_kernel(  # noqa: C901, PLR0915  # pragma: no cover - compiled
             if dist < bound[o]:
                 bound[o] = dist
                 if dist < U:
-                    U = _kth(bound, k, cap)
+                    U = kth_distance(bound, k, cap)
             continue
         # open the group with the smallest key: queue the Fourier points of its views and
         # mirrors still under the limit
@@ -213,7 +213,7 @@ def _refine_kernel(  # noqa: C901, PLR0915  # pragma: no cover - compiled
         g = order[i]
         i += 1
         o = group_owner[g]
-        limit = _widen(min(U, bound[o]))
+        limit = widen(min(U, bound[o]))
         if gk > limit:
             continue
         limit2 = limit * limit
@@ -224,14 +224,14 @@ def _refine_kernel(  # noqa: C901, PLR0915  # pragma: no cover - compiled
         for slot in range(2 * n):
             mirrored = slot >= n
             row = s + (slot - n if mirrored else slot)
-            fd = _fourier_dist2(coords, row, mblo if mirrored else blo, mbhi if mirrored else bhi)
+            fd = fourier_dist2(coords, row, mblo if mirrored else blo, mbhi if mirrored else bhi)
             if fd > limit2:
                 continue
-            pd = _lb_paa2(means, row, mplo if mirrored else plo, mphi if mirrored else phi, pwidth, limit2)
+            pd = lb_paa2(means, row, mplo if mirrored else plo, mphi if mirrored else phi, pwidth, limit2)
             if pd > limit2:
                 continue
             # a point's key is at least its group's (both bound every view of the group)
-            size = _heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), gk),
+            size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), gk),
                               4 * row + (1 if mirrored else 0))
     hsize[0] = size
     return i, status
@@ -278,10 +278,10 @@ def refine_groups(
 def _scan_kernel(q, curves, r, out):  # pragma: no cover - compiled
     scratch = np.empty(q.shape[0])
     for row in range(curves.shape[0]):
-        _load_row(curves, row, False, scratch)
-        a = _dtw_kernel(q, scratch, r, np.inf)
-        _load_row(curves, row, True, scratch)
-        b = _dtw_kernel(q, scratch, r, np.inf)
+        load_row(curves, row, False, scratch)
+        a = dtw_kernel(q, scratch, r, np.inf)
+        load_row(curves, row, True, scratch)
+        b = dtw_kernel(q, scratch, r, np.inf)
         out[row] = min(a, b)
 
 

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import StorageError
 
-__all__ = ["DTYPE_CODES", "decode_array", "encode_array"]
+__all__ = ["DTYPE_CODES", "decode_array", "decode_many", "encode_array"]
 
 MAGIC = b"VA"
 VERSION = 1
@@ -101,3 +102,49 @@ def decode_array(
     ):
         raise StorageError(f"array blob has shape {dims}, expected {shape}")
     return arr
+
+
+def decode_many(
+    blobs: Sequence[bytes], dtype: np.dtype | type | str, ndim: int
+) -> tuple[NDArray, NDArray[np.int64]]:
+    """Decode many BLOBs of one dtype and number of dimensions at once: their data end to
+    end (1-D) and each one's shape (``(len(blobs), ndim)``).
+
+    Exactly what :func:`decode_array` on each would give (the tests hold it to that), but
+    with one copy for the lot instead of a call per blob: a tier's 10,000 groups decode
+    in milliseconds rather than a good part of a second.
+
+    Raises
+    ------
+    StorageError
+        Any blob is malformed or not of ``dtype`` and ``ndim`` (the message is the one
+        :func:`decode_array` gives for the first such blob).
+    """
+    dt = np.dtype(dtype)
+    head = _HEADER.size + 4 * ndim
+    code = _CODE_OF.get(np.dtype(dt.str))
+    if code is None:
+        raise TypeError(f"cannot decode arrays of dtype {dt}")
+    n = len(blobs)
+    if n == 0:
+        return np.zeros(0, dt), np.zeros((0, ndim), np.int64)
+    try:
+        sizes = np.fromiter(map(len, blobs), np.int64, n)
+        heads = np.frombuffer(b"".join(memoryview(b)[:head] for b in blobs), np.uint8)
+    except TypeError:  # something that is not a blob (NULL)
+        sizes = heads = np.zeros(0, np.int64)
+    if len(heads) == n * head:
+        heads = heads.reshape(n, head)
+        expected = np.frombuffer(_HEADER.pack(MAGIC, VERSION, code, ndim), np.uint8)
+        shapes = np.ascontiguousarray(heads[:, _HEADER.size:]).view("<u4").astype(np.int64)
+        ok = (heads[:, : _HEADER.size] == expected).all(axis=1)
+        ok &= sizes - head == shapes.prod(axis=1) * dt.itemsize
+        if ok.all():
+            data = b"".join(memoryview(b)[head:] for b in blobs)
+            return np.frombuffer(data, dt), shapes.reshape(n, ndim)
+        bad = int(np.argmin(ok))
+    else:
+        bad = next(i for i, b in enumerate(blobs)
+                   if not isinstance(b, (bytes, bytearray, memoryview)) or len(b) < head)
+    decode_array(blobs[bad], dt, (None,) * ndim)  # raises the precise error
+    raise StorageError(f"array blob {bad} does not decode as {ndim}-D {dt}")  # pragma: no cover

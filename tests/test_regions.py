@@ -1,0 +1,314 @@
+"""Photos of several objects: box and point prompts, every object, their errors, the
+answer's ``objects``, and the overlay; through the library, the CLI and its JSON."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.ndimage import binary_fill_holes
+
+import viewdb
+from viewdb.bench.photos import TABLE, table_photo
+from viewdb.config import SegmentationConfig
+from viewdb.recognition.image import load_image
+from viewdb.recognition.regions import Box, Point, Prompts, _separate, find_regions, parse_box, parse_point
+from viewdb_cli.main import main
+
+#: Three sample objects on the table, each seen off the database's 30° grid.
+SCENE = (("car", 40, 20), ("mug", 130, 25), ("cube_dice", 200, 35))
+PLACES = [(10, 40), (280, 20), (540, 50)]
+SIZE = (800, 320)
+
+
+@pytest.fixture(scope="module")
+def scene_db(tmp_path_factory):
+    from tests.conftest import sample
+
+    path = tmp_path_factory.mktemp("regions") / "scene.db"
+    with viewdb.open(path, gap=30, image_size=256) as db:
+        report = db.ingest([sample(n) for n in ("cube_dice", "car", "mug", "l_bracket", "chair", "arrow")])
+    assert not report.failed
+    return path
+
+
+@pytest.fixture(scope="module")
+def scene(scene_db, tmp_path_factory):
+    """The photo (RGB), its file, and each object's true mask."""
+    with viewdb.open(scene_db, create=False) as db:
+        views = [db.render(name, h, v) for name, h, v in SCENE]
+    photo, masks = table_photo(views, SIZE, PLACES)
+    path = tmp_path_factory.mktemp("photos") / "table.png"
+    cv2.imwrite(str(path), photo[:, :, ::-1])
+    return photo, path, masks
+
+
+def iou(a, truth):
+    """IoU with the true silhouette, its holes filled (as a segmentation fills them)."""
+    b = binary_fill_holes(truth)
+    return np.count_nonzero(a & b) / np.count_nonzero(a | b)
+
+
+def true_box(mask):
+    ys, xs = np.nonzero(mask)
+    return [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1]
+
+
+@pytest.fixture(scope="module")
+def every_answer(scene_db, scene):
+    photo, _, _ = scene
+    with viewdb.open(scene_db, create=False) as db:
+        return db.query(photo, k=2, every=True)
+
+
+# ---------------------------------------------------------------- every object
+def test_every_object_on_a_table_is_found_and_recognised(every_answer, scene):
+    _, _, masks = scene
+    assert len(every_answer.objects) == 3
+    assert every_answer.results == []
+    found = {}
+    for entry in every_answer.objects:
+        # each region is one object: it overlaps one true mask, and closely
+        overlaps = [iou(entry.region.mask, m) for m in masks]
+        which = int(np.argmax(overlaps))
+        assert overlaps[which] > 0.85, overlaps
+        found[SCENE[which][0]] = entry.results[0].object
+        assert entry.results[0].pose is not None
+    assert found == {name: name for name, _, _ in SCENE}
+    # the largest first
+    areas = [o.region.area for o in every_answer.objects]
+    assert areas == sorted(areas, reverse=True)
+
+
+def test_max_objects_keeps_the_largest(scene_db, scene):
+    photo, _, masks = scene
+    with viewdb.open(scene_db, create=False) as db:
+        two = db.query(photo, k=1, every=True, max_objects=2, pose=False)
+    largest = sorted(range(3), key=lambda i: -masks[i].sum())[:2]
+    assert len(two.objects) == 2
+    assert np.abs(np.array([true_box(masks[i]) for i in largest])
+                  - np.array([o.region.box for o in two.objects])).max() <= 3
+
+
+def test_a_label_map_with_every_queries_every_label(scene_db, scene):
+    photo, _, masks = scene
+    labels = np.zeros(masks[0].shape, np.uint16)
+    for value, mask in zip((7, 3, 12), masks, strict=True):
+        labels[mask] = value
+    with viewdb.open(scene_db, create=False) as db:
+        answer = db.query(photo, k=1, label_map=labels, every=True, pose=False)
+    got = {o.region.label: o.results[0].object for o in answer.objects}
+    assert got == {7: "car", 3: "mug", 12: "cube_dice"}
+    assert answer.segmentation == "label"
+
+
+# ---------------------------------------------------------------- prompts
+def test_each_box_and_point_queries_its_object_in_order(scene_db, scene):
+    photo, _, masks = scene
+    boxes = [true_box(m) for m in masks]
+    # a detector's box: a little loose, in floats
+    loose = [(x1 - 4.5, y1 - 3.25, x2 + 5.0, y2 + 4.0) for x1, y1, x2, y2 in boxes]
+    loose = [(max(0.0, a), max(0.0, b), min(SIZE[0], c), min(SIZE[1], d)) for a, b, c, d in loose]
+    centres = []
+    for m in masks:  # a pixel deep inside each object
+        d = cv2.distanceTransform(m.astype(np.uint8), cv2.DIST_L2, 5)
+        y, x = np.unravel_index(int(np.argmax(d)), d.shape)
+        centres.append((float(x), float(y)))
+    with viewdb.open(scene_db, create=False) as db:
+        answer = db.query(photo, k=1, boxes=[loose[2], loose[0]], points=[centres[1]], pose=False)
+    assert [o.results[0].object for o in answer.objects] == ["cube_dice", "car", "mug"]
+    assert [o.region.prompt for o in answer.objects] == [Box(*loose[2]), Box(*loose[0]), Point(*centres[1])]
+    for entry, truth in zip(answer.objects, (masks[2], masks[0], masks[1]), strict=True):
+        assert iou(entry.region.mask, truth) > 0.85
+
+
+def test_the_objects_share_one_decode_and_answer_as_single_queries(scene_db, scene):
+    """Each object of a query of several gets the answer a single query with its mask gets."""
+    photo, _, _ = scene
+    with viewdb.open(scene_db, create=False) as db:
+        several = db.query(photo, k=2, every=True, pose=False)
+        for entry in several.objects:
+            alone = db.query(photo, k=2, mask=entry.region.mask, pose=False)
+            assert [(m.object, m.distance) for m in alone.results] == \
+                [(m.object, m.distance) for m in entry.results]
+
+
+def test_overlapping_claims_go_to_the_smaller_object():
+    a = np.zeros((20, 20), bool)
+    a[2:15, 2:15] = True
+    b = np.zeros((20, 20), bool)
+    b[10:14, 10:14] = True
+    out = _separate([a, b])
+    assert np.array_equal(out[1], b) and np.array_equal(out[0], a & ~b)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 15), st.integers(0, 15), st.integers(1, 8), st.integers(1, 8)),
+                min_size=1, max_size=5))
+def test_separated_masks_are_disjoint_and_cover_the_union(rects):
+    masks = []
+    for x, y, w, h in rects:
+        m = np.zeros((24, 24), bool)
+        m[y:y + h, x:x + w] = True
+        masks.append(m)
+    out = _separate(masks)
+    union = np.logical_or.reduce(masks)
+    assert np.array_equal(np.logical_or.reduce(out), union)
+    assert (np.sum(out, axis=0) <= 1).all()
+    for before, after in zip(masks, out, strict=True):
+        assert not (after & ~before).any()
+    # the smallest mask keeps every pixel
+    smallest = int(np.argmin([m.sum() for m in masks]))
+    assert np.array_equal(out[smallest], masks[smallest])
+
+
+# ---------------------------------------------------------------- errors
+@pytest.mark.parametrize("prompts, problem", [
+    (Prompts(boxes=(Box(700, 10, 790, 100),)), "outside the 640x320 image"),
+    (Prompts(boxes=(Box(-5, 10, 100, 100),)), "outside"),
+    (Prompts(boxes=(Box(50, 10, 50, 100),)), "degenerate"),
+    (Prompts(boxes=(Box(60, 10, 40, 100),)), "degenerate"),
+    (Prompts(boxes=(Box(50, 10, 52, 100),)), "degenerate"),
+    (Prompts(points=(Point(640, 10),)), "outside"),
+    (Prompts(points=(Point(3, -1),)), "outside"),
+    (Prompts(boxes=(Box(20, 20, 200, 200),)), "no object found"),
+    (Prompts(points=(Point(100, 100),)), "no object found"),
+    (Prompts(every=True), "no object found"),
+])
+def test_bad_prompts_and_empty_photos_raise_one_line_errors(tmp_path, prompts, problem):
+    path = tmp_path / "empty table.png"
+    photo, _ = table_photo([], (640, 320), [])
+    cv2.imwrite(str(path), photo[:, :, ::-1])
+    with pytest.raises(viewdb.ImageError) as caught:
+        find_regions(load_image(path), prompts)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: ") and "\n" not in message and problem in message
+    if prompts.boxes or prompts.points:
+        assert str((prompts.boxes or prompts.points)[0]) in message  # names the prompt
+
+
+def test_too_many_prompts_are_refused(scene):
+    photo, _, _ = scene
+    cfg = SegmentationConfig(max_prompts=2)
+    with pytest.raises(viewdb.ImageError, match="3 prompts: at most 2"):
+        find_regions(load_image(photo), Prompts(points=(Point(1, 1),) * 3), config=cfg)
+
+
+@pytest.mark.parametrize("text", ["1,2,3", "1,2,3,4,5", "a,b,c,d", "1;2;3;4", "nan,1,2,3", ""])
+def test_malformed_boxes_are_refused(text):
+    with pytest.raises(viewdb.QueryError, match="box"):
+        parse_box(text)
+
+
+def test_prompts_parse_from_text_and_numbers():
+    assert parse_box(" 1.5, 2,3e1 ,40") == Box(1.5, 2.0, 30.0, 40.0) == parse_box((1.5, 2, 30, 40))
+    assert parse_point("4,5") == Point(4.0, 5.0) == parse_point([4, 5])
+    with pytest.raises(viewdb.QueryError, match="point"):
+        parse_point((1, 2, 3))
+    with pytest.raises(viewdb.QueryError, match="not both"):
+        Prompts.of(boxes=[(1, 2, 30, 40)], every=True)
+    with pytest.raises(viewdb.QueryError, match="lists"):
+        Prompts.of(boxes="1,2,30,40")
+    assert Prompts.of() is None
+
+
+def test_the_library_refuses_prompts_with_a_mask(scene_db, scene):
+    photo, _, masks = scene
+    with viewdb.open(scene_db, create=False) as db, pytest.raises(viewdb.QueryError, match="no mask"):
+        db.query(photo, mask=masks[0], boxes=[(1, 1, 50, 50)])
+
+
+# ---------------------------------------------------------------- the CLI
+def test_cli_json_lists_each_object(scene_db, scene, capsys):
+    _, path, masks = scene
+    boxes = [true_box(m) for m in masks]
+    args = ["query", str(path), "--db", str(scene_db), "-k", "1", "--no-pose", "--json"]
+    assert main([*args, "--box", ",".join(map(str, boxes[1])), "--box", ",".join(map(str, boxes[0]))]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["results"] == [] and len(data["objects"]) == 2
+    assert [o["results"][0]["object"] for o in data["objects"]] == ["mug", "car"]
+    first = data["objects"][0]
+    assert first["region"]["prompt"] == {"box": [float(v) for v in boxes[1]]}
+    assert first["region"]["box"] == pytest.approx(boxes[1], abs=3)
+    assert abs(first["region"]["area"] - int(masks[1].sum())) < 0.1 * masks[1].sum()
+    # a single-object query keeps its shape: no "objects"
+    assert main([*args, "--mask", str(_mask_file(path, masks[0]))]) == 0
+    single = json.loads(capsys.readouterr().out)
+    assert "objects" not in single and single["results"][0]["object"] == "car"
+
+
+def _mask_file(photo_path, mask):
+    out = photo_path.with_name("car-mask.png")
+    cv2.imwrite(str(out), mask.astype(np.uint8) * 255)
+    return out
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--box", "700,10,900,100"], "outside the 800x320 image"),
+    (["--box", "50,10,50,100"], "degenerate"),
+    (["--box", "5,5,40,30"], "no object found"),
+    (["--point", "795,5"], "no object found"),
+    (["--point", "900,5"], "outside"),
+])
+def test_cli_bad_prompts_exit_1_with_one_line(scene_db, scene, capsys, args, problem):
+    _, path, _ = scene
+    assert main(["query", str(path), "--db", str(scene_db), "--no-pose", *args]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"viewdb: {path}: ") and "\n" not in err and problem in err
+    assert "Traceback" not in err
+
+
+def test_cli_all_on_an_empty_photo_exits_1(scene_db, tmp_path, capsys):
+    path = tmp_path / "nothing.png"
+    photo, _ = table_photo([], (320, 240), [])
+    cv2.imwrite(str(path), photo[:, :, ::-1])
+    assert main(["query", str(path), "--db", str(scene_db), "--all"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"viewdb: {path}: no object found: nothing stands out from the background"
+
+
+@pytest.mark.parametrize("args", [
+    ["--box", "1,2,3"], ["--point", "1"], ["--box", "1,2,30,40", "--all"], ["--max-objects", "2"],
+    ["--all", "--label", "3"], ["--overlay", "out.jpg"],
+])
+def test_cli_malformed_prompts_are_usage_errors(scene_db, scene, capsys, args):
+    _, path, _ = scene
+    assert main(["query", str(path), "--db", str(scene_db), *args]) == 2
+
+
+# ---------------------------------------------------------------- the overlay
+def test_overlay_draws_each_object_over_the_photo(scene_db, scene, every_answer, tmp_path, capsys):
+    photo, path, masks = scene
+    drawn = every_answer.overlay()
+    assert drawn.shape == photo.shape and drawn.dtype == np.uint8
+    changed = np.abs(drawn.astype(int) - photo.astype(int)).sum(axis=2) > 30
+    near = [cv2.dilate(m.astype(np.uint8), np.ones((41, 41), np.uint8)) > 0 for m in masks]
+    # every object is drawn on, and most of what is drawn is on or next to an object
+    for m in masks:
+        assert (changed & m).sum() > 0.3 * m.sum()
+    assert (changed & np.logical_or.reduce(near)).sum() > 0.75 * changed.sum()
+    # the CLI writes the same picture
+    out = tmp_path / "overlay.png"
+    assert main(["query", str(path), "--db", str(scene_db), "-k", "2", "--all", "--overlay", str(out)]) == 0
+    written = cv2.imread(str(out))[:, :, ::-1]
+    assert np.array_equal(written, drawn)
+    assert "object 3" in capsys.readouterr().out
+
+
+def test_overlay_into_a_missing_folder_fails_before_the_query(scene_db, scene, tmp_path, capsys):
+    _, path, _ = scene
+    out = tmp_path / "no such folder" / "o.png"
+    assert main(["query", str(path), "--db", str(scene_db), "--overlay", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"viewdb: {out}: the folder to write the overlay in does not exist"
+    assert not out.parent.exists()
+
+
+def test_table_photo_is_table_coloured(scene):
+    photo, _, masks = scene
+    background = ~np.logical_or.reduce(masks)
+    assert np.abs(photo[background].mean(axis=0) - TABLE).max() < 15
