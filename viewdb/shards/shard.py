@@ -9,6 +9,7 @@ Replies are plain dicts and lists (what crosses between processes).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -52,6 +53,8 @@ class Shard:
                 self.versions = dict(reader.object_versions())
                 full = reader.tier("full")
                 full.rows(np.arange(full.n_groups, dtype=np.int64))  # every curve in memory
+            if full.n_groups:  # the search kernels compiled (or loaded) before the first query
+                self.refine(RefineRequest(np.ones(self.samples), 6, 1, []).to_dict(), math.inf)
         except BaseException:
             self.db.close()
             raise
