@@ -590,8 +590,36 @@ def export_client(
 
 
 @app.command()
-def serve(
+def shard(
     db: DbOption,
+    shards: Annotated[int, typer.Option("--shards", help="Number of shard files to write.",
+                                        min=1, max=4096)],
+    out_dir: Annotated[Path, typer.Option("--out", help="Folder to write (must not exist or be empty).",
+                                          file_okay=False)],
+) -> None:
+    """Split a full database by object into N shard files plus manifest.json (for serve --shards).
+
+    An object goes to shard blake2b(name) mod N; each shard is a normal database file
+    (info, check and query --db work on it)."""
+    from viewdb.shards.layout import split_catalogue
+
+    with _progress() as bar:
+        task = bar.add_task("shard", total=shards)
+        manifest = split_catalogue(db, shards, out_dir,
+                                   progress=lambda done, total: bar.update(task, completed=done, total=total))
+    _say(f"wrote {out_dir}: {manifest.shards} shards holding "
+         + ", ".join(str(n) for n in manifest.objects) + " objects")
+
+
+@app.command()
+def serve(
+    db: Annotated[Path | None, typer.Option("--db", help="Database file.", dir_okay=False)] = None,
+    shards: Annotated[Path | None, typer.Option(
+        "--shards", help="Serve a sharded catalogue (viewdb shard --out) on Ray instead of --db.",
+        file_okay=False)] = None,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", help="With --shards: the Ray cluster, 'auto' (the one on this machine, or a new "
+                      "local one) or HOST:PORT of a head node (ray start --head).")] = None,
     host: Annotated[str, typer.Option(help="Address to listen on (loopback by default).")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port (0 picks a free one).", min=0, max=65535)] = 8765,
     workers: Annotated[int, typer.Option(help="Worker processes, each with the db open read-only.",
@@ -632,15 +660,20 @@ def serve(
 
     if log_level not in ("critical", "error", "warning", "info", "debug"):
         raise typer.BadParameter("must be critical, error, warning, info or debug", param_hint="--log-level")
+    if (db is None) == (shards is None):
+        raise typer.BadParameter("give either --db FILE or --shards DIR", param_hint="--db")
+    if ray is not None and shards is None:
+        raise typer.BadParameter("--ray needs --shards", param_hint="--ray")
+    served = db if db is not None else shards
 
     def ready(url: str, objects: int) -> None:
         auth = ", bearer token required" if token else ""
         page = "" if no_ui else f"; web page at {url}/"
-        _say(f"viewdb: serving {db} ({objects} objects) on {url} with {workers} "
+        _say(f"viewdb: serving {served} ({objects} objects) on {url} with {workers} "
              f"worker{'s' if workers > 1 else ''}{auth}{page}; Ctrl-C stops")
         sys.stdout.flush()
 
-    run_server(db, host=host, port=port, workers=workers, token=token, max_body=max_body,
+    run_server(served, host=host, port=port, workers=workers, token=token, max_body=max_body, ray=ray,
                max_image_body=max_image_body, log_level=log_level, ready=ready, ui=not no_ui,
                http=viewdb_config.HttpConfig(header_timeout=header_timeout, body_timeout=body_timeout,
                                              max_pixels=max_pixels))

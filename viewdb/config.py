@@ -14,7 +14,8 @@ from typing import Any
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig",
     "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
-    "RenderConfig", "SearchConfig", "SegmentationConfig", "SiftConfig", "SilhouetteConfig", "SkimConfig",
+    "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
+    "SkimConfig",
     "WebConfig",
     "default_client_gap", "finite", "integer",
 ]
@@ -598,6 +599,31 @@ class BuildConfig:
             # sources adds the appearance rows with these defaults
             appearance=AppearanceConfig(**data.get("appearance", {})),
         )
+
+
+@dataclass(frozen=True)
+class ShardConfig:
+    """Tunables of sharded catalogues and their scatter-gather search (:mod:`viewdb.shards`)."""
+
+    #: Shards searched in the first round of a query; the rest are searched together in
+    #: the second, bounded by the k-th distance the first round found (more shards in the
+    #: first round: lower latency, less pruning).
+    first_round: int = 1
+    #: CPUs Ray reserves for each shard's actor (a fraction lets several shards share a
+    #: core; the search itself runs in the actor whatever the reservation).
+    actor_cpus: float = 0.25
+    #: Run ``check`` on every shard when the shards are opened, and refuse a damaged one.
+    check_at_start: bool = True
+    #: Seconds a round of a query may wait for its shards before the query fails.
+    timeout: float = 120.0
+
+    def __post_init__(self) -> None:
+        if self.first_round < 1:
+            raise ValueError(f"first_round must be at least 1, got {self.first_round}")
+        if not 0.0 <= self.actor_cpus <= 64:
+            raise ValueError(f"actor_cpus must be in [0, 64], got {self.actor_cpus}")
+        if not self.timeout > 0:
+            raise ValueError(f"timeout must be positive, got {self.timeout}")
 
 
 @dataclass(frozen=True)

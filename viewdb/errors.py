@@ -10,7 +10,8 @@ Catch :class:`ViewDBError` to handle them all. The tree::
     ├── StorageError            the database file is unreadable, corrupt or busy
     │   ├── SchemaMismatch      the file's schema is newer than this viewdb knows
     │   ├── UpgradeNeeded       opened read-only, the file's schema is too old to read as it is
-    │   └── NotFound            an object or view asked for is not in the database
+    │   ├── NotFound            an object or view asked for is not in the database
+    │   └── ShardUnavailable    a shard of a sharded catalogue stopped answering (its actor died)
     ├── QueryError              a query cannot be answered as asked
     ├── PoseError               a pose cannot be estimated
     └── ServerError             a viewdb server cannot be reached or refused a request
@@ -33,6 +34,7 @@ __all__ = [
     "RenderError",
     "SchemaMismatch",
     "ServerError",
+    "ShardUnavailable",
     "StorageError",
     "UpgradeNeeded",
     "ViewDBError",
@@ -82,6 +84,11 @@ class UpgradeNeeded(StorageError):
 
 class NotFound(StorageError):
     """An object or view asked for is not in the database."""
+
+
+class ShardUnavailable(StorageError):
+    """A shard of a sharded catalogue did not answer (its Ray actor died or its node was
+    lost): the query fails as a whole rather than answer from the other shards."""
 
 
 class QueryError(ViewDBError):

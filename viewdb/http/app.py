@@ -83,6 +83,8 @@ DEFAULT_MAX_IMAGE_BODY = 32 * 1024 * 1024
 
 #: Environment variables a worker process reads its configuration from.
 ENV_DB, ENV_TOKEN = "VIEWDB_DB", "VIEWDB_TOKEN"
+#: The Ray cluster a sharded catalogue is served on ("auto" or HOST:PORT).
+ENV_RAY = "VIEWDB_RAY"
 ENV_MAX_BODY, ENV_MAX_IMAGE_BODY = "VIEWDB_MAX_BODY", "VIEWDB_MAX_IMAGE_BODY"
 ENV_BODY_TIMEOUT, ENV_MAX_PIXELS = "VIEWDB_BODY_TIMEOUT", "VIEWDB_MAX_PIXELS"
 #: "0": no web page (``viewdb serve --no-ui``).
@@ -436,6 +438,10 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
 
 
 def _open_for_serving(path: Path) -> ViewDB:
+    if path.is_dir():  # a sharded catalogue (viewdb shard --out): its shards on Ray
+        from ..shards.serving import open_sharded
+
+        return open_sharded(path, os.environ.get(ENV_RAY) or "auto")  # type: ignore[return-value]
     db = open_db(path, read_only=True)
     try:
         if db.role != "full":

@@ -26,6 +26,7 @@ from .app import (
     ENV_MAX_BODY,
     ENV_MAX_IMAGE_BODY,
     ENV_MAX_PIXELS,
+    ENV_RAY,
     ENV_TOKEN,
     ENV_UI,
 )
@@ -67,11 +68,13 @@ def run_server(
     ready: Callable[[str, int], None] | None = None,
     ui: bool = True,
     http: HttpConfig | None = None,
+    ray: str | None = None,
 ) -> None:
-    """Serve the full database ``db`` until interrupted. ``ready(url, objects)`` is called
-    once the socket listens (before the workers start answering). ``ui``: serve the web
-    page at ``/``. ``http`` sets the header and body timeouts and the largest image
-    decoded (:class:`~viewdb.config.HttpConfig`)."""
+    """Serve the full database ``db`` (or, given a folder of shards, the sharded catalogue
+    on the Ray cluster ``ray``: ``"auto"`` or ``HOST:PORT``) until interrupted.
+    ``ready(url, objects)`` is called once the socket listens (before the workers start
+    answering). ``ui``: serve the web page at ``/``. ``http`` sets the header and body
+    timeouts and the largest image decoded (:class:`~viewdb.config.HttpConfig`)."""
     import uvicorn
     from uvicorn.supervisors import Multiprocess
 
@@ -81,10 +84,13 @@ def run_server(
         raise ViewDBError("the bearer token must be printable ASCII without spaces (a client could "
                           "not send it)")
     http = http or HttpConfig()
-    with open_db(db, read_only=True) as vdb:  # refuse a bad file before binding anything
-        if vdb.role != "full":
-            raise ViewDBError("is a client file (export-client); serve the full database", db)
-        objects = len(vdb.objects())
+    if Path(db).is_dir():
+        objects = _open_shards(Path(db), workers, ray or "auto")
+    else:
+        with open_db(db, read_only=True) as vdb:  # refuse a bad file before binding anything
+            if vdb.role != "full":
+                raise ViewDBError("is a client file (export-client); serve the full database", db)
+            objects = len(vdb.objects())
     os.environ[ENV_DB] = str(Path(db).resolve())
     os.environ[ENV_MAX_BODY] = str(int(max_body))
     os.environ[ENV_MAX_IMAGE_BODY] = str(int(max_image_body))
@@ -120,6 +126,17 @@ def run_server(
         raise ServerError("the server failed to start (see the log above)", db)
     if stopped_by == "int":
         raise KeyboardInterrupt  # Ctrl-C, as with one worker
+
+
+def _open_shards(folder: Path, workers: int, ray: str) -> int:
+    """Open (and check) a sharded catalogue before binding; its object count."""
+    from ..shards.serving import open_sharded
+
+    if workers != 1:
+        raise ViewDBError("a sharded catalogue is served by one worker (its shards answer in "
+                          "parallel on Ray); drop --workers", folder)
+    os.environ[ENV_RAY] = ray
+    return len(open_sharded(folder, ray).objects())
 
 
 def _supervisor(base: type[Any]) -> type[Any]:

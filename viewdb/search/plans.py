@@ -273,8 +273,26 @@ class ServerReply:
         return cls(candidates_from_json(data["results"], MAX_K), stats_from_dict(data.get("stats")))
 
 
+def usable_client(
+    request: RefineRequest, holds: Callable[[str], bool], versions: Mapping[str, str] | None = None,
+) -> list[Candidate]:
+    """The request's client candidates whose distances bound a server's (module doc of
+    :func:`refine`), nearest first: of an object the server ``holds``, in the version
+    the server holds (``versions``), at a shift the request's window allows."""
+    n = len(request.curve)
+    allowed = {0} if request.shifts is None else set(request.shifts.shifts(n).tolist())
+    return sorted(
+        (c for c in request.client
+         if holds(c.object)
+         and (c.version is None or versions is None or versions.get(c.object) == c.version)
+         and (c.shift is None or c.shift in allowed)),
+        key=lambda c: c.distance,
+    )
+
+
 def refine(
-    source: TierSource, request: RefineRequest, versions: Mapping[str, str] | None = None
+    source: TierSource, request: RefineRequest, versions: Mapping[str, str] | None = None,
+    upper: float = math.inf,
 ) -> tuple[list[Neighbour], SearchStats]:
     """CS1's server half (Algorithm 3): exact k-NN on ``source`` (the full tier) bounded by
     the client's k-th distance and its per-object distances.
@@ -287,17 +305,12 @@ def refine(
     the request's shift window: its distance is not one the window allows.
 
     With ``request.shifts`` the distance is the smallest over those shifts of the curve
-    (:func:`~viewdb.search.knn.knn`), the client's too."""
-    n = len(request.curve)
-    allowed = {0} if request.shifts is None else set(request.shifts.shifts(n).tolist())
-    client = sorted(
-        (c for c in request.client
-         if source.object_index(c.object) is not None
-         and (c.version is None or versions is None or versions.get(c.object) == c.version)
-         and (c.shift is None or c.shift in allowed)),
-        key=lambda c: c.distance,
-    )
-    upper = client[request.k - 1].distance if len(client) >= request.k else math.inf
+    (:func:`~viewdb.search.knn.knn`), the client's too. ``upper``: a further upper bound
+    of the k-th distance from elsewhere (a sharded catalogue's other shards); objects
+    farther than it may be left out of the answer."""
+    client = usable_client(request, lambda name: source.object_index(name) is not None, versions)
+    if len(client) >= request.k:
+        upper = min(upper, client[request.k - 1].distance)
     known: dict[int, float] = {}
     for c in client:
         index = source.object_index(c.object)

@@ -1,0 +1,124 @@
+"""Sharded catalogues on a local Ray: shard actors answer real queries exactly as the single
+file does, over HTTP too; a dead shard fails the query (503), a damaged one is refused."""
+
+import json
+import shutil
+import socket
+import sqlite3
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+
+import viewdb
+from viewdb.bench.photos import composite_photo
+from viewdb.search.plans import RefineRequest
+from viewdb.shards.layout import split_catalogue
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def three_shards(tiered_db, tmp_path_factory):
+    return split_catalogue(tiered_db, 3, tmp_path_factory.mktemp("ray") / "shards")
+
+
+def _matches(result):
+    return [(m.object, m.distance, m.azimuth, m.elevation, m.mirrored) for m in result.results]
+
+
+def test_shard_actors_answer_curves_and_photos_as_the_single_file(local_ray, tiered_db, three_shards):
+    from viewdb.shards.cluster import ShardedServerTier
+
+    tier = ShardedServerTier(three_shards.folder)
+    try:
+        rng = np.random.default_rng(3)
+        with viewdb.open(tiered_db, read_only=True) as db:
+            arrays, _ = db.search_tier("full")
+            for _ in range(12):
+                q = np.clip(arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.05, 128), 0, None)
+                k = int(rng.integers(1, 7))
+                for plan in ("server", "cs1", "cs2"):
+                    here = db.recognise(q, k, plan=plan)
+                    there = db.recognise(q, k, plan=plan, server=tier)
+                    assert [c.to_dict() for c in there.results] == [c.to_dict() for c in here.results]
+            for name, h, v in (("car", 200, 15), ("mug", 37, 22), ("chair", 110, 40), ("arrow", 300, -20)):
+                img, _ = composite_photo(db.render(name, h, v), turn=20, scale=0.8, background=200)
+                here = db.query(img, k=3, pose_top=1)
+                there = db.query(img, k=3, pose_top=1, server=tier)
+                assert [m.object for m in there.results][0] == name
+                assert [m.to_dict()["object"] for m in there.results] == [m.to_dict()["object"] for m in here.results]
+                for a, b in zip(here.results, there.results, strict=True):
+                    assert a.distance == b.distance
+                    assert json.dumps(a.to_dict(), sort_keys=True) == json.dumps(b.to_dict(), sort_keys=True)
+    finally:
+        tier.close()
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _post(url, body):
+    req = urllib.request.Request(url, json.dumps(body).encode(), {"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+def test_a_killed_shard_fails_queries_with_503_and_a_damaged_shard_is_refused(
+        local_ray, tiered_db, three_shards, tmp_path, monkeypatch):
+    import uvicorn
+
+    from viewdb.http.app import ENV_RAY, create_app
+    from viewdb.shards.serving import open_sharded
+
+    monkeypatch.setenv(ENV_RAY, "auto")
+    catalogue = open_sharded(three_shards.folder)
+    port = _free_port()
+    server = uvicorn.Server(uvicorn.Config(create_app(three_shards.folder, ui=False), port=port,
+                                           log_level="critical"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not server.started and time.monotonic() < deadline:
+            time.sleep(0.05)
+        url = f"http://127.0.0.1:{port}"
+        with viewdb.open(tiered_db, read_only=True) as db:
+            arrays, _ = db.search_tier("full")
+            body = RefineRequest(arrays.curves[5], 6, 5, []).to_dict()
+            status, reply = _post(url + "/refine", body)
+            assert status == 200
+            assert [c["object"] for c in reply["results"]] == [h.object for h in db.search(arrays.curves[5], 5)[0]]
+        ray.kill(catalogue.server_tier().actors[1])
+        status, reply = _post(url + "/refine", body)
+        assert status == 503 and "shard 1 did not answer" in reply["error"]
+        assert "results" not in reply
+    finally:
+        server.should_exit = True
+        thread.join(30)
+        catalogue.close()
+
+    folder = tmp_path / "damaged"
+    shutil.copytree(three_shards.folder, folder)
+    with sqlite3.connect(folder / "shard-002.viewdb") as conn:
+        conn.execute("UPDATE curves SET samples = x'00' WHERE view_id = (SELECT MIN(view_id) FROM curves)")
+    from viewdb.shards.cluster import ShardedServerTier
+
+    with pytest.raises(viewdb.StorageError, match=r"shard 2 refused: .*shard-002\.viewdb: fails check"):
+        ShardedServerTier(folder)

@@ -1,0 +1,265 @@
+"""A sharded catalogue on Ray: one actor per shard, an exact scatter-gather search.
+
+:class:`ShardedServerTier` is a :class:`~viewdb.recognition.server_tier.ServerTier`, so
+the query pipeline, ``viewdb serve`` and remote clients use it as they use one file.
+Each shard of the manifest (:mod:`viewdb.shards.layout`) is a Ray actor holding a
+:class:`~viewdb.shards.shard.Shard`, its full tier's curves in memory. When the tier
+starts, every actor opens and checks its file; a shard that is missing, fails ``check``
+or holds objects the placement rule puts elsewhere is refused, naming its file.
+
+A search (``server`` and ``cs1``, :meth:`ShardedServerTier.refine`) runs in two rounds:
+the first ``ShardConfig.first_round`` shards (the shard of the client's best candidate
+first), then every other shard at once, bounded by the k-th distance the first round
+found (and by the client's bounds, as in CS1). The merge (:mod:`viewdb.shards.gather`)
+gives exactly the single file's answer. A shard that dies or does not answer within
+``ShardConfig.timeout`` fails the whole query with
+:class:`~viewdb.errors.ShardUnavailable` (HTTP 503): never a partial answer.
+
+Re-ranking and pose calls go to the shard of each object, in parallel.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import ShardConfig
+from ..errors import NotFound, QueryError, ShardUnavailable, StorageError, ViewDBError
+from ..pose.estimate import PoseEstimate, QueryView
+from ..pose.intrinsics import Intrinsics
+from ..recognition.server_tier import Exchange
+from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from .gather import scatter_gather
+from .layout import Manifest, read_manifest, shard_of
+
+__all__ = ["ShardedServerTier", "connect"]
+
+T = TypeVar("T")
+
+
+def _ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ViewDBError("sharded catalogues need Ray: pip install 'viewdb[ray]'") from None
+    return ray
+
+
+def connect(address: str | None = "auto") -> None:
+    """Join a Ray cluster (``address``: ``"auto"`` joins the one running on this machine,
+    or starts a local one if none is; ``"HOST:PORT"`` joins that head node). A process
+    already connected stays so."""
+    ray = _ray()
+    if ray.is_initialized():
+        return
+    options = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    if address in (None, "auto"):
+        try:
+            ray.init(address="auto", **options)
+        except ConnectionError:
+            ray.init(**options)
+        return
+    try:
+        ray.init(address=address, **options)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise ViewDBError(f"cannot join the Ray cluster at {address}: {str(exc).splitlines()[0]}") from None
+
+
+class _Host:
+    """What runs in a shard's actor: the shard, or the error that stopped it opening."""
+
+    def __init__(self, path: str, index: int, check: bool) -> None:
+        from .shard import Shard
+
+        self.shard: Shard | None = None
+        self.error: str | None = None
+        try:
+            self.shard = Shard(path, index, check)
+        except ViewDBError as exc:
+            self.error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - any failure refuses the shard, naming it
+            self.error = f"{path}: cannot be opened ({type(exc).__name__}: {exc})"
+
+    def call(self, method: str, *args: Any) -> Any:
+        if self.shard is None:
+            raise StorageError(self.error or "failed to open")
+        return getattr(self.shard, method)(*args)
+
+    def describe(self) -> dict[str, Any]:
+        return {"error": self.error} if self.shard is None else self.shard.describe()
+
+
+class ShardedServerTier:
+    """The server tier of a sharded catalogue (module doc)."""
+
+    remote = False
+
+    def __init__(self, folder: str | Path, *, ray_address: str | None = "auto",
+                 config: ShardConfig | None = None) -> None:
+        self.config = config or ShardConfig()
+        self.manifest: Manifest = read_manifest(folder)
+        connect(ray_address)
+        ray = _ray()
+        actor = ray.remote(_Host).options(num_cpus=self.config.actor_cpus, max_restarts=0)
+        self.actors = [actor.remote(str(f), i, self.config.check_at_start)
+                       for i, f in enumerate(self.manifest.files)]
+        try:
+            described = self._gather([a.describe.remote() for a in self.actors], range(len(self.actors)))
+            self._adopt(described)
+        except BaseException:
+            self.close()
+            raise
+
+    def _adopt(self, described: list[dict[str, Any]]) -> None:
+        n = self.manifest.shards
+        self.owner: dict[str, int] = {}
+        self.versions: dict[str, str] = {}
+        for i, d in enumerate(described):
+            path = self.manifest.files[i]
+            if d.get("error"):
+                raise StorageError(f"shard {i} refused: {d['error']}", self.manifest.folder)
+            misplaced = [name for name in d["versions"] if shard_of(name, n) != i]
+            if misplaced or len(d["versions"]) != self.manifest.objects[i]:
+                raise StorageError(f"does not hold the objects the manifest places in shard {i} "
+                                   f"(e.g. {(misplaced or ['a different count'])[0]!r})", path)
+            self.owner.update(dict.fromkeys(d["versions"], i))
+            self.versions.update(d["versions"])
+        first = described[0]
+        if any(d["samples"] != first["samples"] or d["config"] != first["config"] for d in described):
+            raise StorageError("holds shards built with different settings", self.manifest.folder)
+        self.samples: int = first["samples"]
+        self.build: dict[str, Any] = first["config"]
+
+    def close(self) -> None:
+        ray = _ray()
+        for a in getattr(self, "actors", []):
+            ray.kill(a)
+        self.actors = []
+
+    # ------------------------------------------------------------------ Ray calls
+    def _gather(self, refs: list[Any], shards: Sequence[int]) -> list[Any]:
+        """The results of one round of calls (``shards``: the shard of each), or
+        :class:`ShardUnavailable` naming the first shard that failed to answer."""
+        ray = _ray()
+        try:
+            return list(ray.get(refs, timeout=self.config.timeout))
+        except ray.exceptions.RayTaskError as exc:
+            cause = getattr(exc, "cause", None)
+            if isinstance(cause, ViewDBError):
+                raise cause from None
+            raise
+        except (ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError,
+                ray.exceptions.ObjectLostError) as exc:
+            dead = self._dead(refs, shards)
+            raise ShardUnavailable(
+                f"shard {dead} did not answer ({type(exc).__name__}); no partial answer is given: "
+                "restart the server", self.manifest.files[dead],
+            ) from None
+
+    def _dead(self, refs: list[Any], shards: Sequence[int]) -> int:
+        ray = _ray()
+        for ref, shard in zip(refs, shards, strict=True):
+            try:
+                ray.get(ref, timeout=0)
+            except Exception:  # noqa: BLE001 - any failure names the shard
+                return int(shard)
+        return int(shards[0])
+
+    def _by_shard(self, names: Sequence[str]) -> dict[int, list[int]]:
+        """Positions of ``names`` grouped by the shard holding each (NotFound for a name
+        the catalogue lacks)."""
+        out: dict[int, list[int]] = {}
+        for i, name in enumerate(names):
+            shard = self.owner.get(name)
+            if shard is None:
+                raise NotFound(f"no object named {name!r}", self.manifest.folder)
+            out.setdefault(shard, []).append(i)
+        return out
+
+    def _routed(self, names: Sequence[str], call: Callable[[Any, list[int]], Any]) -> list[Any]:
+        """``call(actor, positions)`` on each shard holding some of ``names`` (in
+        parallel); the answers put back in the order of ``names``."""
+        groups = self._by_shard(names)
+        shards = list(groups)
+        answers = self._gather([call(self.actors[s], groups[s]) for s in shards], shards)
+        out: list[Any] = [None] * len(names)
+        for s, answer in zip(shards, answers, strict=True):
+            for position, value in zip(groups[s], answer, strict=True):
+                out[position] = value
+        return out
+
+    @staticmethod
+    def _timed(call: Callable[[], T]) -> tuple[T, Exchange]:
+        start = time.perf_counter()
+        answer = call()
+        ms = (time.perf_counter() - start) * 1e3
+        return answer, Exchange(0, 0, ms, ms, trips=0)
+
+    # ------------------------------------------------------------------ the plans
+    def refine(self, request: RefineRequest) -> tuple[ServerReply, Exchange]:
+        """CS1 (and ``server`` with no client candidates) over every shard, exactly the
+        single file's answer (module doc)."""
+        return self._timed(lambda: self._refine(request))
+
+    def _refine(self, request: RefineRequest) -> ServerReply:
+        if len(request.curve) != self.samples:
+            raise QueryError(f"query curve must be {self.samples} finite samples")
+
+        body = request.to_dict()
+
+        def run(shards: list[int], bound: float, client: dict[int, list[Candidate]]) -> list[Any]:
+            return self._gather([self.actors[s].call.remote(
+                "refine", {**body, "client": [c.to_dict() for c in client.get(s, [])]}, bound)
+                for s in shards], shards)
+
+        return scatter_gather(request, self.owner, self.versions, self.manifest.shards,
+                              self.config.first_round, run)
+
+    def walk(self, request: WalkRequest) -> tuple[ServerReply, Exchange]:
+        """CS2: each shard walks from the client's candidates of its objects; the best k."""
+        return self._timed(lambda: self._walk(request))
+
+    def _walk(self, request: WalkRequest) -> ServerReply:
+        mine = [c for c in request.client if c.object in self.owner]
+        groups = self._by_shard([c.object for c in mine])
+        shards = list(groups)
+        body = request.to_dict()
+        refs = [self.actors[s].call.remote("walk", {**body, "client": [mine[i].to_dict() for i in groups[s]]})
+                for s in shards]
+        found: list[Candidate] = []
+        dtw = 0.0
+        for reply in self._gather(refs, shards):
+            parsed = ServerReply.from_dict(reply)
+            found += parsed.results
+            dtw += parsed.stats.get("dtw", 0.0)
+        return ServerReply(sorted(found, key=lambda c: (c.distance, c.object))[: request.k], {"dtw": dtw})
+
+    # ------------------------------------------------------------------ re-ranking and pose
+    def colours(
+        self, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
+        return self._timed(lambda: self._routed(
+            [v[0] for v in views], lambda a, at: a.call.remote("colours", [views[i] for i in at])))
+
+    def fits(
+        self, query: QueryView, views: Sequence[tuple[str, float, float]]
+    ) -> tuple[list[float | None], Exchange]:
+        return self._timed(lambda: self._routed(
+            [v[0] for v in views], lambda a, at: a.call.remote("fits", query, [views[i] for i in at])))
+
+    def poses(
+        self, query: QueryView, matches: Sequence[Candidate],
+        intrinsics: Intrinsics | None = None,
+        curves: Sequence[NDArray[np.float64] | None] | None = None,
+        rerank: bool = False,
+    ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
+        def call(actor: Any, at: list[int]) -> Any:
+            return actor.call.remote("poses", query, [matches[i].to_dict() for i in at], intrinsics,
+                                     None if curves is None else [curves[i] for i in at], rerank)
+
+        return self._timed(lambda: self._routed([m.object for m in matches], call))
