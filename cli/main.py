@@ -574,12 +574,18 @@ def export_client(
         typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap).",
                      callback=_number(*GAP_RANGE)),
     ] = None,
+    curve_bits: Annotated[
+        int,
+        typer.Option(help="Bits per curve sample (0: exact float32 curves, a larger file).",
+                     min=0, max=16),
+    ] = viewdb_config.ClientFileConfig().curve_bits,
 ) -> None:
     """Write the small file that ships to devices: the sparse tier only (no meshes, no SIFT)."""
     with _open_read(db) as vdb, _progress() as bar:
         task = bar.add_task("export", total=None)
         config = vdb.export_client(out_path, client_gap=gap,
-                                   progress=lambda done, total: bar.update(task, completed=done, total=total))
+                                   progress=lambda done, total: bar.update(task, completed=done, total=total),
+                                   file=viewdb_config.ClientFileConfig(curve_bits=curve_bits))
         full = vdb.info()
     with _open_read(out_path) as client:
         small = client.info()

@@ -24,7 +24,7 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import LIMITS, BuildConfig, OverlayConfig, RenderConfig, finite, integer
+from .config import LIMITS, BuildConfig, ClientFileConfig, OverlayConfig, RenderConfig, finite, integer
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -172,11 +172,12 @@ class ViewDB:
 
     def export_client(
         self, out: str | Path, *, client_gap: float | None = None,
-        progress: Callable[[int, int], None] | None = None,
+        progress: Callable[[int, int], None] | None = None, file: ClientFileConfig | None = None,
     ) -> BuildConfig:
         """Write the small client file (sparse tier only, at ``client_gap``; default this
-        file's client gap) to ``out``, which must not exist. Returns its configuration."""
-        return export_client(self._store, out, client_gap, progress)
+        file's client gap) to ``out``, which must not exist. Returns its configuration.
+        ``file``: how it is written (default compact: quantised curves)."""
+        return export_client(self._store, out, client_gap, progress, file)
 
     # ------------------------------------------------------------------ queries
     def query(
