@@ -252,6 +252,9 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
+    curves = "quantised (compact client file)" if data.curve_storage == "quantised" else "float32"
+    out.print(f"  size: {data.bytes_per_view:.0f} bytes per view, {data.bytes_per_object / 1e3:.1f} kB per "
+              f"object; curves {curves}")
     distances = data.config.perspective.distances
     stored = data.rows.get("perspective_views", 0)
     lacking = sum(1 for o in data.objects if o.perspective_views == 0)

@@ -467,7 +467,7 @@ class Store(Database):
         out = {}
         with self.read() as conn:
             for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features,
-                          s.perspective_views, s.appearances):
+                          s.perspective_views, s.appearances, s.curve_errors):
                 out[table.name] = int(
                     conn.execute(sa.select(sa.func.count()).select_from(table)).scalar_one()
                 )
