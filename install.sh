@@ -33,3 +33,11 @@ from viewdb.catalogue.render import get_renderer
 get_renderer()
 print("install.sh: viewdb installed; headless rendering works")
 PY
+
+# Compile the search kernels now (numba caches them on disk), not during a user's first
+# query: a throw-away catalogue is ingested and queried with every plan (viewdb/warm.py).
+"$PYTHON" - <<'PY'
+from viewdb.warm import warm_up
+report = warm_up()
+print(f"install.sh: search kernels ready ({report.compiled} compiled, {report.cached} from the cache)")
+PY

@@ -12,7 +12,8 @@ render's silhouette with its holes filled (a refusal scores 0), and by the RMS
 difference between the distance curves of its mask and of the truth (what a query is
 searched with; a refusal scores 1).  Prints IoU mean, minimum, 10th percentile and the
 share of cases at IoU >= 0.95 and >= 0.90, the curve error's median, 90th percentile and
-share below 0.05, the mean CPU time per photo (process time: all threads), and the
+share below 0.05, the median CPU time per photo and background and the mean over all
+(process time: all threads), and the
 worst cases (model, azimuth, elevation, seed).  This is how ``SegmentationConfig.default_method`` was
 chosen.  About 3 minutes on 2 cores with the defaults.
 """
@@ -55,6 +56,7 @@ def main() -> None:
     scores: dict[tuple[str, str], list[tuple[float, str]]] = {}
     curve_errors: dict[tuple[str, str], list[float]] = {}
     seconds: dict[str, float] = dict.fromkeys(methods, 0.0)
+    times: dict[tuple[str, str], list[float]] = {}
     photos = 0
     for m_index, path in enumerate(sample_files()):
         rng = np.random.default_rng([args.seed, m_index])
@@ -74,7 +76,9 @@ def main() -> None:
                         mask = segment(image, method=method).mask
                     except ImageError:
                         mask = np.zeros_like(truth)
-                    seconds[method] += time.process_time() - start
+                    spent = time.process_time() - start
+                    seconds[method] += spent
+                    times.setdefault((method, kind), []).append(spent)
                     iou = np.count_nonzero(mask & truth) / np.count_nonzero(mask | truth)
                     error = 1.0  # a refusal
                     if mask.any():
@@ -86,16 +90,17 @@ def main() -> None:
     per_background = photos // len(ALL_BACKGROUNDS)
     print(f"{per_background} photos per background ({len(sample_files())} models x {args.views} views), "
           f"240 x 320 pixels; auto default: {SegmentationConfig().default_method}")
-    print(f"{'':24} {'IoU':-^34}  {'curve RMS':-^20}")
+    print(f"{'':24} {'IoU':-^34}  {'curve RMS':-^20}  {'CPU ms':-^6}")
     print(f"{'method':8} {'background':15} {'mean':>6} {'min':>6} {'p10':>6} {'>=.95':>6} {'>=.90':>6}"
-          f"  {'median':>6} {'p90':>6} {'<.05':>6}")
+          f"  {'median':>6} {'p90':>6} {'<.05':>6}  {'median':>6}")
     for method in methods:
         for kind in ALL_BACKGROUNDS:
             v = np.array([s for s, _ in scores[(method, kind)]])
             e = np.array(curve_errors[(method, kind)])
             print(f"{method:8} {kind:15} {v.mean():6.3f} {v.min():6.3f} {np.quantile(v, 0.1):6.3f} "
                   f"{np.mean(v >= 0.95):6.2f} {np.mean(v >= 0.90):6.2f}"
-                  f"  {np.median(e):6.3f} {np.quantile(e, 0.9):6.3f} {np.mean(e < 0.05):6.2f}")
+                  f"  {np.median(e):6.3f} {np.quantile(e, 0.9):6.3f} {np.mean(e < 0.05):6.2f}"
+                  f"  {1000 * np.median(times[(method, kind)]):6.1f}")
         print(f"{method:8} {'CPU per photo':15} {1000 * seconds[method] / photos:6.1f} ms")
     if args.worst:
         print("\nworst cases")

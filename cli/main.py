@@ -30,7 +30,6 @@ from rich.table import Table
 from rich.text import Text
 
 import viewdb
-import viewdb.bench as viewdb_bench
 import viewdb.config as viewdb_config
 from viewdb.typed import Intrinsics
 
@@ -172,7 +171,7 @@ def ingest(
     ] = False,
     max_faces: Annotated[
         int, typer.Option(help="Refuse meshes with more triangles (0 = no cap).", min=0)
-    ] = viewdb.DEFAULT_MAX_FACES,
+    ] = viewdb_config.DEFAULT_MAX_FACES,
     allow_missing_textures: Annotated[
         bool, typer.Option("--allow-missing-textures",
                            help="Ingest meshes whose texture files are missing, untextured.")
@@ -742,6 +741,8 @@ def bench(
 ) -> None:
     """Reproduce the paper's experiments: S1–S6 CMC curves, time against the client gap
     for k = 1..k, index sizes. Resumable: run the same command again to continue."""
+    import viewdb.bench as viewdb_bench
+
     config = viewdb_bench.BenchConfig(
         models=models, out=out_dir, queries=queries, seed=seed, gaps=_floats(gaps, "--gaps"),
         k=k, jobs=jobs, subset=subset, cache=cache, gap=gap, client_gap=client_gap,

@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from viewdb.errors import StorageError
-from viewdb.storage.codecs import DTYPE_CODES, decode_array, encode_array
+from viewdb.storage.codecs import DTYPE_CODES, decode_array, decode_many, encode_array
 
 dtypes = st.sampled_from(sorted({dt.str for dt in DTYPE_CODES.values()}))
 
@@ -57,3 +57,42 @@ def test_big_endian_input_is_stored_little_endian():
 def test_unsupported_dtype_is_a_type_error():
     with pytest.raises(TypeError):
         encode_array(np.array(["a"]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(dtypes.flatmap(lambda dt: st.tuples(
+    st.just(np.dtype(dt)), st.integers(1, 3).flatmap(lambda ndim: st.lists(
+        hnp.arrays(np.dtype(dt), hnp.array_shapes(min_dims=ndim, max_dims=ndim, min_side=0, max_side=5)),
+        max_size=8)))))
+def test_decode_many_is_decode_array_on_each(case):
+    """Many blobs decoded at once: the same data (end to end) and shapes as one by one."""
+    dtype, arrays = case
+    ndim = arrays[0].ndim if arrays else 1
+    data, shapes = decode_many([encode_array(a) for a in arrays], dtype, ndim)
+    one_by_one = [decode_array(encode_array(a), dtype, (None,) * ndim) for a in arrays]
+    assert data.dtype == dtype and shapes.shape == (len(arrays), ndim)
+    assert [tuple(s) for s in shapes.tolist()] == [a.shape for a in one_by_one]
+    assert data.tobytes() == b"".join(a.tobytes() for a in one_by_one)  # bit-exact, NaNs included
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(hnp.arrays(np.float32, st.tuples(st.integers(0, 4), st.just(3))), min_size=1, max_size=6),
+       st.data())
+def test_decode_many_refuses_what_decode_array_refuses(arrays, data):
+    """One bad blob among good ones (cut, lengthened, another dtype or number of
+    dimensions, missing): decode_many raises decode_array's error for it."""
+    blobs = [encode_array(a) for a in arrays]
+    bad = data.draw(st.integers(0, len(blobs) - 1))
+    kind = data.draw(st.sampled_from(["cut", "longer", "dtype", "ndim", "missing"]))
+    blobs[bad] = {
+        "cut": blobs[bad][: data.draw(st.integers(0, len(blobs[bad]) - 1))],
+        "longer": blobs[bad] + b"\0",
+        "dtype": encode_array(arrays[bad].astype(np.float64)),
+        "ndim": encode_array(arrays[bad].reshape(-1)),
+        "missing": None,
+    }[kind]
+    with pytest.raises(StorageError) as one:
+        decode_array(blobs[bad], np.float32, (None, None))
+    with pytest.raises(StorageError) as many:
+        decode_many(blobs, np.float32, 2)
+    assert str(many.value) == str(one.value)

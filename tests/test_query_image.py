@@ -150,18 +150,46 @@ def test_auto_segmentation_of_a_thin_object(kind):
     check_auto_segmentation(["arrow"], kind, 0.90)
 
 
+def auto_method(kind: str) -> str:
+    """The method ``method="auto"`` uses on a background of ``kind``: the border model on a
+    plain one, the default method on the others."""
+    return "border" if kind.startswith("plain") else SegmentationConfig().default_method
+
+
 def check_auto_segmentation(stems, kind, min_iou):
     scores, curves = {}, {}
     for stem in stems:
         photo, truth = scene(stem, kind, seed=1)
         seg = segment(load_image(photo))
-        assert seg.method == SegmentationConfig().default_method
+        assert seg.method == auto_method(kind)
         assert seg.mask.shape == truth.shape and seg.mask.dtype == np.bool_
         assert seg.area_fraction == pytest.approx(seg.mask.mean())
         scores[stem] = round(iou(seg.mask, truth), 3)
         curves[stem] = round(rms(query_curve(seg, 128), distance_curve(truth, 128)), 3)
     assert min(scores.values()) >= min_iou, scores
     assert max(curves.values()) < MAX_CURVE_RMS, curves
+
+
+@pytest.mark.parametrize("background,method", [
+    ("noise 1", "border"),     # colours within plain_spread of their median
+    ("noise 4", "border"),     # up to twice that, but varying pixel by pixel: sensor noise
+    ("ramp 16", "grabcut"),    # as wide a spread, varying smoothly: a gradient
+    ("ramp 40", "grabcut"),    # beyond twice plain_spread
+])
+def test_auto_takes_the_border_model_on_a_plain_background_only(background, method):
+    kind, amount = background.split()
+    rng = np.random.default_rng(3)
+    h, w = 240, 320
+    if kind == "noise":
+        img = 150 + rng.normal(0, float(amount), (h, w, 3))
+    else:
+        img = 150 + np.linspace(-float(amount), float(amount), w)[None, :, None] + rng.normal(0, 1, (h, w, 3))
+    truth = np.zeros((h, w), np.uint8)
+    cv2.circle(truth, (160, 120), 60, 1, -1)
+    img[truth.astype(bool)] = (40, 90, 160)
+    seg = segment(load_image(np.clip(img, 0, 255).astype(np.uint8)))
+    assert seg.method == method
+    assert iou(seg.mask, truth.astype(bool)) >= 0.97
 
 
 @pytest.mark.parametrize("method", ["border", "otsu", "grabcut"])
@@ -228,7 +256,7 @@ def test_opaque_alpha_is_ignored_and_alpha_without_transparency_is_refused():
     opaque = load_image(np.dstack([photo, np.full(photo.shape[:2], 255, np.uint8)]))
     assert opaque.alpha is not None
     seg = segment(opaque)
-    assert seg.method == SegmentationConfig().default_method and iou(seg.mask, truth) >= MIN_IOU["plain_light"]
+    assert seg.method == auto_method("plain_light") and iou(seg.mask, truth) >= MIN_IOU["plain_light"]
     with pytest.raises(ImageError, match="no transparent pixels"):
         segment(opaque, method="alpha")
     with pytest.raises(ImageError, match="no transparent pixels"):

@@ -51,6 +51,11 @@ class InputLimits:
 #: The limits in force.
 LIMITS = InputLimits()
 
+#: Meshes with more triangles than this are refused by default (rendering 1,296 views
+#: of a multi-million-triangle scan takes hours in software GL and the outline gains
+#: nothing at 256 px): decimate such a mesh first, or raise the cap.
+DEFAULT_MAX_FACES = 2_000_000
+
 
 @dataclass(frozen=True)
 class HttpConfig:
@@ -320,8 +325,16 @@ class SegmentationConfig:
     max_object_fraction: float = 0.98
     #: The colour methods work on a copy scaled to at most this many pixels on the longer side.
     work_max_side: int = 1024
-    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``).
+    #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``) ...
     default_method: str = "grabcut"
+    #: ... except on a plain background, where the border model alone is as good (GrabCut
+    #: refines nothing there, at five times the time): the border strip's Lab colours lie
+    #: within ``plain_spread`` of their median (99th percentile), or within twice that
+    #: and vary from pixel to pixel as sensor noise does (their variance at most
+    #: ``plain_noise_ratio`` times half the mean squared difference of neighbouring
+    #: pixels; a gradient or blobs vary smoothly, for ratios of 2 to 200).
+    plain_spread: float = 5.0
+    plain_noise_ratio: float = 1.3
     #: Width of the border strip that samples the background, as a share of the shorter side.
     border_strip: float = 0.02
     #: Colour clusters of the background model; clusters holding less than

@@ -24,12 +24,12 @@ from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 
-from ..config import integer
+from ..config import DEFAULT_MAX_FACES, integer
 from ..errors import MeshError
 from ..interrupts import interrupts_held
+from ..lazy import lazy_module
 from ..paths import not_regular, open_regular
 
 __all__ = [
@@ -44,6 +44,9 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 MIN_AREA = 1e-10
 
 logging.getLogger("trimesh").setLevel(logging.ERROR)
+
+#: Imported when a mesh is first loaded or built (:mod:`viewdb.lazy`).
+trimesh = lazy_module("trimesh")
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,12 +90,6 @@ def file_hash(path: str | Path) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
-
-
-#: Meshes with more triangles than this are refused by default (rendering 1,296 views
-#: of a multi-million-triangle scan takes hours in software GL and the outline gains
-#: nothing at 256 px): decimate such a mesh first, or raise the cap.
-DEFAULT_MAX_FACES = 2_000_000
 
 
 @dataclass(frozen=True)

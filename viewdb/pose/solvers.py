@@ -10,7 +10,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from .frames import intrinsics_matrix, rodrigues, skew
 
@@ -46,6 +45,8 @@ def solve_orthographic(
     threshold), then takes as inliers every correspondence within the threshold. Returns
     ``initial`` unchanged when fewer than 3 inliers remain.
     """
+    from scipy.optimize import least_squares  # on first use: SciPy's import is slow
+
     q = np.asarray(query_points, dtype=np.float64).reshape(-1, 2)
     x = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     fit = initial

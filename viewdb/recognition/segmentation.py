@@ -43,8 +43,16 @@ be background) and starts from a model of it:
   falls back to the border-model result ("border") when it cannot run.
 
 The colour methods run on a copy scaled down to at most ``work_max_side`` pixels on
-the longer side; the mask is scaled back up.  ``method="auto"`` uses
-``default_method``, GrabCut, chosen by measurement: ``python
+the longer side; the mask is scaled back up.  ``method="auto"`` uses the border model
+on a plain background and ``default_method``, GrabCut, on any other.  A background
+is plain when the border strip's Lab colours lie within ``plain_spread`` of their median
+(99th percentile), or within twice that and vary from pixel to pixel as sensor noise
+does (their variance at most ``plain_noise_ratio`` times half the mean squared step
+between neighbouring pixels; a gradient or blobs vary smoothly).  There GrabCut refines
+nothing (mean IoU 0.997 / 0.995 with or without it on the benchmark's plain
+backgrounds, 0.986 on synthetic photos of the 212 catalogue models) and takes five
+times the time (about 35 against 7 ms of CPU for a 256 x 256 photo).  GrabCut was
+chosen by measurement: ``python
 benchmarks/segmentation.py`` scores each method by intersection over union (IoU) with
 the true silhouette, and by the RMS difference of the distance curves, on renders of all
 15 sample models (3 views each) composited over plain, gradient and cluttered
@@ -163,7 +171,7 @@ def segment(
         raw, used = image.alpha > 127, "alpha"
     else:
         used = cfg.default_method if method == "auto" else method
-        raw, used = _colour_segmentation(image.rgb, used, cfg)
+        raw, used = _colour_segmentation(image.rgb, used, cfg, plain_as_border=method == "auto")
     final = largest_filled(raw)
     fraction = check_object(final, used, name, cfg)
     return Segmentation(final, used, fraction, name)
@@ -360,14 +368,41 @@ def colour_foreground(rgb: NDArray[np.uint8], method: str, cfg: SegmentationConf
 
 
 def _colour_segmentation(
-    rgb: NDArray[np.uint8], method: str, cfg: SegmentationConfig
+    rgb: NDArray[np.uint8], method: str, cfg: SegmentationConfig, plain_as_border: bool = False
 ) -> tuple[NDArray[np.bool_], str]:
-    """The object's mask by a colour method, at the image's size, and the method used."""
+    """The object's mask by a colour method, at the image's size, and the method used
+    (with ``plain_as_border``, the border model on a plain background, :func:`_plain`)."""
     fg = colour_foreground(rgb, method, cfg)
     found = fg.found
+    if plain_as_border and method == "grabcut":
+        lab = cv2.cvtColor(fg.small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+        if _plain(lab, cfg):
+            method = "border"
     if method == "grabcut":
         found, method = grabcut_from(fg, largest_filled(found), cfg)
     return fg.full_size(found, rgb.shape), method
+
+
+def _plain(lab: NDArray[np.float32], cfg: SegmentationConfig) -> bool:
+    """Whether the image border shows a plain background: its Lab colours within
+    ``cfg.plain_spread`` of their median (99th percentile), or within twice that and
+    spatially white (their variance at most ``cfg.plain_noise_ratio`` times half the mean
+    squared difference of neighbouring pixels along the strip, as for sensor noise)."""
+    h, w = lab.shape[:2]
+    b = max(2, round(cfg.border_strip * min(h, w)))
+    # the strips along the border, each running lengthwise: (b, length, 3)
+    strips = [lab[:b], lab[-b:], lab[:, :b].transpose(1, 0, 2), lab[:, -b:].transpose(1, 0, 2)]
+    values = np.concatenate([s.reshape(-1, 3) for s in strips]).astype(np.float64)
+    deviation = values - np.median(values, axis=0)
+    spread = float(np.quantile(np.sqrt((deviation * deviation).sum(axis=1)), 0.99))
+    if spread <= cfg.plain_spread:
+        return True
+    if spread > 2.0 * cfg.plain_spread:
+        return False
+    steps = np.concatenate([np.diff(s, axis=1).reshape(-1, 3) for s in strips]).astype(np.float64)
+    variance = float((deviation * deviation).sum(axis=1).mean())
+    noise = 0.5 * float((steps * steps).sum(axis=1).mean())
+    return variance <= cfg.plain_noise_ratio * noise
 
 
 def _half_contrast(

@@ -20,13 +20,15 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import StorageError
 
-__all__ = ["DTYPE_CODES", "QUANTISED_CODES", "decode_array", "encode_array", "encode_quantised"]
+__all__ = ["DTYPE_CODES", "QUANTISED_CODES", "decode_array", "decode_many", "encode_array",
+           "encode_quantised", "quantised_blobs"]
 
 MAGIC = b"VA"
 VERSION = 1
@@ -157,3 +159,59 @@ def _dequantise(buf: bytes, offset: int, dims: tuple[int, ...], code_dtype: np.d
     out *= scale[:, None]
     out += low[:, None]
     return out
+
+
+def decode_many(
+    blobs: Sequence[bytes], dtype: np.dtype | type | str, ndim: int
+) -> tuple[NDArray, NDArray[np.int64]]:
+    """Decode many BLOBs of one dtype and number of dimensions at once: their data end to
+    end (1-D) and each one's shape (``(len(blobs), ndim)``).
+
+    Exactly what :func:`decode_array` on each would give (the tests hold it to that), but
+    with one copy for the lot instead of a call per blob: a tier's 10,000 groups decode
+    in milliseconds rather than a good part of a second.
+
+    Raises
+    ------
+    StorageError
+        Any blob is malformed or not of ``dtype`` and ``ndim`` (the message is the one
+        :func:`decode_array` gives for the first such blob).
+    """
+    dt = np.dtype(dtype)
+    head = _HEADER.size + 4 * ndim
+    code = _CODE_OF.get(np.dtype(dt.str))
+    if code is None:
+        raise TypeError(f"cannot decode arrays of dtype {dt}")
+    n = len(blobs)
+    if n == 0:
+        return np.zeros(0, dt), np.zeros((0, ndim), np.int64)
+    try:
+        sizes = np.fromiter(map(len, blobs), np.int64, n)
+        heads = np.frombuffer(b"".join(memoryview(b)[:head] for b in blobs), np.uint8)
+    except TypeError:  # something that is not a blob (NULL)
+        sizes = heads = np.zeros(0, np.int64)
+    if len(heads) == n * head:
+        heads = heads.reshape(n, head)
+        expected = np.frombuffer(_HEADER.pack(MAGIC, VERSION, code, ndim), np.uint8)
+        shapes = np.ascontiguousarray(heads[:, _HEADER.size:]).view("<u4").astype(np.int64)
+        ok = (heads[:, : _HEADER.size] == expected).all(axis=1)
+        ok &= sizes - head == shapes.prod(axis=1) * dt.itemsize
+        if ok.all():
+            data = b"".join(memoryview(b)[head:] for b in blobs)
+            return np.frombuffer(data, dt), shapes.reshape(n, ndim)
+        bad = int(np.argmin(ok))
+        if quantised_blobs(blobs):  # quantised curves (a compact client file): one at a time
+            arrays = [decode_array(b, dt, (None,) * ndim) for b in blobs]
+            return (np.concatenate([a.reshape(-1) for a in arrays]),
+                    np.array([a.shape for a in arrays], np.int64).reshape(n, ndim))
+    else:
+        bad = next(i for i, b in enumerate(blobs)
+                   if not isinstance(b, (bytes, bytearray, memoryview)) or len(b) < head)
+    decode_array(blobs[bad], dt, (None,) * ndim)  # raises the precise error
+    raise StorageError(f"array blob {bad} does not decode as {ndim}-D {dt}")  # pragma: no cover
+
+
+def quantised_blobs(blobs: Sequence[bytes]) -> bool:
+    """Whether any of ``blobs`` holds quantised curves (:func:`encode_quantised`)."""
+    return any(isinstance(b, (bytes, bytearray, memoryview)) and len(b) > 3 and b[3] in QUANTISED_CODES
+               for b in blobs)

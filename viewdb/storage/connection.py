@@ -154,7 +154,9 @@ def _recognise(path: Path, revision: str | None, tables: int) -> None:
     was written by a newer viewdb."""
     if revision is None and tables:
         raise StorageError("is an SQLite file but not a viewdb database (no schema version)", path)
-    if revision is not None and revision not in known_revisions():
+    # this viewdb's own revision needs no look at the migrations (importing Alembic to
+    # list them costs more than the rest of an open)
+    if revision is not None and revision != s.SCHEMA_REVISION and revision not in known_revisions():
         raise SchemaMismatch(
             f"was written by a newer viewdb (schema revision {revision}; this viewdb "
             f"knows up to {s.SCHEMA_REVISION}); upgrade viewdb to open it", path,

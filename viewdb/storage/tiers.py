@@ -36,7 +36,7 @@ from ..search.grouping import (
     tier_members,
 )
 from ..search.knn import QueryBoxes, TierArrays
-from .codecs import decode_array, encode_array, encode_quantised
+from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
 
 __all__ = [
@@ -51,6 +51,12 @@ __all__ = [
 
 #: The two tiers: every stored view (server grid) and the client grid's stand-ins.
 TIERS = ("full", "sparse")
+
+#: Views whose coordinates and segment means are computed together when curves are read:
+#: small enough for BLAS to stay on one thread (a few thousand rows at once made OpenBLAS
+#: spread the thin product over threads and cost ten times the CPU on a loaded machine).
+_BLOCK = 256
+
 
 def rows_with_ids(conn: sqlite3.Connection, sql: str, ids: Sequence[int]) -> Iterator[tuple[Any, ...]]:
     """The rows of ``sql`` (``... WHERE id IN ({})``) for ``ids``, queried in chunks:
@@ -67,6 +73,14 @@ def rounded_up32(x: NDArray[np.floating]) -> NDArray[np.float32]:
     low = out.astype(np.float64) < x
     out[low] = np.nextafter(out[low], np.float32(np.inf))
     return out
+
+
+def _stacked(blobs: list[Any], dtype: type) -> NDArray[Any]:
+    """Equal-length 1-D arrays, one BLOB each, as the rows of one ``(len(blobs), n)`` array."""
+    data, shapes = decode_many(blobs, dtype, 1)
+    if len(shapes) and (shapes[:, 0] != shapes[0, 0]).any():
+        raise StorageError("index groups hold arrays of different lengths in one column")
+    return data.reshape(len(shapes), int(shapes[0, 0]) if len(shapes) else 0)
 
 
 def create_tiers(conn: Any) -> None:
@@ -182,14 +196,14 @@ class StoredTier:
                                       return_inverse=True)
         self.group_owner = owner.astype(np.int64).reshape(-1)
         self.n_objects = len(object_ids)
+        # every group's MBR, curve range and view ids, each column decoded in one go
         self._lo, self._hi, self._curve_lo, self._curve_hi = (
-            np.array([decode_array(r[i], dtype, (None,)) for r in rows], dtype=np.float64)
+            _stacked([r[i] for r in rows], dtype).astype(np.float64)
             for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
         )
-        views = [decode_array(r[6], np.int64, (None,)) for r in rows]
-        self.group_count = np.array([len(v) for v in views], dtype=np.int64)
+        self._views, shapes = decode_many([r[6] for r in rows], np.int64, 1)
+        self.group_count = shapes[:, 0].copy()
         self.group_start = np.concatenate([[0], np.cumsum(self.group_count)[:-1]]).astype(np.int64)
-        self._views = np.concatenate(views) if views else np.zeros(0, np.int64)
         self.row_owner = np.repeat(self.group_owner, self.group_count)
         samples = self._curve_lo.shape[1] if rows else 0
         # curves and coordinates of every view, filled in group by group as searches need them
@@ -232,20 +246,37 @@ class StoredTier:
     def rows(
         self, groups: NDArray[np.int64]
     ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
-        missing = groups[~self._loaded[groups]]
-        by_id = {int(self._ids[g]): int(g) for g in missing}
-        for gid, blob in rows_with_ids(
-            self.conn, "SELECT id, curves FROM index_groups WHERE id IN ({})", list(by_id)
-        ):
-            g = by_id[int(gid)]
-            a, n = int(self.group_start[g]), int(self.group_count[g])
-            curves = decode_array(blob, np.float32, (n, self._curves.shape[1]))
-            self._curves[a : a + n] = curves
-            self._coords[a : a + n] = indexed_coordinates(curves)
-            self._means[a : a + n] = paa_means(curves, self._edges)
-            self._loaded[g] = True
+        missing = np.unique(groups[~self._loaded[groups]])
+        if len(missing):
+            found = dict(rows_with_ids(self.conn, "SELECT id, curves FROM index_groups WHERE id IN ({})",
+                                       self._ids[missing].tolist()))
+            self._fill(missing, [found.get(int(i)) for i in self._ids[missing]])
         return self._curves, self._coords, self._means
 
+    def _fill(self, groups: NDArray[np.int64], blobs: list[Any]) -> None:
+        """Decode the curves of ``groups`` (one BLOB each) into their rows, with their
+        indexed coordinates and segment means, all groups at once."""
+        if not self.quantised and quantised_blobs(blobs):
+            raise StorageError("holds quantised curves without their error bounds (curve_errors): "
+                               "export the client file again")
+        data, shapes = decode_many(blobs, np.float32, 2)
+        counts = self.group_count[groups]
+        samples = self._curves.shape[1]
+        if not ((shapes[:, 0] == counts).all() and (shapes[:, 1] == samples).all()):
+            bad = int(np.argmin((shapes[:, 0] == counts) & (shapes[:, 1] == samples)))
+            raise StorageError(f"index group {int(self._ids[groups[bad]])} holds curves of shape "
+                               f"{tuple(shapes[bad])}, expected ({int(counts[bad])}, {samples})")
+        # the rows of the groups, in the order their curves arrived
+        at = np.repeat(self.group_start[groups] - np.cumsum(counts) + counts, counts) + np.arange(
+            int(counts.sum()))
+        curves = data.reshape(-1, samples)
+        self._curves[at] = curves
+        for start in range(0, len(curves), _BLOCK):
+            block = curves[start : start + _BLOCK].astype(np.float64)
+            rows = at[start : start + _BLOCK]
+            self._coords[rows] = indexed_coordinates(block)
+            self._means[rows] = paa_means(block, self._edges)
+        self._loaded[groups] = True
     def group_boxes(
         self,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:

@@ -1,0 +1,140 @@
+"""Warm query latency and accuracy on the synthetic photos, per set of options, with each
+stage's share and the search against a brute-force scan of the same features.
+
+    python benchmarks/query_latency.py DB [--seeds 1-6] [--photos 40] [-k 5] [--plan server]
+                                          [--configs no-pose,default,upright-no-pose,upright]
+                                          [--brute 3]
+
+The photos are those of ``benchmarks/photo_accuracy.py`` (:func:`viewdb.bench.photos.photo_series`,
+same seeds, same photos: a random object, off-grid perspective view, random light, plain
+background, noise, JPEG), generated before any timing. One process; each
+set of options opens the file afresh (empty caches), is warmed up on the first photo, then
+every photo is queried with it:
+
+* ``no-pose``: ``pose=False``;
+* ``default``: the library's defaults (the top result posed);
+* ``upright-no-pose``, ``upright``: the same with the gravity hint ``roll=0`` (the
+  photos are upright, as a camera that knows gravity takes them).
+
+Printed per set: the median and p95 wall time of a whole query, the median of each stage
+(``timing_ms``), rank-1 and rank-5 (the photo's own object). With ``--brute N`` the first N
+photos' curves (the 12 turns) are also searched by a compiled DTW scan of every view of the
+full tier (and its mirror, :func:`viewdb.search.refine.scan_all`), and the scan's time is
+given against the same photos' search stages (``client`` + ``server``) without pose. Give
+the load average with the figures: the machine's other work lengthens every stage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+import viewdb
+from viewdb.bench.photos import decoded_photo, photo_series
+from viewdb.recognition.pipeline import segment_query
+from viewdb.search.refine import scan_all
+
+CONFIGS = {
+    "no-pose": {"pose": False},
+    "default": {},
+    "upright-no-pose": {"pose": False, "roll": 0.0},
+    "upright": {"roll": 0.0},
+}
+
+
+def seeds(text: str) -> list[int]:
+    if "-" in text:
+        low, high = (int(x) for x in text.split("-"))
+        return list(range(low, high + 1))
+    return [int(x) for x in text.split(",")]
+
+
+def percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(values), q))
+
+
+def run_config(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], options: dict, k: int,
+               plan: str) -> dict:
+    db.query(photos[0][1], k=k, plan=plan, **options)  # warm
+    totals, ranks, stages = [], [], {}
+    for name, photo in photos:
+        start = time.perf_counter()
+        try:
+            result = db.query(photo, k=k, plan=plan, **options)
+        except viewdb.ViewDBError:
+            totals.append((time.perf_counter() - start) * 1e3)
+            ranks.append(None)
+            continue
+        totals.append((time.perf_counter() - start) * 1e3)
+        objects = [r.object for r in result.results]
+        ranks.append(objects.index(name) + 1 if name in objects else None)
+        for stage, ms in result.timing_ms.items():
+            stages.setdefault(stage, []).append(ms)
+    return {"totals": totals, "ranks": ranks, "stages": stages}
+
+
+def brute_force(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], band: int) -> list[float]:
+    """Milliseconds of a compiled DTW scan of every full-tier view for each photo's 12 turns."""
+    tier, _ = db.search_tier("full")
+    samples = db.config.features.curve_samples
+    out = []
+    for _, photo in photos:
+        shape = segment_query(photo, samples, 12)
+        start = time.perf_counter()
+        for _, curve in shape.curves:
+            scan_all(curve, tier.curves, band)
+        out.append((time.perf_counter() - start) * 1e3)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("db")
+    parser.add_argument("--seeds", default="1-6")
+    parser.add_argument("--photos", type=int, default=40, help="photos per seed")
+    parser.add_argument("-k", type=int, default=5)
+    parser.add_argument("--plan", default="server")
+    parser.add_argument("--configs", default="no-pose,default,upright-no-pose,upright")
+    parser.add_argument("--brute", type=int, default=3, help="photos also searched by brute force")
+    args = parser.parse_args()
+    configs = args.configs.split(",")
+    unknown = [c for c in configs if c not in CONFIGS]
+    if unknown:
+        raise SystemExit(f"unknown --configs {unknown}; known: {', '.join(CONFIGS)}")
+    with viewdb.open(args.db, read_only=True) as db:
+        names = [o.name for o in db.objects()]
+        photos = []
+        for seed in seeds(args.seeds):
+            for spec in photo_series(names, seed, args.photos):
+                photos.append((spec.object, decoded_photo(db.mesh(spec.object), spec)))
+        print(f"{args.db}: {len(names)} objects; {len(photos)} photos (seeds {args.seeds}); "
+              f"plan {args.plan}, k={args.k}; load {os.getloadavg()[0]:.1f}", flush=True)
+    for config in configs:
+        with viewdb.open(args.db, read_only=True) as db:  # each set starts with empty caches
+            got = run_config(db, photos, CONFIGS[config], args.k, args.plan)
+            ranks = got["ranks"]
+            rank1 = sum(r == 1 for r in ranks) / len(ranks)
+            rank5 = sum(r is not None and r <= 5 for r in ranks) / len(ranks)
+            split = ", ".join(f"{s} {statistics.median(v):.0f}" for s, v in got["stages"].items()
+                              if s != "total")
+            print(f"{config:16s} median {statistics.median(got['totals']):6.0f} ms  "
+                  f"p95 {percentile(got['totals'], 95):6.0f} ms  rank-1 {rank1:6.1%}  rank-5 {rank5:6.1%}  "
+                  f"load {os.getloadavg()[0]:.1f}\n{'':16s} stage medians (ms): {split}", flush=True)
+    if args.brute > 0:
+        with viewdb.open(args.db, read_only=True) as db:
+            some = photos[:args.brute]
+            brute = brute_force(db, some, 6)
+            search = run_config(db, some, {"pose": False}, args.k, args.plan)["stages"]
+            searched = [c + s for c, s in zip(search["client"], search["server"], strict=True)]
+            scan, searching = statistics.median(brute), statistics.median(searched)
+            print(f"brute force over {len(some)} photos: DTW scan of every view, 12 turns, median "
+                  f"{scan:.0f} ms against the search stage's {searching:.0f} ms: {scan / searching:.1f}x "
+                  f"(load {os.getloadavg()[0]:.1f})")
+
+
+if __name__ == "__main__":
+    main()
