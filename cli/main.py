@@ -251,6 +251,9 @@ def info(
         f"{data.file_bytes / 1e6:.1f} MB, schema {data.schema_revision}, "
         f"grid gap {data.config.gap:g}°, {data.config.render.image_size} px"
     )
+    curves = "quantised (compact client file)" if data.curve_storage == "quantised" else "float32"
+    out.print(f"  size: {data.bytes_per_view:.0f} bytes per view, {data.bytes_per_object / 1e3:.1f} kB per "
+              f"object; curves {curves}")
     distances = data.config.perspective.distances
     stored = data.rows.get("perspective_views", 0)
     lacking = sum(1 for o in data.objects if o.perspective_views == 0)
@@ -573,12 +576,18 @@ def export_client(
         typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap).",
                      callback=_number(*GAP_RANGE)),
     ] = None,
+    curve_bits: Annotated[
+        int,
+        typer.Option(help="Bits per curve sample (0: exact float32 curves, a larger file).",
+                     min=0, max=16),
+    ] = viewdb_config.ClientFileConfig().curve_bits,
 ) -> None:
     """Write the small file that ships to devices: the sparse tier only (no meshes, no SIFT)."""
     with _open_read(db) as vdb, _progress() as bar:
         task = bar.add_task("export", total=None)
         config = vdb.export_client(out_path, client_gap=gap,
-                                   progress=lambda done, total: bar.update(task, completed=done, total=total))
+                                   progress=lambda done, total: bar.update(task, completed=done, total=total),
+                                   file=viewdb_config.ClientFileConfig(curve_bits=curve_bits))
         full = vdb.info()
     with _open_read(out_path) as client:
         small = client.info()

@@ -125,8 +125,8 @@ def test_a_client_file_from_revision_0003_is_used_read_only_as_it_is(tiered_db, 
     upgraded on a read-only device: it opens read-only with an empty stand-in for the
     table it lacks, answers as the current file does, and is not written."""
     client = tmp_path / "client.db"
-    with viewdb.open(tiered_db, read_only=True) as full:
-        full.export_client(client)
+    with viewdb.open(tiered_db, read_only=True) as full:  # float32 curves, as files of then
+        full.export_client(client, file=viewdb.config.ClientFileConfig(curve_bits=0))
         curves = mixed_query_curves(full, np.random.default_rng(11), 8)
     with viewdb.open(client, read_only=True) as db:
         expected = [db.client_candidates(q, 3)[0] for q in curves]

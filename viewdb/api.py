@@ -24,7 +24,7 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import LIMITS, BuildConfig, OverlayConfig, RenderConfig, finite, integer
+from .config import LIMITS, BuildConfig, ClientFileConfig, OverlayConfig, RenderConfig, finite, integer
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -62,9 +62,25 @@ class DatabaseInfo:
     #: Per tier (``full``, ``sparse``): its grid gap, views, groups and R-tree bytes.
     tiers: dict[str, dict[str, float]] = field(default_factory=dict)
 
+    @property
+    def bytes_per_view(self) -> float:
+        """File bytes per stored view (0 for a file without views)."""
+        return self.file_bytes / self.rows["views"] if self.rows.get("views") else 0.0
+
+    @property
+    def bytes_per_object(self) -> float:
+        return self.file_bytes / len(self.objects) if self.objects else 0.0
+
+    @property
+    def curve_storage(self) -> str:
+        """``"quantised"`` (a compact client file, :mod:`viewdb.search.quantised`) or ``"float32"``."""
+        return "quantised" if self.rows.get("curve_errors") else "float32"
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "path": self.path, "file_bytes": self.file_bytes,
+            "bytes_per_view": round(self.bytes_per_view, 1),
+            "bytes_per_object": round(self.bytes_per_object, 1), "curves": self.curve_storage,
             "schema_version": self.schema_revision, "gap": self.config.gap,
             "client_gap": self.config.client_gap, "tiers": self.tiers,
             "image_size": self.config.render.image_size,
@@ -172,11 +188,12 @@ class ViewDB:
 
     def export_client(
         self, out: str | Path, *, client_gap: float | None = None,
-        progress: Callable[[int, int], None] | None = None,
+        progress: Callable[[int, int], None] | None = None, file: ClientFileConfig | None = None,
     ) -> BuildConfig:
         """Write the small client file (sparse tier only, at ``client_gap``; default this
-        file's client gap) to ``out``, which must not exist. Returns its configuration."""
-        return export_client(self._store, out, client_gap, progress)
+        file's client gap) to ``out``, which must not exist. Returns its configuration.
+        ``file``: how it is written (default compact: quantised curves)."""
+        return export_client(self._store, out, client_gap, progress, file)
 
     # ------------------------------------------------------------------ queries
     def query(

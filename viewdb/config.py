@@ -12,7 +12,8 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 __all__ = [
-    "LIMITS", "AppearanceConfig", "BuildConfig", "FeatureConfig", "HttpConfig", "ImageConfig", "IndexConfig",
+    "LIMITS", "AppearanceConfig", "BuildConfig", "ClientFileConfig", "FeatureConfig", "HttpConfig",
+    "ImageConfig", "IndexConfig",
     "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
     "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
     "SkimConfig",
@@ -205,6 +206,26 @@ class IndexConfig:
     def __post_init__(self) -> None:
         if self.group_views < 1:
             raise ValueError(f"group_views must be at least 1, got {self.group_views}")
+
+
+@dataclass(frozen=True)
+class ClientFileConfig:
+    """How ``export-client`` writes the file that ships to devices (:mod:`viewdb.storage.export`)."""
+
+    #: Bits per curve sample (codes with a per-curve offset and scale; the client's CS1
+    #: bounds grow by each curve's proven error, :mod:`viewdb.search.quantised`); 0 keeps
+    #: float32 curves and the per-view curve and Fourier rows (the format before compact
+    #: files, exact distances).
+    curve_bits: int = 8
+    #: SQLite page size of the written file (smaller pages waste less in partly filled
+    #: ones; 512 to 65536, a power of two).
+    page_size: int = 1024
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.curve_bits <= 16:
+            raise ValueError(f"curve_bits must be in [0, 16], got {self.curve_bits}")
+        if self.page_size < 512 or self.page_size > 65536 or self.page_size & (self.page_size - 1):
+            raise ValueError(f"page_size must be a power of two in [512, 65536], got {self.page_size}")
 
 
 @dataclass(frozen=True)

@@ -30,5 +30,6 @@ class ClientTier:
     ) -> list[Candidate]:
         """The k nearest objects on the sparse tier (over ``shifts`` of the curve), each
         with its content hash as ``version`` (so a server can tell a stale client file's
-        bounds)."""
-        return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts)[0]
+        bounds). A compact client file's distances are raised by their curves' proven
+        quantisation error, so each is an upper bound of the exact one and CS1 stays exact."""
+        return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts, bounded=True)[0]

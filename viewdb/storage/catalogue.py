@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -30,13 +30,14 @@ from ..catalogue.skimming import ViewClasses, plan_without_skimming, skim_plan
 from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig
 from ..errors import FeatureError, NotFound, QueryError
-from ..search.knn import SearchStats, TierArrays, knn, objects_within
+from ..search.knn import Neighbour, SearchStats, TierArrays, knn, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
+from ..search.quantised import distance_bound, upper_distance
 from ..search.refine import scan_all
 from ..search.shifts import ShiftWindow
 from .appearances import decode_record
 from .store import ObjectRow, Store
-from .tiers import TIERS, TierReader
+from .tiers import TIERS, StoredTier, TierReader
 
 __all__ = ["SearchHit", "StoredCatalogue"]
 
@@ -323,17 +324,24 @@ class StoredCatalogue:
 
     def nearest_objects(
         self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full",
-        shifts: ShiftWindow | None = None,
+        shifts: ShiftWindow | None = None, *, bounded: bool = False,
     ) -> tuple[list[Candidate], SearchStats]:
         """Algorithm 2 on one tier, in one read snapshot: the ``k`` nearest objects, each
         with its best view (and the object's content hash as its ``version``); over the
-        circular ``shifts`` of the curve in one search (each with the shift that matched)."""
+        circular ``shifts`` of the curve in one search (each with the shift that matched).
+
+        The distances are those of the stored curves. ``bounded``: each is raised by its
+        view's proven quantisation error (a compact client file; nothing to add for exact
+        curves), so it bounds the distance to the exact curve from above, as a CS1 client
+        must send (:mod:`viewdb.search.quantised`)."""
         q = self.query_curve(curve, k, tier)
         with self.tier_reader().snapshot() as reader:
             source = reader.tier(tier)
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
             found, stats = knn(q, source, k, band, shifts=shifts)
+            if bounded and source.quantised:
+                found = raised_distances(found, source, len(q), band)
             angles = reader.view_projections([n.view for n in found])
             versions = reader.object_versions()
         return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None), stats
@@ -355,3 +363,11 @@ class StoredCatalogue:
             raise QueryError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
         with self.tier_reader().snapshot() as reader:
             return reader.tier_arrays(tier)
+
+
+def raised_distances(found: list[Neighbour], source: StoredTier, samples: int, band: int) -> list[Neighbour]:
+    """``found`` with each distance raised by its view's quantisation bound (upper bounds
+    of the exact distances, :func:`~viewdb.search.quantised.upper_distance`), best first."""
+    raised = [replace(n, distance=upper_distance(
+        n.distance, float(distance_bound(source.view_errors(n.view), samples, band)))) for n in found]
+    return sorted(raised, key=lambda n: (n.distance, n.object))

@@ -7,6 +7,13 @@ Layout (little-endian)::
 ``dtype`` is a code from :data:`DTYPE_CODES`; ``data`` is the C-ordered array bytes. A
 blob that does not decode exactly (wrong magic, unknown dtype, length that does not match
 the shape) raises :class:`~viewdb.errors.StorageError` instead of returning garbage.
+
+Quantised curves (:func:`encode_quantised`, compact client files) are a stack of ``n``
+curves of ``N`` samples stored as unsigned integer codes with a per-curve offset and
+scale; they decode to float32, ``offset + scale * code`` computed in float32, so a reader
+sees the same dtype as for exact curves. Their ``data`` is::
+
+    offset:f4*n  scale:f4*n  codes:(u1 or u2)*(n*N)
 """
 
 from __future__ import annotations
@@ -20,7 +27,8 @@ from numpy.typing import NDArray
 
 from ..errors import StorageError
 
-__all__ = ["DTYPE_CODES", "decode_array", "decode_many", "encode_array"]
+__all__ = ["DTYPE_CODES", "QUANTISED_CODES", "decode_array", "decode_many", "encode_array",
+           "encode_quantised", "quantised_blobs"]
 
 MAGIC = b"VA"
 VERSION = 1
@@ -39,6 +47,8 @@ DTYPE_CODES: dict[int, np.dtype] = {
     10: np.dtype("|b1"),
 }
 _CODE_OF = {dt: code for code, dt in DTYPE_CODES.items()}
+#: dtype code of quantised curves ↔ the dtype of their codes (they decode to float32).
+QUANTISED_CODES: dict[int, np.dtype] = {11: np.dtype("|u1"), 12: np.dtype("<u2")}
 _HEADER = struct.Struct("<2sBBB")
 
 
@@ -82,19 +92,22 @@ def decode_array(
     magic, version, code, ndim = _HEADER.unpack_from(buf)
     if magic != MAGIC or version != VERSION:
         raise StorageError("array blob has a bad header")
-    if code not in DTYPE_CODES:
+    if code not in DTYPE_CODES and code not in QUANTISED_CODES:
         raise StorageError(f"array blob has unknown dtype code {code}")
     offset = _HEADER.size + 4 * ndim
     if len(buf) < offset:
         raise StorageError("array blob truncated in its shape")
     dims = struct.unpack_from(f"<{ndim}I", buf, _HEADER.size)
-    dt = DTYPE_CODES[code]
-    expected = math.prod(dims) * dt.itemsize  # exact; np.prod costs ~6 µs a call
-    if len(buf) - offset != expected:
-        raise StorageError(
-            f"array blob holds {len(buf) - offset} data bytes, shape {dims} needs {expected}"
-        )
-    arr = np.frombuffer(buf, dtype=dt, offset=offset).reshape(dims)
+    if code in QUANTISED_CODES:
+        arr = _dequantise(buf, offset, dims, QUANTISED_CODES[code])
+    else:
+        dt = DTYPE_CODES[code]
+        expected = math.prod(dims) * dt.itemsize  # exact; np.prod costs ~6 µs a call
+        if len(buf) - offset != expected:
+            raise StorageError(
+                f"array blob holds {len(buf) - offset} data bytes, shape {dims} needs {expected}"
+            )
+        arr = np.frombuffer(buf, dtype=dt, offset=offset).reshape(dims)
     if dtype is not None and arr.dtype != np.dtype(dtype):
         raise StorageError(f"array blob has dtype {arr.dtype}, expected {np.dtype(dtype)}")
     if shape is not None and (
@@ -102,6 +115,50 @@ def decode_array(
     ):
         raise StorageError(f"array blob has shape {dims}, expected {shape}")
     return arr
+
+
+def encode_quantised(curves: NDArray[np.floating], bits: int = 8) -> tuple[bytes, NDArray[np.float64]]:
+    """Encode a stack of curves ``(n, N)`` as ``bits``-bit codes (1–16) with a per-curve
+    offset and scale; returns the blob and each curve's decoding error: ``(n, 2)``, the
+    L2 and L-infinity norms of ``decode - float32(curves)`` (computed in float64 on the
+    very values :func:`decode_array` returns; the caller rounds them up to store them)."""
+    if not 1 <= bits <= 16:
+        raise ValueError(f"bits must be in [1, 16], got {bits}")
+    exact = np.ascontiguousarray(curves, dtype=np.float32)
+    if exact.ndim != 2 or not np.all(np.isfinite(exact)):
+        raise ValueError("quantised curves must be a finite (n, N) stack")
+    top = (1 << bits) - 1
+    low = exact.min(axis=1) if exact.size else np.zeros(len(exact), np.float32)
+    high = exact.max(axis=1) if exact.size else np.zeros(len(exact), np.float32)
+    scale = ((high.astype(np.float64) - low) / top).astype(np.float32)
+    safe = np.where(scale > 0, scale, np.float32(1)).astype(np.float64)
+    codes = np.clip(np.rint((exact - low[:, None].astype(np.float64)) / safe[:, None]), 0, top)
+    code_dtype = np.dtype("|u1") if bits <= 8 else np.dtype("<u2")
+    code = 11 if bits <= 8 else 12
+    header = _HEADER.pack(MAGIC, VERSION, code, 2) + struct.pack("<2I", *exact.shape)
+    blob = header + low.astype("<f4").tobytes() + scale.astype("<f4").tobytes() + \
+        codes.astype(code_dtype).tobytes()
+    error = decode_array(blob, np.float32, exact.shape).astype(np.float64) - exact
+    return blob, np.stack([np.sqrt((error * error).sum(axis=1)), np.abs(error).max(axis=1, initial=0.0)],
+                          axis=1)
+
+
+def _dequantise(buf: bytes, offset: int, dims: tuple[int, ...], code_dtype: np.dtype) -> NDArray:
+    if len(dims) != 2:
+        raise StorageError(f"quantised curves must be 2-D, got shape {dims}")
+    n, samples = dims
+    expected = 8 * n + n * samples * code_dtype.itemsize
+    if len(buf) - offset != expected:
+        raise StorageError(
+            f"array blob holds {len(buf) - offset} data bytes, shape {dims} needs {expected}"
+        )
+    low = np.frombuffer(buf, dtype="<f4", count=n, offset=offset)
+    scale = np.frombuffer(buf, dtype="<f4", count=n, offset=offset + 4 * n)
+    codes = np.frombuffer(buf, dtype=code_dtype, count=n * samples, offset=offset + 8 * n)
+    out = codes.reshape(n, samples).astype(np.float32)
+    out *= scale[:, None]
+    out += low[:, None]
+    return out
 
 
 def decode_many(
@@ -143,8 +200,18 @@ def decode_many(
             data = b"".join(memoryview(b)[head:] for b in blobs)
             return np.frombuffer(data, dt), shapes.reshape(n, ndim)
         bad = int(np.argmin(ok))
+        if quantised_blobs(blobs):  # quantised curves (a compact client file): one at a time
+            arrays = [decode_array(b, dt, (None,) * ndim) for b in blobs]
+            return (np.concatenate([a.reshape(-1) for a in arrays]),
+                    np.array([a.shape for a in arrays], np.int64).reshape(n, ndim))
     else:
         bad = next(i for i, b in enumerate(blobs)
                    if not isinstance(b, (bytes, bytearray, memoryview)) or len(b) < head)
     decode_array(blobs[bad], dt, (None,) * ndim)  # raises the precise error
     raise StorageError(f"array blob {bad} does not decode as {ndim}-D {dt}")  # pragma: no cover
+
+
+def quantised_blobs(blobs: Sequence[bytes]) -> bool:
+    """Whether any of ``blobs`` holds quantised curves (:func:`encode_quantised`)."""
+    return any(isinstance(b, (bytes, bytearray, memoryview)) and len(b) > 3 and b[3] in QUANTISED_CODES
+               for b in blobs)

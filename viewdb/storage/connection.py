@@ -97,9 +97,15 @@ _APPEARANCE_STAND_INS = (
     " offset INTEGER NOT NULL, size INTEGER NOT NULL)",
     "CREATE TEMP TABLE IF NOT EXISTS appearance_blobs (object_id INTEGER PRIMARY KEY, data BLOB NOT NULL)",
 )
+#: Revision 0006 only added the quantisation errors of a compact client file's curves:
+#: a file without them stores exact curves.
+_CURVE_ERRORS_STAND_IN = (
+    "CREATE TEMP TABLE IF NOT EXISTS curve_errors (group_id INTEGER PRIMARY KEY, errors BLOB NOT NULL)"
+)
 READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
-    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS),
-    "0004": _APPEARANCE_STAND_INS,
+    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN),
+    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN),
+    "0005": (_CURVE_ERRORS_STAND_IN,),
 }
 
 

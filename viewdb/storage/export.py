@@ -3,7 +3,12 @@
 It holds what a client needs to run its half of CS1/CS2 and nothing else: the objects'
 names and symmetry types, the views of the sparse tier (the client grid, possibly coarser
 than the full file's) with their curves and Fourier points, and the sparse tier's
-R-tree. No meshes, no SIFT features, no full tier. The file is written under a temporary
+R-tree. No meshes, no SIFT features, no full tier. By default the file is *compact*
+(:class:`~viewdb.config.ClientFileConfig`): the curves are stored once, in the sparse
+tier's groups, as 8-bit codes with a per-curve offset and scale and each curve's proven
+error (``curve_errors``, :mod:`viewdb.search.quantised`); no per-view curve or Fourier
+rows (a reader derives both from the groups); the R-tree boxes are the decoded curves';
+small pages and a final ``VACUUM``. The file is written under a temporary
 name next to the target and renamed into place when complete, so a failed or interrupted
 export leaves nothing behind.
 """
@@ -20,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..catalogue.symmetry import SymmetryType
-from ..config import BuildConfig
+from ..config import BuildConfig, ClientFileConfig
 from ..errors import StorageError, ViewDBError
 from ..search.grouping import tier_members
 from .codecs import decode_array
@@ -35,12 +40,14 @@ def export_client(
     out: str | Path,
     client_gap: float | None = None,
     progress: Callable[[int, int], None] | None = None,
+    file: ClientFileConfig | None = None,
 ) -> BuildConfig:
     """Write the client file of ``source`` to ``out``; returns the client's configuration.
 
     ``client_gap`` (default: the source's client gap) must be a multiple of the source's
-    grid gap. ``out`` must not exist.
+    grid gap. ``out`` must not exist. ``file``: how the file is written (default compact).
     """
+    file = file or ClientFileConfig()
     out = Path(out)
     config = source.build_config()
     if config is None:
@@ -62,12 +69,13 @@ def export_client(
     try:
         target = Store(partial, initial=(client, "client"))
         try:
-            _copy(source, target, client, progress)
+            _copy(source, target, client, progress, file.curve_bits)
         finally:
             target.close()
         with sqlite3.connect(partial) as conn:  # fold the WAL in: one self-contained file
             conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             conn.execute("PRAGMA journal_mode=DELETE")
+            conn.execute(f"PRAGMA page_size={int(file.page_size)}")
             conn.execute("VACUUM")
         os.replace(partial, out)
     except BaseException:
@@ -77,7 +85,7 @@ def export_client(
     return client
 
 
-def _copy(source: Store, target: Store, client: BuildConfig, progress) -> None:  # type: ignore[no-untyped-def]
+def _copy(source: Store, target: Store, client: BuildConfig, progress, bits: int) -> None:  # type: ignore[no-untyped-def]
     with source.read() as sconn:
         src = sconn.connection.driver_connection
         objects = src.execute(
@@ -114,13 +122,14 @@ def _copy(source: Store, target: Store, client: BuildConfig, progress) -> None: 
                         "INSERT INTO views (object_id, azimuth, elevation, grid_gap) VALUES (?, ?, ?, ?)",
                         (new_id, az, el, gap),
                     ).lastrowid
-                    dst.execute("INSERT INTO curves (view_id, samples) VALUES (?, ?)", (vid, samples))
-                    dst.execute("INSERT INTO fourier_points (view_id, coefficients) VALUES (?, ?)",
-                                (vid, coefficients))
+                    if not bits:  # a compact file keeps the curves in its groups only
+                        dst.execute("INSERT INTO curves (view_id, samples) VALUES (?, ?)", (vid, samples))
+                        dst.execute("INSERT INTO fourier_points (view_id, coefficients) VALUES (?, ?)",
+                                    (vid, coefficients))
                     ids.append(vid)
                     curves.append(decode_array(samples, np.float32, (None,)))
                 if ids:
                     write_groups(dst, new_id, ids, np.stack(curves), {"sparse": range(len(ids))},
-                                 client.index.group_views)
+                                 client.index.group_views, bits)
             if progress is not None:
                 progress(done, len(objects))

@@ -11,7 +11,9 @@ lie in its box, the full tier holds every view (and every perspective view) once
 sparse tier exactly the client grid's stand-ins; and each object's appearance records
 (revision 0005; none for an object stored before it): one per viewing direction of
 :func:`~viewdb.catalogue.describe.appearance_views`, each decoding to what it promises, and
-a stored view's silhouette giving exactly its stored curve.
+a stored view's silhouette giving exactly its stored curve; and a compact client file's
+quantisation errors (one pair of norms per view of each sparse group, consistent; such a
+file has no per-view curve or Fourier rows: its curves are in its groups).
 """
 
 from __future__ import annotations
@@ -103,9 +105,12 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
         for row in conn.exec_driver_sql("PRAGMA foreign_key_check").all()[:MAX_LISTED]:
             report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
         client = store.role() == "client"
+        raw = conn.connection.driver_connection
+        compact = client and raw.execute("SELECT 1 FROM curve_errors LIMIT 1").fetchone() is not None
         _check_objects(conn, config.gap, report, client)
-        _check_views(conn, config, report, progress, client)
-        _check_tiers(conn.connection.driver_connection, config, report, client)
+        _check_views(conn, config, report, progress, client, compact)
+        _check_tiers(raw, config, report, client)
+        _check_curve_errors(raw, config.features.curve_samples, report, compact)
         _check_appearances(conn.connection.driver_connection, config, report, client)
     return report
 
@@ -235,7 +240,34 @@ def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client:
             )
 
 
-def _check_views(conn, config, report: CheckReport, progress, client) -> None:  # type: ignore[no-untyped-def]
+def _check_curve_errors(raw, n: int, report: CheckReport, compact: bool) -> None:  # type: ignore[no-untyped-def]
+    """A compact client file's quantisation errors: one row per sparse group, one pair of
+    norms per view, consistent (L-infinity <= L2 <= sqrt(N) L-infinity); none elsewhere."""
+    rows = raw.execute(
+        "SELECT g.id, g.tier, g.view_ids, e.errors FROM index_groups g"
+        " LEFT JOIN curve_errors e ON e.group_id = g.id").fetchall()
+    for gid, tier, blob_ids, blob_errors in rows:
+        where = f"{tier} tier group {gid}"
+        if blob_errors is None:
+            if compact:
+                report.add(f"{where}: no quantisation errors (a compact client file has them for all)")
+            continue
+        if not compact or tier != "sparse":
+            report.add(f"{where}: quantisation errors outside a compact client file's sparse tier")
+            continue
+        try:
+            ids = decode_array(blob_ids, np.int64, (None,))
+            errors = decode_array(blob_errors, np.float32, (len(ids), 2)).astype(np.float64)
+        except StorageError as exc:
+            report.add(f"{where}: {exc.message}")
+            continue
+        l2, linf = errors[:, 0], errors[:, 1]
+        if not (np.all(np.isfinite(errors)) and np.all(linf >= 0)
+                and np.all(l2 >= linf * (1 - 1e-6)) and np.all(l2 <= np.sqrt(n) * linf * (1 + 1e-6))):
+            report.add(f"{where}: quantisation errors are not consistent norms")
+
+
+def _check_views(conn, config, report: CheckReport, progress, client, compact=False) -> None:  # type: ignore[no-untyped-def]
     v, c, f, k = s.views, s.curves, s.fourier_points, s.sift_features
     n_curve, m = config.features.curve_samples, config.features.fourier_coefficients
     total = conn.execute(sa.select(sa.func.count()).select_from(v)).scalar_one()
@@ -257,6 +289,9 @@ def _check_views(conn, config, report: CheckReport, progress, client) -> None:  
         where = f"view {vid} ({az:g}, {el:g})"
         if client and kp is not None:
             report.add(f"{where}: a client file holds no SIFT features")
+        elif compact:
+            if curve_blob is not None or fourier_blob is not None:
+                report.add(f"{where}: a compact client file keeps its curves in its groups only")
         elif curve_blob is None or fourier_blob is None or (kp is None and not client):
             report.add(f"{where}: missing curve, Fourier point or SIFT row")
         else:

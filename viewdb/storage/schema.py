@@ -29,6 +29,9 @@ index_groups    R-tree entries: a few views of one object in one tier (``full`` 
                 :func:`perspective_group_id`)
 rtree_pages     the libspatialindex pages of each tier's R-tree (one BLOB per page)
 rtree_meta      each tier's R-tree: dimension and header page
+curve_errors    per index group of a compact client file (revision 0006): each view's
+                quantisation error norms, float32 (n, 2): L2 and L-infinity of the
+                decoded curve minus the float32 curve it was made from, rounded up
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ __all__ = [
     "SCHEMA_REVISION",
     "appearance_blobs",
     "appearances",
+    "curve_errors",
     "curves",
     "fourier_points",
     "index_groups",
@@ -66,7 +70,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0005"
+SCHEMA_REVISION = "0006"
 
 metadata = MetaData()
 
@@ -215,4 +219,13 @@ rtree_meta = Table(
     Column("tier", Text, primary_key=True),
     Column("dimension", Integer, nullable=False),
     Column("header_page", Integer, nullable=False),
+)
+
+# revision 0006: the proven error of each quantised curve of a compact client file
+curve_errors = Table(
+    "curve_errors",
+    metadata,
+    Column("group_id", Integer, ForeignKey("index_groups.id", ondelete="CASCADE"), primary_key=True),
+    #: float32 (n, 2): per view of the group, L2 and L-infinity norm of its decoding error
+    Column("errors", LargeBinary, nullable=False),
 )

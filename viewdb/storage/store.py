@@ -26,7 +26,7 @@ from . import schema as s
 from .appearances import pack_records
 from .codecs import decode_array, encode_array
 from .connection import Database
-from .tiers import delete_groups, write_groups
+from .tiers import delete_groups, rows_with_ids, write_groups
 
 __all__ = ["ObjectRow", "Store", "ViewRow"]
 
@@ -114,7 +114,25 @@ class Store(Database):
                 )
                 .where(s.objects.c.name == name)
             ).all()
+            if not rows:  # a compact client file keeps its curves in the groups only
+                return self._group_curves(conn, name)
         return {(float(a), float(e)): decode_array(b, np.float32, (None,)) for a, e, b in rows}
+
+    @staticmethod
+    def _group_curves(conn: Connection, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
+        raw = conn.connection.driver_connection
+        out = {}
+        for ids_blob, curves_blob in raw.execute(
+            "SELECT g.view_ids, g.curves FROM index_groups g JOIN objects o ON o.id = g.object_id"
+            " WHERE o.name = ? AND g.tier = 'sparse'", (name,),
+        ):
+            ids = decode_array(ids_blob, np.int64, (None,))
+            curves = decode_array(curves_blob, np.float32, (len(ids), None))
+            angles = {int(i): (float(a), float(e)) for i, a, e in rows_with_ids(
+                raw, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})", ids.tolist())}
+            for vid, curve in zip(ids.tolist(), curves, strict=True):
+                out[angles[int(vid)]] = curve
+        return out
 
     def curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float32] | None:
         """The stored curve of one view (None if that view is not stored)."""
@@ -449,7 +467,7 @@ class Store(Database):
         out = {}
         with self.read() as conn:
             for table in (s.objects, s.views, s.curves, s.fourier_points, s.sift_features,
-                          s.perspective_views, s.appearances):
+                          s.perspective_views, s.appearances, s.curve_errors):
                 out[table.name] = int(
                     conn.execute(sa.select(sa.func.count()).select_from(table)).scalar_one()
                 )

@@ -36,7 +36,7 @@ from ..search.grouping import (
     tier_members,
 )
 from ..search.knn import QueryBoxes, TierArrays
-from .codecs import decode_array, decode_many, encode_array
+from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
 
 __all__ = [
@@ -66,6 +66,15 @@ def rows_with_ids(conn: sqlite3.Connection, sql: str, ids: Sequence[int]) -> Ite
         yield from conn.execute(sql.format(",".join("?" * len(chunk))), chunk)
 
 
+def rounded_up32(x: NDArray[np.floating]) -> NDArray[np.float32]:
+    """``x`` as float32, each value rounded up (never below ``x``)."""
+    x = np.asarray(x, dtype=np.float64)
+    out = x.astype(np.float32)
+    low = out.astype(np.float64) < x
+    out[low] = np.nextafter(out[low], np.float32(np.inf))
+    return out
+
+
 def _stacked(blobs: list[Any], dtype: type) -> NDArray[Any]:
     """Equal-length 1-D arrays, one BLOB each, as the rows of one ``(len(blobs), n)`` array."""
     data, shapes = decode_many(blobs, dtype, 1)
@@ -87,11 +96,15 @@ def write_groups(
     curves: NDArray[np.floating],
     members: Mapping[str, Sequence[int]],
     group_views: int,
+    curve_bits: int = 0,
 ) -> dict[str, int]:
     """Group one object's views of each tier and index the groups; returns group counts.
 
     ``members[tier]`` are positions in ``view_ids``/``curves`` of the views in that tier.
-    Runs in the caller's transaction; on an error the caller must roll back.
+    ``curve_bits`` > 0 stores each group's curves quantised to that many bits (a compact
+    client file) with their error norms in ``curve_errors``; the boxes are then those of
+    the decoded curves, which are what a search reads. Runs in the caller's transaction;
+    on an error the caller must roll back.
     """
     raw = raw_connection(conn)
     ids = np.asarray(view_ids, dtype=np.int64)
@@ -107,15 +120,24 @@ def write_groups(
         index = FourierIndex.open(raw, tier)
         try:
             for group in group_points(coords, group_views):
-                lo, hi = padded_mbr(coords[group])
                 grouped = tier_curves[group]
+                blob, errors = encode_array(grouped), None
+                if curve_bits:
+                    blob, errors = encode_quantised(grouped, curve_bits)
+                    grouped = decode_array(blob, np.float32, grouped.shape)
+                    lo, hi = padded_mbr(indexed_coordinates(grouped))
+                else:
+                    lo, hi = padded_mbr(coords[group])
                 gid = raw.execute(
                     "INSERT INTO index_groups (tier, object_id, view_ids, curves, lo, hi,"
                     " curve_lo, curve_hi) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (tier, int(object_id), encode_array(ids[sel][group]), encode_array(grouped),
+                    (tier, int(object_id), encode_array(ids[sel][group]), blob,
                      encode_array(lo), encode_array(hi), encode_array(grouped.min(axis=0)),
                      encode_array(grouped.max(axis=0))),
                 ).lastrowid
+                if errors is not None:
+                    raw.execute("INSERT INTO curve_errors (group_id, errors) VALUES (?, ?)",
+                                (gid, encode_array(rounded_up32(errors))))
                 index.insert_box(int(gid), lo, hi)
                 counts[tier] += 1
             index.close()
@@ -190,6 +212,18 @@ class StoredTier:
         self._edges = paa_edges(max(samples, 1))
         self._means = np.empty((len(self._views), len(self._edges) - 1), dtype=np.float64)
         self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
+        #: per view row: its quantisation error norms (L2, L-infinity); zero for exact curves
+        self.errors = np.zeros((len(self._views), 2), dtype=np.float64)
+        at = {int(gid): g for g, gid in enumerate(self._ids.tolist())}
+        for gid, blob in conn.execute(
+            "SELECT e.group_id, e.errors FROM curve_errors e JOIN index_groups g"
+            " ON g.id = e.group_id WHERE g.tier = ?", (tier,)
+        ):
+            g = at[int(gid)]
+            a, n = int(self.group_start[g]), int(self.group_count[g])
+            self.errors[a : a + n] = decode_array(blob, np.float32, (n, 2))
+        self.quantised = bool(self.errors.any())
+        self._row_of_view = {int(v): r for r, v in enumerate(self._views.tolist())} if self.quantised else {}
         names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
         self._names = [names[int(i)] for i in object_ids]
         self._index_by_name = {name: i for i, name in enumerate(self._names)}
@@ -222,6 +256,9 @@ class StoredTier:
     def _fill(self, groups: NDArray[np.int64], blobs: list[Any]) -> None:
         """Decode the curves of ``groups`` (one BLOB each) into their rows, with their
         indexed coordinates and segment means, all groups at once."""
+        if not self.quantised and quantised_blobs(blobs):
+            raise StorageError("holds quantised curves without their error bounds (curve_errors): "
+                               "export the client file again")
         data, shapes = decode_many(blobs, np.float32, 2)
         counts = self.group_count[groups]
         samples = self._curves.shape[1]
@@ -248,6 +285,12 @@ class StoredTier:
 
     def view_id(self, row: int) -> int:
         return int(self._views[row])
+
+    def view_errors(self, view_id: int) -> NDArray[np.float64]:
+        """The quantisation error norms (L2, L-infinity) of view ``view_id``'s stored curve
+        (zero for an exact curve; :mod:`viewdb.search.quantised`)."""
+        row = self._row_of_view.get(int(view_id))
+        return self.errors[row] if row is not None else np.zeros(2)
 
     def object_name(self, index: int) -> str:
         return self._names[index]

@@ -1,0 +1,138 @@
+"""The client file that ships to a device: the float32 format against the compact one, in
+the same run.
+
+    python benchmarks/device_file.py FULL_DB [--gaps 20 30 40 50] [--out DIR]
+        [--queries 100] [--fresh 5] [--exact-gap 30]
+
+For each client gap both files are exported from FULL_DB (read-only): ``float32`` (curve
+bits 0 and 4 kB pages: the layout ``export-client`` wrote before compact files) and
+``compact`` (the default). Printed per gap: file size, bytes per view, the ratio; the
+fresh-process cost (a new Python that imports viewdb, opens the file read-only and runs
+the client half of one query at k = 5, timed inside the child, median of ``--fresh``);
+the warm client half (median over the grid queries, k = 5); the JSON bytes a remote CS1
+query sends (median). At ``--exact-gap`` it also runs CS1 with the compact client against
+``server`` on ``--queries`` grid queries and ``--queries`` synthetic photos (``viewdb
+bench``'s two protocols: :mod:`viewdb.bench.queries`) and counts the answers that differ
+(must be 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import viewdb  # noqa: E402
+from viewdb.bench.queries import grid_queries, photo_queries  # noqa: E402
+from viewdb.config import ClientFileConfig  # noqa: E402
+from viewdb.recognition.client_tier import ClientTier  # noqa: E402
+from viewdb.search.plans import RefineRequest  # noqa: E402
+
+FORMATS = {"float32": ClientFileConfig(curve_bits=0, page_size=4096), "compact": ClientFileConfig()}
+
+CHILD = """
+import sys, time, json
+import numpy as np
+t0 = time.perf_counter()
+import viewdb
+from viewdb.recognition.client_tier import ClientTier
+t1 = time.perf_counter()
+db = viewdb.open(sys.argv[1], read_only=True)
+q = np.array(json.loads(sys.argv[2]))
+ClientTier(db._catalogue).candidates(q, 5)
+t2 = time.perf_counter()
+print(json.dumps({"import_ms": (t1 - t0) * 1e3, "open_search_ms": (t2 - t1) * 1e3}))
+"""
+
+
+def fresh(path: Path, curve: np.ndarray, runs: int) -> dict[str, float]:
+    out = []
+    for _ in range(runs):
+        done = subprocess.run([sys.executable, "-c", CHILD, str(path), json.dumps(curve.tolist())],
+                              capture_output=True, text=True, check=True, cwd=ROOT)
+        out.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    return {key: statistics.median(o[key] for o in out) for key in out[0]}
+
+
+def warm(path: Path, curves: list[np.ndarray]) -> tuple[float, float]:
+    """Median client half (ms) and median CS1 request bytes, k = 5."""
+    times, sent = [], []
+    with viewdb.open(path, read_only=True) as db:
+        tier = ClientTier(db._catalogue)
+        tier.candidates(curves[0], 5)
+        for q in curves:
+            start = time.perf_counter()
+            found = tier.candidates(q, 5)
+            times.append((time.perf_counter() - start) * 1e3)
+            sent.append(len(json.dumps(RefineRequest(q, 6, 5, found).to_dict())))
+    return statistics.median(times), statistics.median(sent)
+
+
+def exactness(full: viewdb.ViewDB, client_path: Path, grid: list, photos: list) -> tuple[int, int]:
+    """Answers of CS1 with the client that differ from ``server``'s (grid, photos)."""
+    wrong = [0, 0]
+    with viewdb.open(client_path, read_only=True) as client:
+        for q in grid:
+            a = full.recognise(q.curve, 5, plan="server").results
+            b = full.recognise(q.curve, 5, plan="cs1", client=client).results
+            wrong[0] += [c.to_dict() for c in a] != [c.to_dict() for c in b]
+        for p in photos:
+            a = full.query(p.path, k=5, plan="server", pose=False).results
+            b = full.query(p.path, k=5, plan="cs1", client=client, pose=False).results
+            wrong[1] += [(r.object, r.distance) for r in a] != [(r.object, r.distance) for r in b]
+    return wrong[0], wrong[1]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("db", type=Path)
+    parser.add_argument("--gaps", type=float, nargs="+", default=[20, 30, 40, 50])
+    parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--queries", type=int, default=100)
+    parser.add_argument("--fresh", type=int, default=5)
+    parser.add_argument("--exact-gap", type=float, default=30)
+    args = parser.parse_args()
+    out = args.out or Path(tempfile.mkdtemp(prefix="device_file_"))
+    out.mkdir(parents=True, exist_ok=True)
+    with viewdb.open(args.db, read_only=True) as full:
+        names = sorted(o.name for o in full.objects())
+        grid = grid_queries(full, names, args.queries, 0, out / "queries")
+        photos = photo_queries(full, names, args.queries, 0, out / "queries") if args.queries else []
+        curves = [q.curve for q in grid]
+        full_bytes = full.info().file_bytes
+        print(f"{args.db}: {full_bytes / 1e6:.1f} MB, {len(names)} objects; {len(curves)} grid queries")
+        print("gap  format    MB     B/view  ratio  import_ms  open+1st_ms  warm_ms  sent_B")
+        for gap in args.gaps:
+            row = {}
+            for fmt, file in FORMATS.items():
+                path = out / f"client_{gap:g}_{fmt}.db"
+                if not path.exists():
+                    full.export_client(path, client_gap=gap, file=file)
+                with viewdb.open(path, read_only=True) as c:
+                    info = c.info()
+                cold = fresh(path, curves[0], args.fresh)
+                warm_ms, sent = warm(path, curves)
+                row[fmt] = info.file_bytes
+                ratio = info.file_bytes / row["float32"]
+                print(f"{gap:<4g} {fmt:<8} {info.file_bytes / 1e6:6.2f} {info.bytes_per_view:8.0f} "
+                      f"{ratio:6.3f} {cold['import_ms']:10.0f} {cold['open_search_ms']:12.0f} "
+                      f"{warm_ms:8.2f} {sent:7.0f}")
+            if gap == args.exact_gap:
+                g, p = exactness(full, out / f"client_{gap:g}_compact.db", grid, photos)
+                print(f"     CS1 (compact, {gap:g}°) != server: {g}/{len(grid)} grid, "
+                      f"{p}/{len(photos)} photos")
+
+
+if __name__ == "__main__":
+    main()
