@@ -407,21 +407,23 @@ def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo
         browser.set_window_size(1200, 900)
         open_page(browser, server.url)
         upload(browser, demo_photo)
-        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, "#ranking li"))
-        first = browser.find_element(By.CSS_SELECTOR, "#ranking li")
+        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, ".ranking li"))
+        first = browser.find_element(By.CSS_SELECTOR, ".ranking li")
         assert first.get_attribute("data-object") == "mug"
         assert "1. mug" in first.text and "pose: azimuth" in first.text
-        wait(browser, lambda d: js(d, "return document.getElementById('overlay-img').naturalWidth") > 0)
+        wait(browser, lambda d: js(d, "return document.querySelector('#layers img').naturalWidth") > 0)
         wait(browser, lambda d: js(d, "return document.getElementById('photo-img').naturalWidth") > 0)
         # every matched view's thumbnail arrived (fetched with the token)
-        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#ranking img')]"
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('.ranking img')]"
                                       ".every(i => i.naturalWidth > 0)"))
         assert "round trip" in browser.find_element(By.ID, "timing").text
+        # no prompt: one ranking, no object sections, no region outlines
+        assert not browser.find_elements(By.CSS_SELECTOR, ".found.several, #marks rect")
         # choosing another result shows its overlay, drawn on request
-        second = browser.find_elements(By.CSS_SELECTOR, "#ranking li")[1]
+        second = browser.find_elements(By.CSS_SELECTOR, ".ranking li")[1]
         second.click()
         assert second.get_attribute("aria-selected") == "true"
-        wait(browser, lambda d: js(d, "const i = document.getElementById('overlay-img');"
+        wait(browser, lambda d: js(d, "const i = document.querySelector('#layers img');"
                                       "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))
         browser.set_window_size(390, 844)
         wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
@@ -462,3 +464,210 @@ def test_the_catalogue_shows_every_object_and_turns_one(browser, server):
         assert "mirror" in browser.find_element(By.ID, "turntable-symmetry").text
         no_horizontal_scroll(browser)
         browser.find_element(By.CSS_SELECTOR, "#turntable .dialog-head button").click()
+
+
+# ---------------------------------------------------------------------- prompts on the page
+#: Three sample objects on a table, each seen off the database's grid: (name, azimuth,
+#: elevation) and where its render's top-left corner goes in the photo.
+TABLE = (("car", 40, 20), ("mug", 130, 25), ("marked_cube", 200, 35))
+TABLE_PLACES = [(10, 60), (170, 20), (310, 80)]
+TABLE_SIZE = (430, 200)
+
+
+@pytest.fixture(scope="module")
+def table(db, tmp_path_factory) -> dict[str, object]:
+    """A photo of three objects: a PNG, the same photo as a JPEG stored on its side with an
+    EXIF orientation (6: turn 90° clockwise to show), and each object's true mask."""
+    from viewdb.bench.photos import table_photo
+    from viewdb.recognition.image import load_image
+
+    photo, masks = table_photo([db.render(n, h, v) for n, h, v in TABLE], TABLE_SIZE, TABLE_PLACES)
+    folder = tmp_path_factory.mktemp("table")
+    png = folder / "table.png"
+    Image.fromarray(photo).save(png)
+    turned = folder / "table-on-its-side.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(photo).transpose(Image.Transpose.ROTATE_90).save(turned, quality=95, exif=exif)
+    assert load_image(turned).rgb.shape == photo.shape  # the server reads it upright
+    return {"png": png, "turned": turned, "masks": dict(zip((n for n, _, _ in TABLE), masks, strict=True))}
+
+
+def true_box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    ys, xs = np.nonzero(mask)
+    return int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
+
+
+def box_iou(a, b) -> float:
+    w = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    h = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    area = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1])
+    return w * h / (area - w * h)
+
+
+def choose(driver, path: Path) -> dict[str, float]:
+    """Pick ``path`` without sending it; once its preview shows, where the drawing surface
+    is on the screen (CSS pixels) and the photo's size in its own pixels."""
+    from selenium.webdriver.common.by import By
+
+    field = driver.find_element(By.ID, "photo")
+    field.clear()
+    field.send_keys(str(path))
+    wait(driver, lambda d: js(d, "return document.getElementById('photo-img').naturalWidth") > 0)
+    js(driver, "document.getElementById('stage').scrollIntoView({block: 'center'})")
+    return js(driver, """
+        const box = document.getElementById('marks').getBoundingClientRect();
+        const img = document.getElementById('photo-img');
+        return {left: box.left, top: box.top, width: box.width, height: box.height,
+                photo_width: img.naturalWidth, photo_height: img.naturalHeight};""")
+
+
+def on_screen(surface: dict[str, float], x: float, y: float) -> tuple[int, int]:
+    """Photo pixel (x, y) → the CSS pixel of the viewport that shows it."""
+    return (round(surface["left"] + x * surface["width"] / surface["photo_width"]),
+            round(surface["top"] + y * surface["height"] / surface["photo_height"]))
+
+
+def gesture(driver, path: list[tuple[int, int]], kind: str = "mouse") -> None:
+    """Press at ``path[0]``, move through the rest, release: a mouse drag, or a finger's."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions import interaction
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+    from selenium.webdriver.common.actions.pointer_input import PointerInput
+
+    chain = ActionChains(driver)
+    pointer = PointerInput(interaction.POINTER_TOUCH if kind == "touch" else interaction.POINTER_MOUSE, kind)
+    chain.w3c_actions = ActionBuilder(driver, mouse=pointer)
+    chain.w3c_actions.pointer_action.move_to_location(*path[0]).pointer_down()
+    for x, y in path[1:]:
+        chain.w3c_actions.pointer_action.move_to_location(x, y)
+    chain.w3c_actions.pointer_action.pointer_up()
+    chain.perform()
+
+
+def drag_box(driver, surface: dict[str, float], box: tuple[float, float, float, float]) -> None:
+    (x1, y1), (x2, y2) = on_screen(surface, *box[:2]), on_screen(surface, *box[2:])
+    gesture(driver, [(x1, y1), ((x1 + x2) // 2, (y1 + y2) // 2), (x2, y2)])
+
+
+def answered_objects(driver) -> list[dict[str, object]]:
+    """Each object of the answer the page shows: its region and ranked objects."""
+    from selenium.webdriver.common.by import By
+
+    wait(driver, lambda d: d.find_elements(By.CSS_SELECTOR, ".found.several")
+         or d.find_element(By.ID, "message").get_attribute("class") == "error")
+    assert not driver.find_element(By.ID, "message").is_displayed(), driver.find_element(By.ID, "message").text
+    return js(driver, "return state.answer.objects.map(o => ({region: o.region, "
+                      "objects: o.results.map(r => r.object)}))")
+
+
+def test_boxes_dragged_on_a_turned_photo_ask_for_those_objects(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "boxes"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["turned"])
+        # the preview shows the photo upright, as the server reads it
+        assert (surface["photo_width"], surface["photo_height"]) == TABLE_SIZE
+        scale = surface["photo_width"] / surface["width"]  # photo pixels per CSS pixel
+        drawn = []
+        for name in ("mug", "car"):
+            x1, y1, x2, y2 = true_box(table["masks"][name])
+            drawn.append((x1 - 8, y1 - 8, x2 + 8, y2 + 8))
+            drag_box(browser, surface, drawn[-1])
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")) == 2
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert [o["objects"] for o in found] == [["mug"], ["car"]]
+        slack = 1.5 * scale + 1  # a CSS pixel of the preview, and rounding
+        for entry, box, name in zip(found, drawn, ("mug", "car"), strict=True):
+            sent = entry["region"]["prompt"]["box"]  # the box the request carried
+            assert np.allclose(sent, box, atol=slack), (sent, box)
+            cut = entry["region"]["box"]
+            assert cut[0] >= box[0] - slack and cut[1] >= box[1] - slack
+            assert cut[2] <= box[2] + slack and cut[3] <= box[3] + slack
+            assert box_iou(cut, true_box(table["masks"][name])) > 0.7, (name, cut)
+        # one section per object, its region outlined, its best result drawn in its pose
+        sections = browser.find_elements(By.CSS_SELECTOR, ".found.several")
+        assert [s.find_element(By.CSS_SELECTOR, ".ranking li").get_attribute("data-object") for s in sections] \
+            == ["mug", "car"]
+        assert "from the box" in sections[0].text and "Object 1" in sections[0].text
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.region")) == 2
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#layers img')]"
+                                      ".map(i => !i.hidden && i.naturalWidth > 0)") == [True, True])
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('.ranking img')]"
+                                      ".every(i => i.naturalWidth > 0)"))
+        # clearing the prompts clears the answer drawn for them
+        browser.find_element(By.ID, "clear-prompts").click()
+        assert not browser.find_elements(By.CSS_SELECTOR, "#marks rect, #layers img")
+        assert not browser.find_element(By.ID, "answers").is_displayed()
+
+
+def test_a_tap_with_a_finger_asks_for_the_object_under_it_at_phone_width(browser, server, table):
+    from scipy.ndimage import distance_transform_edt
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "tap"):
+        browser.set_window_size(390, 844)
+        wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        inside = distance_transform_edt(table["masks"]["mug"])
+        y, x = np.unravel_index(int(np.argmax(inside)), inside.shape)  # deep inside the mug
+        scrolled = js(browser, "return window.scrollY")
+        gesture(browser, [on_screen(surface, x + 0.5, y + 0.5)], kind="touch")
+        assert js(browser, "return window.scrollY") == scrolled
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks circle.prompt")) == 1
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert len(found) == 1 and found[0]["objects"] == ["mug"]
+        scale = surface["photo_width"] / surface["width"]
+        sent = found[0]["region"]["prompt"]["point"]
+        assert abs(sent[0] - x) <= scale + 1 and abs(sent[1] - y) <= scale + 1, (sent, (x, y))
+        assert box_iou(found[0]["region"]["box"], true_box(table["masks"]["mug"])) > 0.7
+        assert "from the point" in browser.find_element(By.CSS_SELECTOR, ".found.several").text
+        wait(browser, lambda d: js(d, "return document.querySelector('#layers img').naturalWidth") > 0)
+        no_horizontal_scroll(browser)
+
+
+def test_every_object_ticked_finds_each_one(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "every"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        drag_box(browser, surface, true_box(table["masks"]["car"]))
+        browser.find_element(By.ID, "every").click()  # prompts or every object, not both
+        assert not browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert len(found) == 3 and all("prompt" not in o["region"] for o in found)
+        for name, mask in table["masks"].items():
+            assert max(box_iou(o["region"]["box"], true_box(mask)) for o in found) > 0.7, name
+        assert "found on its own" in browser.find_element(By.CSS_SELECTOR, ".found.several").text
+
+
+def test_a_degenerate_box_shows_a_message_and_the_server_stays_up(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "degenerate-box"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        start = on_screen(surface, 40, 100)
+        gesture(browser, [start, (start[0] + 60, start[1]), (start[0] + 120, start[1])])  # flat: no height
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")) == 1
+        browser.find_element(By.ID, "go").click()
+        text = message(browser)
+        assert "table.png" in text and "degenerate" in text and "box" in text, text
+        assert not browser.find_element(By.ID, "answers").is_displayed()
+        status, health = request(server.url, "GET", "/health", token=TOKEN)
+        assert status == 200 and health["pid"] in server.pids
