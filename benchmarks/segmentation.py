@@ -35,7 +35,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--views", type=int, default=3, help="random views per model (default 3)")
-    parser.add_argument("--methods", default="border,otsu,grabcut")
+    parser.add_argument("--methods", default="border,otsu,grabcut",
+                        help="any of border, otsu, grabcut, auto, and auto+plain (auto with "
+                             "SegmentationConfig.plain_border on)")
     parser.add_argument("--worst", type=int, default=3, help="worst cases to list per method and background")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
@@ -73,7 +75,10 @@ def main() -> None:
                 for method in methods:
                     start = time.process_time()
                     try:
-                        mask = segment(image, method=method).mask
+                        if method == "auto+plain":  # auto with the plain-background shortcut
+                            mask = segment(image, config=SegmentationConfig(plain_border=True)).mask
+                        else:
+                            mask = segment(image, method=method).mask
                     except ImageError:
                         mask = np.zeros_like(truth)
                     spent = time.process_time() - start

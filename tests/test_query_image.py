@@ -151,9 +151,8 @@ def test_auto_segmentation_of_a_thin_object(kind):
 
 
 def auto_method(kind: str) -> str:
-    """The method ``method="auto"`` uses on a background of ``kind``: the border model on a
-    plain one, the default method on the others."""
-    return "border" if kind.startswith("plain") else SegmentationConfig().default_method
+    """The method ``method="auto"`` uses on a background of ``kind`` by default."""
+    return SegmentationConfig().default_method
 
 
 def check_auto_segmentation(stems, kind, min_iou):
@@ -187,9 +186,11 @@ def test_auto_takes_the_border_model_on_a_plain_background_only(background, meth
     truth = np.zeros((h, w), np.uint8)
     cv2.circle(truth, (160, 120), 60, 1, -1)
     img[truth.astype(bool)] = (40, 90, 160)
-    seg = segment(load_image(np.clip(img, 0, 255).astype(np.uint8)))
+    photo = load_image(np.clip(img, 0, 255).astype(np.uint8))
+    seg = segment(photo, config=SegmentationConfig(plain_border=True))
     assert seg.method == method
     assert iou(seg.mask, truth.astype(bool)) >= 0.97
+    assert segment(photo).method == SegmentationConfig().default_method  # off by default
 
 
 @pytest.mark.parametrize("method", ["border", "otsu", "grabcut"])

@@ -43,8 +43,10 @@ be background) and starts from a model of it:
   falls back to the border-model result ("border") when it cannot run.
 
 The colour methods run on a copy scaled down to at most ``work_max_side`` pixels on
-the longer side; the mask is scaled back up.  ``method="auto"`` uses the border model
-on a plain background and ``default_method``, GrabCut, on any other.  A background
+the longer side; the mask is scaled back up.  ``method="auto"`` uses ``default_method``,
+GrabCut; with ``SegmentationConfig.plain_border`` it uses the border model alone on a
+plain background (off by default: the outline differs from GrabCut's by a few pixels,
+enough to change the matched view of a nearly symmetric object).  A background
 is plain when the border strip's Lab colours lie within ``plain_spread`` of their median
 (99th percentile), or within twice that and vary from pixel to pixel as sensor noise
 does (their variance at most ``plain_noise_ratio`` times half the mean squared step
@@ -171,7 +173,8 @@ def segment(
         raw, used = image.alpha > 127, "alpha"
     else:
         used = cfg.default_method if method == "auto" else method
-        raw, used = _colour_segmentation(image.rgb, used, cfg, plain_as_border=method == "auto")
+        raw, used = _colour_segmentation(image.rgb, used, cfg,
+                                          plain_as_border=method == "auto" and cfg.plain_border)
     final = largest_filled(raw)
     fraction = check_object(final, used, name, cfg)
     return Segmentation(final, used, fraction, name)
