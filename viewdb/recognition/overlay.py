@@ -19,10 +19,10 @@ Projection follows the pose's frame (:mod:`viewdb.pose.estimate`, public contrac
 
 The drawing is NumPy, OpenCV and one numba kernel, no renderer: the triangles are
 scan-converted (:mod:`.raster`) into a face-index image with a depth buffer (a pixel
-shows the nearest face whose projection holds its centre, as a GPU rasterises, at the drawn image's resolution), from
-which the outline, the visible creases and depth steps and the shading are read. The
-photo may be shrunk or enlarged first (:attr:`viewdb.config.OverlayConfig.max_side`,
-``min_side``).
+shows the nearest face whose projection holds its centre, as a GPU rasterises, at the
+drawn image's resolution), from which the outline, the visible creases and depth steps
+and the shading are read. The photo may be shrunk or enlarged first
+(:attr:`viewdb.config.OverlayConfig.max_side`, ``min_side``).
 
 >>> layer = draw_overlay(photo, poses_from_json(result.to_dict()), db.mesh)  # doctest: +SKIP
 """
