@@ -22,6 +22,7 @@ __all__ = [
     "naive_contour",
     "naive_distance_curve",
     "naive_dft",
+    "naive_face_ids",
 ]
 
 # Corner order of a cell whose top-left pixel centre is (x, y): TL, TR, BR, BL.
@@ -366,3 +367,36 @@ def naive_knn_over_curves(queries, curves, owner, names, k: int, r: int):
                     best[o] = (d, view, flip, t)
     ranked = sorted(((d, names[o], v, m, t) for o, (d, v, m, t) in best.items()), key=lambda x: (x[0], x[1]))
     return ranked[:k]
+
+
+def naive_face_ids(tri, planes, faces, shape) -> np.ndarray:
+    """Which triangle each pixel shows, pixel by pixel and triangle by triangle: the
+    nearest whose projection holds the pixel's centre, ``y_min <= y < y_max`` and, where
+    row ``y`` crosses its edges, ``left <= x < right``; the depth ``a·x + b·y + c`` is
+    taken as the kernel takes it, from the row's first pixel on the image; on a tie the
+    later triangle."""
+    h, w = shape
+    ids = np.full((h, w), -1, dtype=np.int32)
+    best = np.full((h, w), np.inf)
+    for f in range(len(tri)):
+        ys = [float(p[1]) for p in tri[f]]
+        a, b, c = (float(v) for v in planes[f])
+        for row in range(h):
+            if not min(ys) <= row < max(ys):
+                continue
+            crossings = []
+            for k in range(3):
+                (px, py), (qx, qy) = tri[f][k], tri[f][(k + 1) % 3]
+                if qy != py and (py - row) * (qy - row) <= 0:
+                    crossings.append(px + (row - py) * (qx - px) / (qy - py))
+            if not crossings:
+                continue
+            left, right = min(crossings), max(crossings)
+            first = min(max(math.ceil(left), 0), w)
+            for x in range(w):
+                if left <= x < right:
+                    z = (a * first + b * row + c) + a * (x - first)
+                    if z <= best[row, x]:
+                        best[row, x] = z
+                        ids[row, x] = faces[f]
+    return ids

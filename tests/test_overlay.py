@@ -271,3 +271,22 @@ def test_poses_from_json_reads_posed_results_in_order():
     poses = poses_from_json(data)
     assert [(p.name, p.rank, p.score, p.scale) for p in poses] == [("a", 1, 0.2, 0.5), ("c", 1, 0.1, 0.5)]
     assert np.allclose(poses[0].translation, [0.1, 0.0, -3.0])
+
+
+# ---------------------------------------------------------------------- the scan conversion
+_corner = st.one_of(st.integers(-4, 28).map(lambda v: v / 2.0),  # on pixel centres and edges
+                    st.floats(-3.0, 14.0, allow_nan=False))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(1, 12), st.integers(1, 12),
+       st.lists(st.tuples(st.tuples(_corner, _corner), st.tuples(_corner, _corner), st.tuples(_corner, _corner),
+                          st.tuples(*[st.floats(-2.0, 2.0, allow_nan=False)] * 3)), max_size=10))
+def test_the_scan_conversion_equals_a_pixel_by_pixel_one(h, w, triangles):
+    from tests.reference import naive_face_ids
+    from viewdb.recognition.raster import face_ids
+
+    tri = np.array([t[:3] for t in triangles], dtype=np.float64).reshape(-1, 3, 2)
+    planes = np.array([t[3] for t in triangles], dtype=np.float64).reshape(-1, 3)
+    faces = np.arange(len(tri), dtype=np.int64)[::-1] * 3  # reported indices, not positions
+    assert np.array_equal(face_ids(tri, planes, faces, (h, w)), naive_face_ids(tri, planes, faces, (h, w)))

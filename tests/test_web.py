@@ -7,16 +7,12 @@ One server (a bearer token, a small photo limit) and one browser serve the whole
 from __future__ import annotations
 
 import base64
-import contextlib
 import http.client
 import io
 import os
 import re
 import shutil
-import tempfile
-import time
 import urllib.parse
-from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
@@ -25,6 +21,22 @@ import pytest
 from PIL import Image
 
 import viewdb
+from tests.browser import (
+    CHROMEDRIVER,
+    CHROMIUM,
+    choose,
+    drag_box,
+    gesture,
+    js,
+    message,
+    no_horizontal_scroll,
+    on_screen,
+    open_with_token,
+    screenshot_on_failure,
+    start_chromium,
+    upload,
+    wait,
+)
 from tests.serving import ServerProcess, multipart, request
 from viewdb.config import OverlayConfig
 from viewdb.http import models
@@ -281,13 +293,6 @@ def test_no_ui_leaves_out_the_page_only(served, monkeypatch):
 
 
 # ====================================================================== browser
-CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
-#: The machine has no internet: without these Chromium keeps calling home.
-CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
-WAIT = 180.0
-
-
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory):
     if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
@@ -295,88 +300,15 @@ def browser(tmp_path_factory):
         if os.environ.get("CI"):
             pytest.fail(why)
         pytest.skip(why)
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={tmp_path_factory.mktemp('chromium')}",
-                 "--window-size=1200,900"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(options=options, service=Service(executable_path=str(CHROMEDRIVER)))
-    driver.set_page_load_timeout(60)
+    driver = start_chromium(tmp_path_factory.mktemp("chromium"), (1200, 900))
     try:
         yield driver
     finally:
         driver.quit()
 
 
-@contextlib.contextmanager
-def screenshot_on_failure(driver, name: str) -> Iterator[None]:
-    """Save what the browser shows when the block fails (``$VIEWDB_SCREENSHOTS``, default
-    a folder in the temp dir), and say where."""
-    try:
-        yield
-    except BaseException:
-        folder = Path(os.environ.get("VIEWDB_SCREENSHOTS", Path(tempfile.gettempdir()) / "viewdb-screenshots"))
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}.png"
-        driver.save_screenshot(str(path))
-        print(f"screenshot of the failed page: {path}")
-        raise
-
-
-def wait(driver, condition, timeout: float = WAIT):
-    from selenium.webdriver.support.ui import WebDriverWait
-
-    return WebDriverWait(driver, timeout, poll_frequency=0.2).until(lambda d: condition(d))
-
-
-def js(driver, script: str, *args):
-    return driver.execute_script(script, *args)
-
-
 def open_page(driver, url: str) -> None:
-    """Load the page, giving it the token if it asks."""
-    from selenium.webdriver.common.by import By
-
-    driver.get(url + "/")
-    wait(driver, lambda d: js(d, "return document.readyState") == "complete")
-    wait(driver, lambda d: d.find_element(By.ID, "server").text or d.find_element(By.ID, "token-panel").is_displayed())
-    if driver.find_element(By.ID, "token-panel").is_displayed():
-        driver.find_element(By.ID, "token").send_keys(TOKEN)
-        driver.find_element(By.CSS_SELECTOR, "#token-form button").click()
-        wait(driver, lambda d: d.find_element(By.ID, "server").text)
-
-
-def upload(driver, path: Path) -> None:
-    from selenium.webdriver.common.by import By
-
-    field = driver.find_element(By.ID, "photo")
-    field.clear()
-    field.send_keys(str(path))
-    driver.find_element(By.ID, "go").click()
-
-
-def message(driver) -> str:
-    """The page's error message, once it shows one."""
-    from selenium.webdriver.common.by import By
-
-    wait(driver, lambda d: d.find_element(By.ID, "message").is_displayed()
-         and "error" in d.find_element(By.ID, "message").get_attribute("class"))
-    return driver.find_element(By.ID, "message").text
-
-
-def no_horizontal_scroll(driver) -> None:
-    width, scroll, widest = js(driver, """
-        const root = document.documentElement;
-        let widest = 0;
-        for (const node of document.querySelectorAll('body *')) {
-          const box = node.getBoundingClientRect();
-          if (box.width > 0) widest = Math.max(widest, box.right);
-        }
-        return [root.clientWidth, root.scrollWidth, widest];""")
-    assert scroll <= width and widest <= width + 0.5, (width, scroll, widest)
+    open_with_token(driver, url, TOKEN)
 
 
 def test_the_page_asks_for_the_token_once(browser, server):
@@ -407,21 +339,23 @@ def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo
         browser.set_window_size(1200, 900)
         open_page(browser, server.url)
         upload(browser, demo_photo)
-        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, "#ranking li"))
-        first = browser.find_element(By.CSS_SELECTOR, "#ranking li")
+        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, ".ranking li"))
+        first = browser.find_element(By.CSS_SELECTOR, ".ranking li")
         assert first.get_attribute("data-object") == "mug"
         assert "1. mug" in first.text and "pose: azimuth" in first.text
-        wait(browser, lambda d: js(d, "return document.getElementById('overlay-img').naturalWidth") > 0)
+        wait(browser, lambda d: js(d, "return document.querySelector('#layers img').naturalWidth") > 0)
         wait(browser, lambda d: js(d, "return document.getElementById('photo-img').naturalWidth") > 0)
         # every matched view's thumbnail arrived (fetched with the token)
-        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#ranking img')]"
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('.ranking img')]"
                                       ".every(i => i.naturalWidth > 0)"))
         assert "round trip" in browser.find_element(By.ID, "timing").text
+        # no prompt: one ranking, no object sections, no region outlines
+        assert not browser.find_elements(By.CSS_SELECTOR, ".found.several, #marks rect")
         # choosing another result shows its overlay, drawn on request
-        second = browser.find_elements(By.CSS_SELECTOR, "#ranking li")[1]
+        second = browser.find_elements(By.CSS_SELECTOR, ".ranking li")[1]
         second.click()
         assert second.get_attribute("aria-selected") == "true"
-        wait(browser, lambda d: js(d, "const i = document.getElementById('overlay-img');"
+        wait(browser, lambda d: js(d, "const i = document.querySelector('#layers img');"
                                       "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))
         browser.set_window_size(390, 844)
         wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
@@ -462,3 +396,165 @@ def test_the_catalogue_shows_every_object_and_turns_one(browser, server):
         assert "mirror" in browser.find_element(By.ID, "turntable-symmetry").text
         no_horizontal_scroll(browser)
         browser.find_element(By.CSS_SELECTOR, "#turntable .dialog-head button").click()
+
+
+# ---------------------------------------------------------------------- prompts on the page
+#: Three sample objects on a table, each seen off the database's grid: (name, azimuth,
+#: elevation) and where its render's top-left corner goes in the photo.
+TABLE = (("car", 40, 20), ("mug", 130, 25), ("marked_cube", 200, 35))
+TABLE_PLACES = [(10, 60), (170, 20), (310, 80)]
+TABLE_SIZE = (430, 200)
+
+
+@pytest.fixture(scope="module")
+def table(db, tmp_path_factory) -> dict[str, object]:
+    """A photo of three objects: a PNG, the same photo as a JPEG stored on its side with an
+    EXIF orientation (6: turn 90° clockwise to show), and each object's true mask."""
+    from viewdb.bench.photos import table_photo
+    from viewdb.recognition.image import load_image
+
+    photo, masks = table_photo([db.render(n, h, v) for n, h, v in TABLE], TABLE_SIZE, TABLE_PLACES)
+    folder = tmp_path_factory.mktemp("table")
+    png = folder / "table.png"
+    Image.fromarray(photo).save(png)
+    turned = folder / "table-on-its-side.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(photo).transpose(Image.Transpose.ROTATE_90).save(turned, quality=95, exif=exif)
+    assert load_image(turned).rgb.shape == photo.shape  # the server reads it upright
+    return {"png": png, "turned": turned, "masks": dict(zip((n for n, _, _ in TABLE), masks, strict=True))}
+
+
+def true_box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    ys, xs = np.nonzero(mask)
+    return int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
+
+
+def box_iou(a, b) -> float:
+    w = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    h = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    area = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1])
+    return w * h / (area - w * h)
+
+
+def answered_objects(driver) -> list[dict[str, object]]:
+    """Each object of the answer the page shows: its region and ranked objects."""
+    from selenium.webdriver.common.by import By
+
+    wait(driver, lambda d: d.find_elements(By.CSS_SELECTOR, ".found.several")
+         or d.find_element(By.ID, "message").get_attribute("class") == "error")
+    assert not driver.find_element(By.ID, "message").is_displayed(), driver.find_element(By.ID, "message").text
+    return js(driver, "return state.answer.objects.map(o => ({region: o.region, "
+                      "objects: o.results.map(r => r.object)}))")
+
+
+def test_boxes_dragged_on_a_turned_photo_ask_for_those_objects(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "boxes"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["turned"])
+        # the preview shows the photo upright, as the server reads it
+        assert (surface["photo_width"], surface["photo_height"]) == TABLE_SIZE
+        scale = surface["photo_width"] / surface["width"]  # photo pixels per CSS pixel
+        drawn = []
+        for name in ("mug", "car"):
+            x1, y1, x2, y2 = true_box(table["masks"][name])
+            drawn.append((x1 - 8, y1 - 8, x2 + 8, y2 + 8))
+            drag_box(browser, surface, drawn[-1])
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")) == 2
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert [o["objects"] for o in found] == [["mug"], ["car"]]
+        slack = 1.5 * scale + 1  # a CSS pixel of the preview, and rounding
+        for entry, box, name in zip(found, drawn, ("mug", "car"), strict=True):
+            sent = entry["region"]["prompt"]["box"]  # the box the request carried
+            assert np.allclose(sent, box, atol=slack), (sent, box)
+            cut = entry["region"]["box"]
+            assert cut[0] >= box[0] - slack and cut[1] >= box[1] - slack
+            assert cut[2] <= box[2] + slack and cut[3] <= box[3] + slack
+            assert box_iou(cut, true_box(table["masks"][name])) > 0.7, (name, cut)
+        # one section per object, its region outlined, its best result drawn in its pose
+        sections = browser.find_elements(By.CSS_SELECTOR, ".found.several")
+        assert [s.find_element(By.CSS_SELECTOR, ".ranking li").get_attribute("data-object") for s in sections] \
+            == ["mug", "car"]
+        assert "from the box" in sections[0].text and "Object 1" in sections[0].text
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.region")) == 2
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('#layers img')]"
+                                      ".map(i => !i.hidden && i.naturalWidth > 0)") == [True, True])
+        wait(browser, lambda d: js(d, "return [...document.querySelectorAll('.ranking img')]"
+                                      ".every(i => i.naturalWidth > 0)"))
+        # clearing the prompts clears the answer drawn for them
+        browser.find_element(By.ID, "clear-prompts").click()
+        assert not browser.find_elements(By.CSS_SELECTOR, "#marks rect, #layers img")
+        assert not browser.find_element(By.ID, "answers").is_displayed()
+
+
+def test_a_tap_with_a_finger_asks_for_the_object_under_it_at_phone_width(browser, server, table):
+    from scipy.ndimage import distance_transform_edt
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "tap"):
+        browser.set_window_size(390, 844)
+        wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        inside = distance_transform_edt(table["masks"]["mug"])
+        y, x = np.unravel_index(int(np.argmax(inside)), inside.shape)  # deep inside the mug
+        scrolled = js(browser, "return window.scrollY")
+        gesture(browser, [on_screen(surface, x + 0.5, y + 0.5)], kind="touch")
+        assert js(browser, "return window.scrollY") == scrolled
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks circle.prompt")) == 1
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert len(found) == 1 and found[0]["objects"] == ["mug"]
+        scale = surface["photo_width"] / surface["width"]
+        sent = found[0]["region"]["prompt"]["point"]
+        assert abs(sent[0] - x) <= scale + 1 and abs(sent[1] - y) <= scale + 1, (sent, (x, y))
+        assert box_iou(found[0]["region"]["box"], true_box(table["masks"]["mug"])) > 0.7
+        assert "from the point" in browser.find_element(By.CSS_SELECTOR, ".found.several").text
+        wait(browser, lambda d: js(d, "return document.querySelector('#layers img').naturalWidth") > 0)
+        no_horizontal_scroll(browser)
+
+
+def test_every_object_ticked_finds_each_one(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "every"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        drag_box(browser, surface, true_box(table["masks"]["car"]))
+        browser.find_element(By.ID, "every").click()  # prompts or every object, not both
+        assert not browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")
+        browser.find_element(By.ID, "k").clear()
+        browser.find_element(By.ID, "k").send_keys("1")
+        browser.find_element(By.ID, "go").click()
+        found = answered_objects(browser)
+        assert len(found) == 3 and all("prompt" not in o["region"] for o in found)
+        for name, mask in table["masks"].items():
+            assert max(box_iou(o["region"]["box"], true_box(mask)) for o in found) > 0.7, name
+        assert "found on its own" in browser.find_element(By.CSS_SELECTOR, ".found.several").text
+
+
+def test_a_degenerate_box_shows_a_message_and_the_server_stays_up(browser, server, table):
+    from selenium.webdriver.common.by import By
+
+    with screenshot_on_failure(browser, "degenerate-box"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        surface = choose(browser, table["png"])
+        start = on_screen(surface, 40, 100)
+        gesture(browser, [start, (start[0] + 60, start[1]), (start[0] + 120, start[1])])  # flat: no height
+        assert len(browser.find_elements(By.CSS_SELECTOR, "#marks rect.prompt")) == 1
+        browser.find_element(By.ID, "go").click()
+        text = message(browser)
+        assert "table.png" in text and "degenerate" in text and "box" in text, text
+        assert not browser.find_element(By.ID, "answers").is_displayed()
+        status, health = request(server.url, "GET", "/health", token=TOKEN)
+        assert status == 200 and health["pid"] in server.pids

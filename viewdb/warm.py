@@ -7,7 +7,8 @@ Compiling them takes tens of seconds; loading them from the cache takes millisec
 types a query passes, by doing what a user does on a throw-away catalogue: it ingests two
 generated meshes into a database in a temporary folder and queries a photo of one of
 them with every plan, with and without pose and with a gravity hint (the search over
-circular shifts). ``install.sh`` runs it, so an installed
+circular shifts), and draws a result over the photo (the overlay's scan conversion,
+:mod:`viewdb.recognition.raster`). ``install.sh`` runs it, so an installed
 viewdb never compiles during a query; :func:`kernel_report` tells what a process compiled.
 
 >>> report = warm_up()                                   # doctest: +SKIP
@@ -78,8 +79,9 @@ def _meshes(folder: Path) -> list[Path]:
 
 
 def warm_up(progress: Callable[[str], None] | None = None) -> KernelReport:
-    """Run every plan's query, with and without pose and with a gravity hint, on a
-    catalogue built in a temporary folder, so that each kernel a query uses is compiled
+    """Run every plan's query, with and without pose and with a gravity hint, and draw
+    an overlay, on a catalogue built in a temporary folder, so that each kernel a query
+    (and the web page) uses is compiled
     (or found) in the cache.
     Returns what the kernels did; ``progress`` hears each step."""
     from .api import open as open_db
@@ -101,4 +103,6 @@ def warm_up(progress: Callable[[str], None] | None = None) -> KernelReport:
                     db.query(photo, plan=plan, pose=pose, k=2)
                 say(f"querying (plan {plan}, with a gravity hint)")
                 db.query(photo, plan=plan, pose=False, k=2, roll=0.0)
+            say("drawing a result over its photo")
+            db.query(photo, k=1).overlay()  # the scan conversion's kernel
     return kernel_report()

@@ -17,12 +17,12 @@ Projection follows the pose's frame (:mod:`viewdb.pose.estimate`, public contrac
   mesh file's own coordinates (``centre + scale·normalised``), as a query with
   intrinsics reports it.
 
-The drawing is pure NumPy and OpenCV, no renderer: the triangles are scan-converted
-into a face-index image with a depth buffer (a pixel shows the nearest face whose
-projection holds its centre, as a GPU rasterises, at the drawn image's resolution), from
-which the outline, the visible creases and depth steps and the shading are read. The
-photo may be shrunk or enlarged first (:attr:`viewdb.config.OverlayConfig.max_side`,
-``min_side``).
+The drawing is NumPy, OpenCV and one numba kernel, no renderer: the triangles are
+scan-converted (:mod:`.raster`) into a face-index image with a depth buffer (a pixel
+shows the nearest face whose projection holds its centre, as a GPU rasterises, at the
+drawn image's resolution), from which the outline, the visible creases and depth steps
+and the shading are read. The photo may be shrunk or enlarged first
+(:attr:`viewdb.config.OverlayConfig.max_side`, ``min_side``).
 
 >>> layer = draw_overlay(photo, poses_from_json(result.to_dict()), db.mesh)  # doctest: +SKIP
 """
@@ -213,69 +213,20 @@ def _project(pose: OverlayPose, place: Placement, points: NDArray[np.float64],
 
 def _face_ids(proj: _Projection, faces: NDArray[np.int64], shape: tuple[int, int]) -> NDArray[np.int32]:
     """The index of the face seen at each pixel (−1: none), by a depth buffer: a pixel
-    belongs to the nearest face whose projection holds its centre."""
+    belongs to the nearest face whose projection holds its centre
+    (:func:`viewdb.recognition.raster.face_ids`)."""
+    from .raster import face_ids
+
     h, w = shape
-    ids = np.full(h * w, -1, dtype=np.int32)
     if len(faces) == 0:
-        return ids.reshape(h, w)
+        return np.full((h, w), -1, dtype=np.int32)
     tri = proj.uv[faces]
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     ok = proj.valid[faces].all(axis=1)
     ok &= (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= w - 1) & (lo[:, 1] <= h - 1)
     index = np.flatnonzero(ok)
-    tri, depth = tri[index], proj.key[faces[index]]
-    # the rows of pixel centres each face crosses, and where each row enters and leaves it;
-    # a centre on the face's right or bottom edge is left to its neighbour (a GPU's rule)
-    y0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)), 0, h).astype(np.int64)
-    y1 = np.clip(np.ceil(tri[:, :, 1].max(axis=1)) - 1, -1, h - 1).astype(np.int64)
-    rows = np.maximum(y1 - y0 + 1, 0)
-    piece = np.repeat(np.arange(len(tri)), rows)  # the face of each row
-    y = (y0[piece] + np.arange(len(piece)) - np.repeat(np.cumsum(rows) - rows, rows)).astype(np.float64)
-    left, right = _span(tri[piece], y)
-    x0 = np.clip(np.ceil(left), 0, w).astype(np.int64)
-    x1 = np.clip(np.ceil(right) - 1, -1, w - 1).astype(np.int64)
-    runs = np.maximum(x1 - x0 + 1, 0)
-    plane = _planes(tri, depth)[piece]
-    # per run: its first pixel, the depth there and the depth's step along the row
-    start = y.astype(np.int64) * w + x0
-    z0 = plane[:, 0] * x0 + plane[:, 1] * y + plane[:, 2]
-    step, face = plane[:, 0], index[piece].astype(np.int32)
-    zbuf = np.full(h * w, np.inf)
-    # the runs' pixels, a bounded number at a time: the nearest depth at each pixel, then
-    # the face that has it
-    ends = np.cumsum(runs)
-    first = 0
-    while first < len(runs):
-        last = max(int(np.searchsorted(ends, ends[first] - runs[first] + _CHUNK, side="right")), first + 1)
-        r = runs[first:last]
-        offset = np.arange(int(r.sum())) - np.repeat(np.cumsum(r) - r, r)
-        pix = np.repeat(start[first:last], r) + offset
-        z = np.repeat(z0[first:last], r) + np.repeat(step[first:last], r) * offset
-        np.minimum.at(zbuf, pix, z)
-        won = z <= zbuf[pix]
-        ids[pix[won]] = np.repeat(face[first:last], r)[won]
-        first = last
-    return ids.reshape(h, w)
-
-
-#: Pixels depth-tested at a time.
-_CHUNK = 1 << 20
-
-
-def _span(
-    tri: NDArray[np.float64], y: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Where the row ``y`` enters and leaves each triangle (n, 3, 2): ``(left, right)``."""
-    left = np.full(len(y), np.inf)
-    right = np.full(len(y), -np.inf)
-    for k in range(3):
-        p, q = tri[:, k], tri[:, (k + 1) % 3]
-        dy = q[:, 1] - p[:, 1]
-        crosses = ((p[:, 1] - y) * (q[:, 1] - y) <= 0) & (dy != 0)
-        x = p[:, 0] + (y - p[:, 1]) * (q[:, 0] - p[:, 0]) / np.where(dy != 0, dy, 1.0)
-        left = np.where(crosses, np.minimum(left, x), left)
-        right = np.where(crosses, np.maximum(right, x), right)
-    return left, right
+    tri = tri[index]
+    return face_ids(tri, _planes(tri, proj.key[faces[index]]), index, (h, w))
 
 
 def _planes(tri: NDArray[np.float64], depth: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -355,27 +306,28 @@ class _Canvas:
         """Paint ``colour`` (RGB 0–255: one for all, or (n, 3), one per covered pixel in
         ``np.nonzero`` order) where ``coverage`` (H, W; uint8 0–255 or bool) says, times
         ``opacity``."""
-        cover = np.asarray(coverage)
-        ys, xs = np.nonzero(cover)
-        if len(ys) == 0:
+        cover = np.asarray(coverage).reshape(-1)  # flat indices: half the cost of (ys, xs)
+        at = np.flatnonzero(cover)
+        if len(at) == 0:
             return
         scale = opacity / 255.0 if cover.dtype == np.uint8 else opacity
-        a = cover[ys, xs].astype(np.float32) * np.float32(scale)
+        a = cover[at].astype(np.float32) * np.float32(scale)
         c = np.asarray(colour, dtype=np.float32) / 255.0
-        self.rgb[ys, xs] = self.rgb[ys, xs] * (1.0 - a[:, None]) + c * a[:, None]
-        self.alpha[ys, xs] = self.alpha[ys, xs] * (1.0 - a) + a
+        rgb, alpha = self.rgb.reshape(-1, 3), self.alpha.reshape(-1)
+        rgb[at] = rgb[at] * (1.0 - a[:, None]) + c * a[:, None]
+        alpha[at] = alpha[at] * (1.0 - a) + a
 
     def over(self, photo: NDArray[np.uint8]) -> NDArray[np.uint8]:
         out = self.rgb * 255.0 + photo.astype(np.float32) * (1.0 - self.alpha[:, :, None])
         return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
     def rgba(self) -> NDArray[np.uint8]:
-        out = np.zeros((*self.alpha.shape, 4), dtype=np.uint8)
-        ys, xs = np.nonzero(self.alpha > 0)
-        a = self.alpha[ys, xs]
-        rgb = self.rgb[ys, xs] / a[:, None]
-        out[ys, xs] = np.clip(np.rint(np.concatenate([rgb, a[:, None]], axis=1) * 255.0), 0, 255)
-        return out
+        out = np.zeros((self.alpha.size, 4), dtype=np.uint8)
+        at = np.flatnonzero(self.alpha > 0)
+        a = self.alpha.reshape(-1)[at]
+        rgb = self.rgb.reshape(-1, 3)[at] / a[:, None]
+        out[at] = np.clip(np.rint(np.concatenate([rgb, a[:, None]], axis=1) * 255.0), 0, 255)
+        return out.reshape(*self.alpha.shape, 4)
 
 
 def _width(value: float, shape: tuple[int, int]) -> int:

@@ -11,7 +11,11 @@ const state = {
   catalogueLoaded: false,
   retry: null, // what to do again once a token is given
   turntable: null,
-  selected: null, // the result whose overlay is shown
+  photo: null, // the chosen file: {file, url, width, height} (its upright pixels; 0 until shown)
+  prompts: { boxes: [], points: [] }, // in the photo's pixels
+  drag: null, // the box being drawn
+  answer: null,
+  groups: [], // the answer's objects (one without prompts), each with its ranking and overlay
 };
 
 const $ = (id) => document.getElementById(id);
@@ -138,6 +142,13 @@ function megabytes(bytes) {
 }
 
 // ------------------------------------------------------------------ query
+// Prompts are drawn on the photo and sent in its own pixels, upright (its EXIF orientation
+// applied, as the server reads it): a box means the same pixels as `viewdb query --box`.
+const TAP = 8; // CSS pixels: a shorter drag is a tap, a point prompt
+const SVG_NS = "http://www.w3.org/2000/svg";
+// outline colours of the objects of one answer (the overlays are coloured by rank)
+const REGION_COLOURS = ["#00b7ff", "#ff4fa3", "#ffb300", "#8c6bff", "#00c48c", "#ff6d3a"];
+
 function say(text, isError = false) {
   const message = $("message");
   message.hidden = !text;
@@ -146,6 +157,187 @@ function say(text, isError = false) {
   message.setAttribute("role", isError ? "alert" : "status");
 }
 
+function svg(tag, attrs = {}, text = null) {
+  const node = document.createElementNS(SVG_NS, tag);
+  for (const [key, value] of Object.entries(attrs)) node.setAttribute(key, String(value));
+  if (text != null) node.textContent = text;
+  return node;
+}
+
+function plural(n, one, many) {
+  return `${n} ${n === 1 ? one : many}`;
+}
+
+function clamp(value, low, high) {
+  return Math.min(high, Math.max(low, value));
+}
+
+// ------------------------------------------------------------------ the photo and its prompts
+$("photo").addEventListener("change", () => choosePhoto($("photo").files[0]));
+
+function choosePhoto(file) {
+  if (state.photo) URL.revokeObjectURL(state.photo.url);
+  state.photo = null;
+  state.prompts = { boxes: [], points: [] };
+  clearAnswer();
+  say("");
+  $("work").hidden = !file;
+  if (!file) return;
+  const url = URL.createObjectURL(file);
+  const photo = { file, url, width: 0, height: 0 };
+  state.photo = photo;
+  const img = $("photo-img");
+  img.removeAttribute("width");
+  img.removeAttribute("height");
+  // the browser applies the EXIF orientation (image-orientation: from-image), as the server does
+  img.onload = () => {
+    if (state.photo !== photo) return;
+    photo.width = img.naturalWidth;
+    photo.height = img.naturalHeight;
+    showPrompts();
+  };
+  img.onerror = () => {
+    if (state.photo !== photo) return;
+    img.removeAttribute("src");
+    showPrompts();
+  };
+  img.alt = `${file.name || "The photo"}: drag a box around an object or tap it`;
+  img.src = url;
+  showPrompts();
+}
+
+function canDraw() {
+  return Boolean(state.photo && state.photo.width);
+}
+
+function showPrompts() {
+  const photo = state.photo;
+  const { boxes, points } = state.prompts;
+  const count = boxes.length + points.length;
+  $("stage").hidden = !canDraw();
+  $("clear-prompts").disabled = !count;
+  let hint = "";
+  if (photo && !photo.width) {
+    hint = "This browser cannot show this photo, so nothing can be drawn on it; Recognise sends it as it is.";
+  } else if ($("every").checked) {
+    hint = "Every object the photo shows is recognised (objects that touch count as one).";
+  } else if (!count) {
+    hint = "Drag a box around an object or tap it, several of each, to recognise each one; " +
+           "with nothing drawn the photo's one object is recognised.";
+  } else {
+    const what = [boxes.length ? plural(boxes.length, "box", "boxes") : "",
+                  points.length ? plural(points.length, "point", "points") : ""].filter(Boolean).join(" and ");
+    hint = `${what}: one object each, numbered as they will be answered.`;
+  }
+  $("prompt-hint").textContent = hint;
+  drawMarks();
+}
+
+function addPrompt(kind, values) {
+  state.prompts[kind].push(values);
+  $("every").checked = false; // prompts or every object, not both
+  clearAnswer(); // the answer on show was to other prompts
+  showPrompts();
+}
+
+$("clear-prompts").addEventListener("click", () => {
+  state.prompts = { boxes: [], points: [] };
+  clearAnswer();
+  showPrompts();
+});
+
+$("every").addEventListener("change", () => {
+  if ($("every").checked && state.prompts.boxes.length + state.prompts.points.length) {
+    state.prompts = { boxes: [], points: [] };
+    clearAnswer();
+  }
+  showPrompts();
+});
+
+// a drag draws a box, a tap a point: mouse, pen and touch alike (pointer events)
+const marks = $("marks");
+
+function photoPixel(event) {
+  const box = marks.getBoundingClientRect();
+  const { width, height } = state.photo;
+  return [clamp((event.clientX - box.left) / box.width * width, 0, width),
+          clamp((event.clientY - box.top) / box.height * height, 0, height)];
+}
+
+function spanBox(a, b) {
+  return [Math.min(a[0], b[0]), Math.min(a[1], b[1]), Math.max(a[0], b[0]), Math.max(a[1], b[1])];
+}
+
+marks.addEventListener("pointerdown", (event) => {
+  if (!canDraw() || !event.isPrimary || (event.pointerType === "mouse" && event.button !== 0)) return;
+  event.preventDefault();
+  marks.setPointerCapture(event.pointerId);
+  const start = photoPixel(event);
+  state.drag = { id: event.pointerId, x: event.clientX, y: event.clientY, start,
+                 shape: svg("rect", { class: "drawing", x: start[0], y: start[1], width: 0, height: 0 }) };
+  marks.append(state.drag.shape);
+});
+
+marks.addEventListener("pointermove", (event) => {
+  const drag = state.drag;
+  if (!drag || drag.id !== event.pointerId) return;
+  const [x1, y1, x2, y2] = spanBox(drag.start, photoPixel(event));
+  for (const [key, value] of Object.entries({ x: x1, y: y1, width: x2 - x1, height: y2 - y1 })) {
+    drag.shape.setAttribute(key, String(value));
+  }
+});
+
+marks.addEventListener("pointerup", (event) => {
+  const drag = state.drag;
+  if (!drag || drag.id !== event.pointerId) return;
+  state.drag = null;
+  drag.shape.remove();
+  const { width, height } = state.photo;
+  if (Math.hypot(event.clientX - drag.x, event.clientY - drag.y) < TAP) {
+    // the pixel tapped
+    addPrompt("points", [clamp(Math.floor(drag.start[0]), 0, width - 1), clamp(Math.floor(drag.start[1]), 0, height - 1)]);
+  } else {
+    addPrompt("boxes", spanBox(drag.start, photoPixel(event)).map(Math.round));
+  }
+});
+
+marks.addEventListener("pointercancel", () => {
+  if (state.drag) state.drag.shape.remove();
+  state.drag = null;
+});
+
+function drawMarks() {
+  marks.replaceChildren();
+  if (!canDraw()) return;
+  const { width, height } = state.photo;
+  marks.setAttribute("viewBox", `0 0 ${width} ${height}`);
+  const side = Math.max(width, height);
+  const font = side / 26;
+  const label = (text, x, y, attrs = {}) => svg("text", {
+    x: clamp(x, 0, width - font), y: clamp(y, font, height), "font-size": font, ...attrs }, text);
+  const { boxes, points } = state.prompts;
+  boxes.forEach(([x1, y1, x2, y2], i) => {
+    marks.append(svg("rect", { class: "prompt", x: x1, y: y1, width: x2 - x1, height: y2 - y1 }),
+                 label(String(i + 1), x1 + font * 0.25, y1 + font, { class: "prompt-label" }));
+  });
+  const radius = side / 80;
+  points.forEach(([x, y], j) => {
+    marks.append(svg("circle", { class: "prompt", cx: x + 0.5, cy: y + 0.5, r: radius }),
+                 svg("circle", { class: "prompt-dot", cx: x + 0.5, cy: y + 0.5, r: radius / 4 }),
+                 label(String(boxes.length + j + 1), x + radius * 1.4, y - radius * 0.6, { class: "prompt-label" }));
+  });
+  // an answer's objects: each cut-out's bounding box
+  (state.groups || []).forEach((group) => {
+    if (!group.region) return;
+    const [x1, y1, x2, y2] = group.region.box;
+    marks.append(svg("rect", { class: "region", x: x1, y: y1, width: x2 - x1, height: y2 - y1,
+                               stroke: group.colour, "data-object": group.index }),
+                 label(String(group.index + 1), x1 + font * 0.25, y2 - font * 0.25,
+                       { class: "region-label", fill: group.colour }));
+  });
+}
+
+// ------------------------------------------------------------------ recognise
 $("query-form").addEventListener("submit", (event) => {
   event.preventDefault();
   recognise();
@@ -161,15 +353,25 @@ async function recognise() {
   form.append("photo", file, file.name || "photo.jpg");
   form.append("plan", $("plan").value);
   form.append("k", $("k").value || "3");
+  const { boxes, points } = state.prompts;
+  for (const box of boxes) form.append("box", box.join(","));
+  for (const point of points) form.append("point", point.join(","));
+  const every = $("every").checked;
+  if (every) form.append("all", "true");
+  if (!state.photo || state.photo.file !== file) choosePhoto(file);
+  const photo = state.photo;
+  const sent = { prompts: boxes.length + points.length, width: photo ? photo.width : 0, height: photo ? photo.height : 0 };
   $("go").disabled = true;
-  $("result").hidden = true;
-  say(`Recognising ${file.name || "the photo"} (${megabytes(file.size)})…`);
+  clearAnswer();
+  const what = every ? "every object" : sent.prompts ? plural(sent.prompts, "object", "objects") : "the object";
+  say(`Recognising ${what} in ${file.name || "the photo"} (${megabytes(file.size)})…`);
   const started = performance.now();
   try {
     const response = await api("query", { method: "POST", body: form });
     const answer = await response.json();
+    if (state.photo !== photo) return; // another photo was chosen meanwhile
     say("");
-    showAnswer(answer, performance.now() - started);
+    showAnswer(answer, performance.now() - started, sent);
   } catch (error) {
     if (error instanceof NeedsToken) {
       state.retry = recognise;
@@ -195,71 +397,135 @@ function degrees(value) {
   return value == null ? "–" : `${Number(value).toFixed(1)}°`;
 }
 
-function showAnswer(answer, roundTripMs) {
-  const results = answer.results || [];
-  $("photo-img").src = answer.photo.src;
-  $("photo-img").width = answer.photo.width;
-  $("photo-img").height = answer.photo.height;
-  const ranking = $("ranking");
-  ranking.replaceChildren();
-  if (!results.length) say("Nothing in the catalogue matched this photo.", true);
-  results.forEach((result, i) => {
-    const thumb = el("img", { alt: `${result.object}, matched view`, width: 72, height: 72 });
-    showPicture(thumb, result.thumbnail);
-    const view = result.view;
-    const pose = result.pose;
-    const facts = [
-      `distance ${number(result.distance)} · score ${number(result.score)}`,
-      `colour ${number(result.colour_distance)} · shape fit ${number(result.shape_fit)}`,
-      `matched view ${degrees(view.azimuth)}, ${degrees(view.elevation)}${view.mirrored ? " (mirrored)" : ""}`,
-      pose ? `pose: azimuth ${degrees(pose.azimuth)}, elevation ${degrees(pose.elevation)}, ` +
-             `turn ${degrees(pose.inplane)} (${pose.method}${pose.method === "sift" ? `, ${pose.inliers} inliers` : ""})`
-           : `no pose${result.pose_error ? `: ${result.pose_error}` : ""}`,
-    ];
-    const item = el("li", { "aria-selected": "false", tabindex: "0", "data-object": result.object,
-                            onclick: () => select(answer, i), onkeydown: (e) => { if (e.key === "Enter") select(answer, i); } },
-      thumb,
-      el("div", {},
-        el("div", { class: "name" }, el("span", { class: "swatch", style: { background: result.colour } }),
-           `${result.rank}. ${result.object}`),
-        ...facts.map((text) => el("div", { class: "facts", text }))));
-    ranking.append(item);
-  });
-  showTiming(answer.timing_ms, roundTripMs);
-  $("result").hidden = false;
-  if (results.length) select(answer, 0);
+function caption(text) {
+  $("caption").hidden = !text;
+  $("caption").textContent = text;
 }
 
-function select(answer, index) {
-  const result = answer.results[index];
-  const items = $("ranking").children;
+function clearAnswer() {
+  state.answer = null;
+  state.groups = [];
+  $("layers").replaceChildren();
+  $("answers").replaceChildren();
+  $("answers").hidden = true;
+  $("time-block").hidden = true;
+  caption("");
+  drawMarks();
+}
+
+// ------------------------------------------------------------------ the answer
+function showAnswer(answer, roundTripMs, sent) {
+  const photo = answer.photo;
+  const img = $("photo-img");
+  img.onload = img.onerror = null;
+  img.src = photo.src; // the photo as the server read it: the overlays are drawn on it
+  img.width = photo.width;
+  img.height = photo.height;
+  img.alt = `${answer.image} as the server read it`;
+  if (sent.prompts && (sent.width !== photo.source_width || sent.height !== photo.source_height)) {
+    // this browser turned the photo otherwise than its EXIF orientation says
+    say(`This browser showed the photo at ${sent.width}×${sent.height} pixels but it is ` +
+        `${photo.source_width}×${photo.source_height} upright, so the boxes and points missed their objects; ` +
+        "draw them again on the photo as it is shown now.", true);
+    state.prompts = { boxes: [], points: [] };
+  }
+  state.photo.width = photo.source_width;
+  state.photo.height = photo.source_height;
+  state.answer = answer;
+  const several = Boolean(answer.objects);
+  state.groups = several
+    ? answer.objects.map((entry, i) => ({ index: i, region: entry.region, segmentation: entry.segmentation,
+                                          results: entry.results, colour: REGION_COLOURS[i % REGION_COLOURS.length] }))
+    : [{ index: 0, region: null, results: answer.results || [], colour: null }];
+  if (!state.groups.some((group) => group.results.length)) say("Nothing in the catalogue matched this photo.", true);
+  $("answers").replaceChildren(...state.groups.map((group) => objectSection(group, several)));
+  $("layers").replaceChildren(...state.groups.map((group) => {
+    group.layer = el("img", { class: "layer", alt: several ? `Object ${group.index + 1}'s result drawn in its pose`
+                                                           : "The selected result's mesh drawn in its pose" });
+    group.layer.hidden = true;
+    return group.layer;
+  }));
+  showTiming(answer.timing_ms, roundTripMs);
+  $("answers").hidden = false;
+  $("time-block").hidden = false;
+  showPrompts();
+  for (const group of state.groups) if (group.results.length) select(group, 0, !several);
+  if (several) caption(`${plural(state.groups.length, "object", "objects")}, each with its best result in its pose`);
+}
+
+function regionText(group) {
+  const prompt = group.region.prompt;
+  const from = !prompt ? "found on its own"
+    : prompt.box ? `from the box ${prompt.box.map((v) => Math.round(v)).join(", ")}`
+    : `from the point ${prompt.point.map((v) => Math.round(v)).join(", ")}`;
+  return `${from} · cut out ${group.region.area.toLocaleString("en")} pixels within ${group.region.box.join(", ")}`;
+}
+
+function objectSection(group, several) {
+  group.list = el("ol", { class: "ranking" }, ...group.results.map((result, i) => resultItem(group, result, i)));
+  if (!several) return el("section", { class: "found" }, group.list);
+  return el("section", { class: "found several", "data-index": String(group.index) },
+    el("h3", {}, el("span", { class: "tag", style: { background: group.colour }, text: String(group.index + 1) }),
+       `Object ${group.index + 1}`),
+    el("p", { class: "facts", text: regionText(group) }),
+    group.results.length ? group.list : el("p", { class: "muted", text: "Nothing in the catalogue matched this object." }));
+}
+
+function resultItem(group, result, i) {
+  const thumb = el("img", { alt: `${result.object}, matched view`, width: 72, height: 72 });
+  showPicture(thumb, result.thumbnail);
+  const view = result.view;
+  const pose = result.pose;
+  const facts = [
+    `distance ${number(result.distance)} · score ${number(result.score)}`,
+    `colour ${number(result.colour_distance)} · shape fit ${number(result.shape_fit)}`,
+    `matched view ${degrees(view.azimuth)}, ${degrees(view.elevation)}${view.mirrored ? " (mirrored)" : ""}`,
+    pose ? `pose: azimuth ${degrees(pose.azimuth)}, elevation ${degrees(pose.elevation)}, ` +
+           `turn ${degrees(pose.inplane)} (${pose.method}${pose.method === "sift" ? `, ${pose.inliers} inliers` : ""})`
+         : `no pose${result.pose_error ? `: ${result.pose_error}` : ""}`,
+  ];
+  return el("li", { "aria-selected": "false", tabindex: "0", "data-object": result.object,
+                    onclick: () => select(group, i), onkeydown: (e) => { if (e.key === "Enter") select(group, i); } },
+    thumb,
+    el("div", {},
+      el("div", { class: "name" }, el("span", { class: "swatch", style: { background: result.colour } }),
+         `${result.rank}. ${result.object}`),
+      ...facts.map((text) => el("div", { class: "facts", text }))));
+}
+
+function select(group, index, announce = true) {
+  const answer = state.answer;
+  const result = group.results[index];
+  const items = group.list.children;
   for (let i = 0; i < items.length; i++) items[i].setAttribute("aria-selected", String(i === index));
-  const overlay = $("overlay-img");
-  state.selected = result;
+  const layer = group.layer;
+  const who = `${group.region ? `Object ${group.index + 1}: ` : ""}${result.rank}. ${result.object}`;
+  const tell = (text) => { if (announce) caption(text); };
+  group.selected = result;
   if (!result.pose) {
-    overlay.hidden = true;
-    overlay.removeAttribute("src");
-    $("caption").textContent = `${result.rank}. ${result.object}: no pose`;
+    layer.hidden = true;
+    layer.removeAttribute("src");
+    tell(`${who}: no pose`);
     return;
   }
-  $("caption").textContent = `${result.rank}. ${result.object} drawn in its pose`;
   if (result.overlay) {
-    overlay.hidden = false;
-    overlay.src = result.overlay;
+    layer.hidden = false;
+    layer.src = result.overlay;
+    tell(`${who} drawn in its pose`);
     return;
   }
-  // only the best result's overlay comes with the answer; the server draws the others on request
-  overlay.hidden = true;
-  $("caption").textContent = `Drawing ${result.object}…`;
+  // only each object's best posed result comes with its overlay; the server draws the others on request
+  layer.hidden = true;
+  tell(`Drawing ${result.object}…`);
   const body = JSON.stringify({ result, width: answer.photo.source_width, height: answer.photo.source_height });
   api("overlay", { method: "POST", body, headers: { "Content-Type": "application/json" } })
     .then((response) => response.blob())
     .then((blob) => {
       result.overlay = URL.createObjectURL(blob);
-      if (state.selected === result) select(answer, index);
+      if (state.answer === answer && group.selected === result) select(group, index, announce);
     })
     .catch((error) => {
-      if (!(error instanceof NeedsToken)) $("caption").textContent = `${result.object} could not be drawn: ${error.message}`;
+      if (!(error instanceof NeedsToken)) caption(`${result.object} could not be drawn: ${error.message}`);
     });
 }
 
