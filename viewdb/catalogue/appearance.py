@@ -213,6 +213,19 @@ class Appearance:
                           np.ascontiguousarray(last - self.edge_points[::-1]),
                           np.ascontiguousarray(self.edge_theta[::-1]), self.signature)
 
+    def mirrored(self, azimuth: float, elevation: float) -> Appearance:
+        """The appearance of view ``(azimuth, elevation)`` whose render is this one's
+        mirrored left to right (:func:`viewdb.catalogue.skimming.image_twins`): the images
+        mirrored, an edge's direction θ becoming π − θ (level ``L − 1 − l``); its edge
+        pixels in row-major order."""
+        last = self.image_size - 1
+        xs, ys = last - self.edge_points[:, 0], self.edge_points[:, 1]
+        order = np.lexsort((xs, ys))
+        points = np.stack([xs[order], ys[order]], axis=1).astype(np.int32)
+        theta = (THETA_LEVELS - 1 - self.edge_theta[order]).astype(np.uint8)
+        return Appearance(azimuth, elevation, np.ascontiguousarray(self.mask[:, ::-1]), points, theta,
+                          self.signature)
+
 
 def _quantised_signature(signature: NDArray[np.float32]) -> NDArray[np.uint16]:
     top = float(signature.max()) if signature.size else 0.0
