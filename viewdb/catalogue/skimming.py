@@ -519,8 +519,14 @@ def image_twins(symmetry: Symmetric, gap: float, h: float, v: float) -> list[tup
     gives the camera ``g·C`` (the same image), a reflection ``g·C·diag(−1, 1, 1)`` (the
     image mirrored), and either times ``diag(−1, −1, 1)`` the image turned by 180°. The
     shaded render of a mesh that has the symmetry, and no colour that breaks it, is then
-    the same up to rasterisation ties (the head-light moves with the camera)."""
+    the same up to rasterisation ties (the head-light moves with the camera).
+
+    Only the elements that keep the vertical axis are used (turns about it, mirrors
+    through vertical planes): a symmetry is verified on silhouettes, which do not see
+    what one that swaps top and bottom would change inside the outline (a mug's
+    opening, seen from above, is not its base seen from below)."""
     mats = _elements(tuple(canonical_generator(g) for g in symmetry.generators))
+    mats = mats[np.abs(mats[:, 1, 1] - 1.0) < 1e-9]  # g·e_y = e_y: the vertical axis kept
     det = np.sign(np.linalg.det(mats))
     cams = mats @ pose_rotation(h, v)
     cams[det < 0] = cams[det < 0] @ _MIRROR_X
