@@ -447,7 +447,8 @@ def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, mes
 @given(st.sampled_from(("l_bracket", "car", "chair")), st.integers(0, 11), st.integers(0, 11))
 def test_a_mirrored_appearance_is_that_of_the_mirrored_render(meshes, name, i, j):
     """Appearance.mirrored (its edges' directions θ → π − θ) against the appearance made
-    from the render mirrored left to right (independently: Canny on the mirrored image)."""
+    from the render mirrored left to right (independently: Canny on the mirrored image,
+    whose ties put some edge pixels one pixel over)."""
     from viewdb.catalogue.render import RenderedView
 
     view = get_renderer(RenderConfig(image_size=96)).render(meshes[name], 30.0 * i, 30.0 * j)
@@ -461,8 +462,10 @@ def test_a_mirrored_appearance_is_that_of_the_mirrored_render(meshes, name, i, j
                           np.arange(len(derived.edge_points)))  # row-major, as records are
     ours = {tuple(p): t for p, t in zip(derived.edge_points, derived.edge_theta, strict=True)}
     theirs = {tuple(p): t for p, t in zip(direct.edge_points, direct.edge_theta, strict=True)}
+    for a, b in ((ours, theirs), (theirs, ours)):  # Canny's ties: each within a pixel of the other
+        near = {(x + dx, y + dy) for x, y in b for dx in (-1, 0, 1) for dy in (-1, 0, 1)}
+        assert sum(p in near for p in a) >= 0.95 * len(a) - 2
     same = set(ours) & set(theirs)
-    assert len(same) >= 0.95 * max(len(theirs), 1) - 2
     levels = np.array([abs(int(ours[p]) - int(theirs[p])) for p in same])
     gap = np.minimum(levels, THETA_LEVELS - levels)  # directions modulo π wrap
     assert len(gap) == 0 or (gap <= 1).mean() >= 0.98

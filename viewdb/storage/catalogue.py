@@ -96,6 +96,9 @@ class StoredCatalogue:
         self._store = store
         self.config = config
         self.stored_appearance = stored_appearance
+        #: Whether a view without a record takes an image twin's (:meth:`_symmetric_appearance`);
+        #: False renders it instead (to measure what that saves).
+        self.image_twins = True
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._renders: OrderedDict[tuple[str, float, float], RenderedView] = OrderedDict()
@@ -265,7 +268,7 @@ class StoredCatalogue:
         render is this one's mirrored or turned by the object's symmetry
         (:func:`~viewdb.catalogue.skimming.image_twins`), for a mesh without colour of its
         own (a texture need not share the symmetry of the shape); else None."""
-        symmetry = self.object(name).symmetry
+        symmetry = self.object(name).symmetry if self.image_twins else None
         if symmetry is None or not symmetry.generators:
             return None
         twins = image_twins(symmetry, self.config.gap, azimuth, elevation)
