@@ -47,6 +47,7 @@ from viewdb.bench.photos import decoded_photo, photo_series
 from viewdb.config import PosingConfig
 from viewdb.pose.estimate import PoseConfig
 from viewdb.pose.matched import pose_matches
+from viewdb.pose.views import QueryView
 from viewdb.recognition.pipeline import segment_query
 from viewdb.search.plans import Candidate
 
@@ -130,15 +131,19 @@ def run_way(path: str, inputs, posing: PosingConfig, twins: bool) -> list[dict]:
             try:
                 return render(*args, **kwargs)
             finally:
-                SPENT["renders"] += time.perf_counter() - start
+                SPENT["rendering"] += time.perf_counter() - start
 
         catalogue.render = counted
         appearance = catalogue.appearance
         catalogue.appearance = timed("appearance", appearance)
-        _, _, view, match, curve = inputs[0]
-        pose_matches(catalogue, view, [match], None, PoseConfig(), [curve], posing=posing)  # warm
+        _, _, segmented, match, curve = inputs[0]
+        warm = QueryView(segmented.color, segmented.mask, segmented.ignore)
+        pose_matches(catalogue, warm, [match], None, PoseConfig(), [curve], posing=posing)
         rows = []
-        for kind, spec, view, match, curve in inputs:
+        for kind, spec, segmented, match, curve in inputs:
+            # a fresh query view: what a query derives from the photo (its SIFT, outline,
+            # edges) is not carried over from another way
+            view = QueryView(segmented.color, segmented.mask, segmented.ignore)
             SPENT.clear()
             renders[0] = 0
             wall, cpu = time.perf_counter(), time.process_time()
@@ -157,7 +162,7 @@ def report(way: str, kind: str, rows: list[dict]) -> None:
     errors = [r["error"] for r in rows if not math.isnan(r["error"])]
     methods = [r["method"] for r in rows]
     renders = float(np.mean([r["renders"] for r in rows]))
-    parts = [label for label, _, _ in PARTS] + ["appearance", "renders"]
+    parts = [label for label, _, _ in PARTS] + ["appearance", "rendering"]
     split = ", ".join(f"{p} {statistics.median(r.get(p, 0.0) for r in rows):.1f}" for p in parts)
     print(f"{way:8s} {kind:9s} n={len(rows):3d}  wall median {statistics.median(wall):6.1f} ms, "
           f"p95 {np.percentile(wall, 95):6.1f}; CPU median {statistics.median(cpu):6.1f}, "

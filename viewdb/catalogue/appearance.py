@@ -24,6 +24,7 @@ appearance (:meth:`Appearance.turned`). One record per viewing direction serves 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -186,6 +187,16 @@ class Appearance:
     #: The colour signature as uint16 (BINS, BINS), largest bin :data:`SIGNATURE_TOP`;
     #: None when the mesh has no colour of its own.
     signature: NDArray[np.uint16] | None = field(repr=False)
+    #: What the pose derives from the record (its outline), kept with it: a catalogue
+    #: keeps its records, and a query fits the same views several times. So a record's
+    #: arrays must not change once used.
+    _derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key: Any, make: Callable[[], Any]) -> Any:
+        """``make()``, computed once per ``key`` for this record."""
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     @property
     def image_size(self) -> int:
