@@ -710,7 +710,7 @@ class PosingConfig:
     #: Whether, when the stored candidates give no SIFT pose, the SIFT features of the
     #: candidates the file does not store (pruned by skimming: e.g. the side opposite a
     #: stored view) are made from renders of the mesh ("always", 3-30 ms a view) or not
-    #: ("never": the outlines decide). Measured on 92 synthetic photos (docs/pose-latency.md):
+    #: ("never": the outlines decide). Measured on 92 synthetic photos (docs/appearance.md):
     #: the renders gave a SIFT pose once, and that pose was further off than the outline's.
     regenerate: str = "never"
 
