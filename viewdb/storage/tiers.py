@@ -208,6 +208,8 @@ class StoredTier:
             raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
         self.conn = conn
         self.tier = tier
+        #: whether the arrays are a tier file's (else decoded from the groups)
+        self.mapped = mapped is not None
         self.index = FourierIndex.open(conn, tier)
         columns = _group_columns(conn, tier) if mapped is None else mapped
         self._ids = columns["ids"]
