@@ -23,7 +23,7 @@ loaded into its numba cache by one uncounted run first). Printed per tree, media
 ``import`` (NumPy, ``import viewdb`` and the client tier's modules), ``open + 1st half``
 (``viewdb.open(read_only=True)``, which imports the rest of the facade, and one client half
 at k = 5: the issue's figure), their sum, and the process's wall time from launch to exit
-as the parent sees it, and the CPU time it used (user + system: what the machine's other
+as the parent sees it; then the same as CPU time (user + system; what the machine's other
 jobs disturb least).
 """
 
@@ -55,16 +55,17 @@ FORMATS = {"float32": ClientFileConfig(curve_bits=0, page_size=4096), "compact":
 
 CHILD = """
 import sys, time, json
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 import numpy as np
 import viewdb
 from viewdb.recognition.client_tier import ClientTier
-t1 = time.perf_counter()
+t1, c1 = time.perf_counter(), time.process_time()
 db = viewdb.open(sys.argv[1], read_only=True)
 q = np.array(json.loads(sys.argv[2]))
 ClientTier(db._catalogue).candidates(q, 5)
-t2 = time.perf_counter()
-print(json.dumps({"import_ms": (t1 - t0) * 1e3, "open_search_ms": (t2 - t1) * 1e3}))
+t2, c2 = time.perf_counter(), time.process_time()
+print(json.dumps({"import_ms": (t1 - t0) * 1e3, "open_search_ms": (t2 - t1) * 1e3,
+                  "import_cpu_ms": (c1 - c0) * 1e3, "open_search_cpu_ms": (c2 - c1) * 1e3}))
 """
 
 
@@ -103,11 +104,12 @@ def cold_start(path: Path, runs: int, baseline: Path | None) -> None:
         for name, tree in trees.items():
             runs_of[name].append(child(path, curve, tree))
     print(f"{path}: {path.stat().st_size / 1e6:.2f} MB; median of {runs} fresh processes per tree")
-    print("tree      import_ms  open+1st_ms  sum_ms  process_ms  process_cpu_ms")
+    print("tree      import_ms  open+1st_ms  sum_ms  process_ms   CPU: import  open+1st  process")
     for name, out in runs_of.items():
         med = {key: statistics.median(o[key] for o in out) for key in out[0]}
         print(f"{name:<9} {med['import_ms']:9.0f} {med['open_search_ms']:12.0f} {med['total_ms']:7.0f} "
-              f"{med['process_ms']:11.0f} {med['process_cpu_ms']:15.0f}   ({trees[name]})")
+              f"{med['process_ms']:11.0f} {med['import_cpu_ms']:13.0f} {med['open_search_cpu_ms']:9.0f} "
+              f"{med['process_cpu_ms']:8.0f}   ({trees[name]})")
 
 
 def warm(path: Path, curves: list[np.ndarray]) -> tuple[float, float]:
