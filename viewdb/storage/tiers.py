@@ -474,10 +474,16 @@ class TierReader:
         return out
 
     def object_versions(self) -> dict[str, str]:
-        """``object name -> content hash`` of every object (inside :meth:`snapshot`; read
-        once per version of the file, like the tiers)."""
+        """``object name -> version`` of every object (inside :meth:`snapshot`; read once
+        per version of the file, like the tiers): its content hash, the file's
+        :meth:`~viewdb.config.BuildConfig.curve_key` and whether its views were skimmed,
+        so a client's bounds count only where both files hold the same curves."""
         if self._versions is None:
-            self._versions = dict(self.conn.execute("SELECT name, content_hash FROM objects"))
+            row = self.conn.execute("SELECT value FROM settings WHERE key = 'build'").fetchone()
+            key = "" if row is None else BuildConfig.from_dict(json.loads(row[0])).curve_key()
+            self._versions = {
+                name: f"{content_hash}{key}{'s' if skimmed else 'a'}" for name, content_hash, skimmed
+                in self.conn.execute("SELECT name, content_hash, skimmed FROM objects")}
         return self._versions
 
     def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:
