@@ -448,7 +448,8 @@ def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, mes
 def test_a_mirrored_appearance_is_that_of_the_mirrored_render(meshes, name, i, j):
     """Appearance.mirrored (its edges' directions θ → π − θ) against the appearance made
     from the render mirrored left to right (independently: Canny on the mirrored image,
-    whose ties put some edge pixels one pixel over)."""
+    whose ties put some edge pixels a pixel over, or keep or drop a weak chain), and the
+    shape fit each gives a query."""
     from viewdb.catalogue.render import RenderedView
 
     view = get_renderer(RenderConfig(image_size=96)).render(meshes[name], 30.0 * i, 30.0 * j)
@@ -462,9 +463,14 @@ def test_a_mirrored_appearance_is_that_of_the_mirrored_render(meshes, name, i, j
                           np.arange(len(derived.edge_points)))  # row-major, as records are
     ours = {tuple(p): t for p, t in zip(derived.edge_points, derived.edge_theta, strict=True)}
     theirs = {tuple(p): t for p, t in zip(direct.edge_points, direct.edge_theta, strict=True)}
-    for a, b in ((ours, theirs), (theirs, ours)):  # Canny's ties: each within a pixel of the other
+    for a, b in ((ours, theirs), (theirs, ours)):  # Canny's ties: each mostly within a pixel of the other
         near = {(x + dx, y + dy) for x, y in b for dx in (-1, 0, 1) for dy in (-1, 0, 1)}
-        assert sum(p in near for p in a) >= 0.95 * len(a) - 2
+        assert sum(p in near for p in a) >= 0.8 * len(a) - 2
+    query = _query(meshes[name], 30.0 * i + 7.0, 30.0 * j + 5.0)  # a photo off the grid
+    rendered = CandidateView(1.0, 2.0, False, *NO_FEATURES, flipped.mask, 96, 1.0, flipped.color)
+    stored = CandidateView(1.0, 2.0, False, *NO_FEATURES, derived.mask, 96, 1.0, None, derived)
+    if flipped.mask.any():
+        assert shape_fit(query, stored) == pytest.approx(shape_fit(query, rendered), abs=0.01)
     same = set(ours) & set(theirs)
     levels = np.array([abs(int(ours[p]) - int(theirs[p])) for p in same])
     gap = np.minimum(levels, THETA_LEVELS - levels)  # directions modulo π wrap
