@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
+import viewdb.http  # noqa: F401  (viewdb.http.* below; a lazy subpackage)
 from tests.conftest import mixed_query_curves
 from viewdb.catalogue.features import mirror_curve
 from viewdb.search.bounds import dtw
