@@ -19,7 +19,9 @@ every photo is queried with it:
   in-plane turns searched one by one (``RecognitionConfig(turn_search="separate")``)
   instead of as one stack. With both a set and its ``-separate`` twin in the run, the
   two answers are compared photo by photo, and the search stages (``client`` + ``server``)
-  paired.
+  paired; then each photo's 12 turns are searched both ways again, one right after the
+  other (alternating which goes first), and the CPU time of each search is given: the
+  steadier figure on a shared machine.
 
 Printed per set: the median and p95 wall time of a whole query, the median of each stage
 (``timing_ms``), rank-1 and rank-5 (the photo's own object). With ``--brute N`` the first N
@@ -35,13 +37,16 @@ import argparse
 import os
 import statistics
 import time
+from dataclasses import replace
 
 import numpy as np
 
 import viewdb
 from viewdb.bench.photos import decoded_photo, photo_series
 from viewdb.config import RecognitionConfig
+from viewdb.recognition.client_tier import ClientTier
 from viewdb.recognition.pipeline import segment_query
+from viewdb.recognition.retrieval import merge, recognise_curve
 from viewdb.search.refine import scan_all
 
 CONFIGS = {
@@ -120,6 +125,40 @@ def brute_force(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], band: i
     return out
 
 
+def search_cpu(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], k: int, plan: str,
+               band: int = 6) -> tuple[list[float], list[float], int]:
+    """Per photo, the CPU milliseconds of searching its 12 turns as one stack and one by one
+    (each bounded by the turns before, as the pipeline does), back to back; and on how many
+    photos the two agree."""
+    samples = db.config.features.curve_samples
+    server, client = db.server_tier(), ClientTier(db._catalogue)  # the file's own sparse tier (cs1)
+
+    def stack(curves):
+        found = recognise_curve(np.stack([c for _, c in curves]), k, band, plan, server, client)
+        return [(replace(c, curve_index=None), curves[c.curve_index][0]) for c in found.results]
+
+    def separate(curves):
+        per_curve = []
+        for angle, curve in curves:
+            prior = [c for c, _ in merge(per_curve, k)]
+            per_curve.append((angle, recognise_curve(curve, k, band, plan, server, client, prior).results))
+        return merge(per_curve, k)
+
+    stacked, one_by_one, same = [], [], 0
+    for i, (_, photo) in enumerate(photos):
+        try:
+            curves = segment_query(photo, samples, 12).curves
+        except viewdb.ViewDBError:
+            continue
+        answers = {}
+        for how in ((stack, separate) if i % 2 else (separate, stack)):
+            start = time.thread_time()
+            answers[how] = how(curves)
+            (stacked if how is stack else one_by_one).append((time.thread_time() - start) * 1e3)
+        same += answers[stack] == answers[separate]
+    return stacked, one_by_one, same
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("db")
@@ -157,6 +196,15 @@ def main() -> None:
     for config in configs:
         if f"{config}-separate" in runs:
             compare(config, runs[config], runs[f"{config}-separate"])
+    if any(f"{config}-separate" in runs for config in configs):
+        with viewdb.open(args.db, read_only=True) as db:
+            stacked, separate, same = search_cpu(db, photos, max(args.k, 5), args.plan)
+        ratio = statistics.median(b / a for a, b in zip(stacked, separate, strict=True) if a > 0)
+        new, old = statistics.median(stacked), statistics.median(separate)
+        print(f"search alone, back to back: CPU median {new:.0f} ms (stack) vs {old:.0f} ms (separate): "
+              f"{old / new:.2f}x; median per-photo ratio {ratio:.2f}x; p95 {percentile(stacked, 95):.0f} vs "
+              f"{percentile(separate, 95):.0f} ms; the same pool on {same}/{len(stacked)} photos "
+              f"(load {os.getloadavg()[0]:.1f})", flush=True)
     if args.brute > 0:
         with viewdb.open(args.db, read_only=True) as db:
             some = photos[:args.brute]
