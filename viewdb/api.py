@@ -177,7 +177,7 @@ class ViewDB:
             integer(jobs, "jobs", 1, LIMITS.max_jobs)
         except ValueError as exc:
             raise ViewDBError(str(exc)) from exc
-        return run_ingest(
+        report = run_ingest(
             list(paths), self.config, self._store.object_hashes(), write,
             lacking_perspective=self._store.objects_lacking_perspective(),
             lacking_appearance={name: self._catalogue.views(name)
@@ -185,6 +185,9 @@ class ViewDB:
             write_upgrade=write_upgrade,
             jobs=jobs, skim=skim, progress=progress, options=options,
         )
+        with self._catalogue.tier_reader().snapshot() as reader:
+            reader.write_tier_files()  # the tiers ready to map for the next fresh process
+        return report
 
     def export_client(
         self, out: str | Path, *, client_gap: float | None = None,
