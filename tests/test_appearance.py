@@ -440,3 +440,111 @@ def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, mes
     mean = {way: float(np.mean(e)) for way, e in errors.items()}
     assert mean["interpolate"] < 0.75 * mean["none"], mean
     assert mean["interpolate"] < config.gap / 4, mean
+
+
+# --------------------------------------------------------------------------- symmetric views
+@settings(max_examples=12, deadline=None)
+@given(st.sampled_from(("l_bracket", "car", "chair")), st.integers(0, 11), st.integers(0, 11))
+def test_a_mirrored_appearance_is_that_of_the_mirrored_render(meshes, name, i, j):
+    """Appearance.mirrored (its edges' directions θ → π − θ) against the appearance made
+    from the render mirrored left to right (independently: Canny on the mirrored image,
+    whose ties put some edge pixels a pixel over, or keep or drop a weak chain), and the
+    shape fit each gives a query."""
+    from viewdb.catalogue.render import RenderedView
+
+    view = get_renderer(RenderConfig(image_size=96)).render(meshes[name], 30.0 * i, 30.0 * j)
+    flipped = RenderedView(view.azimuth, view.elevation, np.ascontiguousarray(view.color[:, ::-1]),
+                           np.ascontiguousarray(view.mask[:, ::-1]), view.depth, view.pose)
+    direct = appearance_of(flipped, AppearanceConfig(), name == "car")
+    derived = appearance_of(view, AppearanceConfig(), name == "car").mirrored(1.0, 2.0)
+    assert (derived.azimuth, derived.elevation) == (1.0, 2.0)
+    assert np.array_equal(derived.mask, direct.mask)
+    assert np.array_equal(np.lexsort((derived.edge_points[:, 0], derived.edge_points[:, 1])),
+                          np.arange(len(derived.edge_points)))  # row-major, as records are
+    ours = {tuple(p): t for p, t in zip(derived.edge_points, derived.edge_theta, strict=True)}
+    theirs = {tuple(p): t for p, t in zip(direct.edge_points, direct.edge_theta, strict=True)}
+    for a, b in ((ours, theirs), (theirs, ours)):  # Canny's ties: each mostly within a pixel of the other
+        near = {(x + dx, y + dy) for x, y in b for dx in (-1, 0, 1) for dy in (-1, 0, 1)}
+        assert sum(p in near for p in a) >= 0.8 * len(a) - 2
+    query = _query(meshes[name], 30.0 * i + 7.0, 30.0 * j + 5.0)  # a photo off the grid
+    rendered = CandidateView(1.0, 2.0, False, *NO_FEATURES, flipped.mask, 96, 1.0, flipped.color)
+    stored = CandidateView(1.0, 2.0, False, *NO_FEATURES, derived.mask, 96, 1.0, None, derived)
+    if flipped.mask.any():
+        assert shape_fit(query, stored) == pytest.approx(shape_fit(query, rendered), abs=0.01)
+    same = set(ours) & set(theirs)
+    levels = np.array([abs(int(ours[p]) - int(theirs[p])) for p in same])
+    gap = np.minimum(levels, THETA_LEVELS - levels)  # directions modulo π wrap
+    assert len(gap) == 0 or (gap <= 1).mean() >= 0.98
+
+
+@pytest.fixture(scope="module")
+def symmetric_db(tmp_path_factory):
+    """The cylinder, and the mug without its colour (a plain STL copy): uncoloured, their
+    views mirror and turn into one another by their symmetry."""
+    import trimesh
+
+    folder = tmp_path_factory.mktemp("symmetric")
+    trimesh.load(sample("mug"), force="mesh").export(folder / "plain_mug.stl")
+    with viewdb.open(folder / "s.db", config=CONFIG) as db:
+        assert not db.ingest([sample("cylinder"), folder / "plain_mug.stl"]).failed
+        meshes = {name: db.mesh(name) for name in ("cylinder", "plain_mug")}
+    return folder / "s.db", meshes
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.sampled_from(("cylinder", "plain_mug")), st.integers(0, 11), st.integers(0, 11))
+def test_image_twins_render_as_the_view_mirrored_or_turned(symmetric_db, name, i, j):
+    """Every image twin of a view (the object's verified symmetry, on a 30° grid),
+    rendered, is the view's render mirrored and/or turned (independently: two renders)."""
+    from viewdb.catalogue.skimming import image_twins
+
+    path, meshes = symmetric_db
+    with viewdb.open(path, read_only=True) as db:
+        symmetry = db.object(name).symmetry
+    assert symmetry is not None and symmetry.generators
+    renderer = get_renderer(RenderConfig(image_size=96))
+    h, v = 30.0 * i, 30.0 * j
+    view = renderer.render(meshes[name], h, v)
+    twins = image_twins(symmetry, 30.0, h, v)
+    assert turned_view(h, v) in {(a, b) for a, b, _, _ in twins}  # every object's turned twin
+    for th, tv, mirrored, turned in twins:
+        twin = renderer.render(meshes[name], th, tv)
+        color, mask = view.color, view.mask
+        if mirrored:
+            color, mask = color[:, ::-1], mask[:, ::-1]
+        if turned:
+            color, mask = color[::-1, ::-1], mask[::-1, ::-1]
+        assert np.count_nonzero(mask != twin.mask) <= 0.01 * max(twin.mask.sum(), 1), (th, tv)
+        assert np.abs(color.astype(int) - twin.color).max(axis=2).mean() < 1.0, (th, tv)
+
+
+@pytest.mark.parametrize("name", ["cylinder", "plain_mug"])
+def test_a_symmetric_uncoloured_object_answers_its_views_from_records(symmetric_db, name):
+    """Views without a record of their own take a recorded image twin's appearance; each
+    compares as a fresh render's does, and only views without an image twin are rendered."""
+    from viewdb.catalogue.skimming import image_twins
+
+    path, meshes = symmetric_db
+    renderer = get_renderer(CONFIG.render)
+    recorded = {(a, e) for n, a, e, _ in _rows(path) if n == name}
+    with viewdb.open(path, read_only=True) as db:
+        catalogue = db._catalogue
+        symmetry = db.object(name).symmetry
+        query = _query(meshes[name], 37.0, 21.0)
+        derived = 0
+        for h, v in grid_views(CONFIG.gap):
+            own = (h, v) in recorded or turned_view(h, v) in recorded
+            twinned = any((a, b) in recorded for a, b, _, _ in image_twins(symmetry, CONFIG.gap, h, v))
+            derived += not own and twinned
+            record = catalogue.appearance(name, h, v)
+            assert ((name, h, v) in catalogue._renders) == (not own and not twinned)
+            view = renderer.render(meshes[name], h, v)
+            assert np.count_nonzero(record.mask != view.mask) <= 0.01 * max(view.mask.sum(), 1)
+            fresh = appearance_of(view, CONFIG.appearance, False)
+            near = {(x + dx, y + dy) for x, y in fresh.edge_points for dx in (-1, 0, 1) for dy in (-1, 0, 1)}
+            assert sum(tuple(p) in near for p in record.edge_points) >= 0.9 * len(record.edge_points) - 2
+            stored = appearance_view(catalogue, name, h, v, PoseConfig())
+            rendered = CandidateView(h, v, False, *NO_FEATURES, view.mask, view.image_size, 1.0, view.color)
+            if view.mask.any():
+                assert shape_fit(query, stored) == pytest.approx(shape_fit(query, rendered), abs=0.01)
+        assert derived > 0

@@ -739,10 +739,18 @@ class PosingConfig:
     #: IoU re-ranking: results fitted again with the full silhouette search after the
     #: quick one (besides the plan's first).
     rerank_full: int = 1
+    #: Whether, when the stored candidates give no SIFT pose, the SIFT features of the
+    #: candidates the file does not store (pruned by skimming: e.g. the side opposite a
+    #: stored view) are made from renders of the mesh ("always", 3-30 ms a view) or not
+    #: ("never": the outlines decide). Measured on 92 synthetic photos (docs/appearance.md):
+    #: the renders gave a SIFT pose once, and that pose was further off than the outline's.
+    regenerate: str = "never"
 
     def __post_init__(self) -> None:
         if self.max_candidates < 1 or self.near_views < 0 or self.rerank_full < 0 or self.shape_climb < 0:
             raise ValueError("need max_candidates >= 1, near_views >= 0, rerank_full >= 0, shape_climb >= 0")
+        if self.regenerate not in ("always", "never"):
+            raise ValueError(f"regenerate must be 'always' or 'never', got {self.regenerate!r}")
         if self.shape_refine not in ("interpolate", "walk", "none"):
             raise ValueError(
                 f"shape_refine must be 'interpolate', 'walk' or 'none', got {self.shape_refine!r}")

@@ -24,6 +24,7 @@ appearance (:meth:`Appearance.turned`). One record per viewing direction serves 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -186,6 +187,16 @@ class Appearance:
     #: The colour signature as uint16 (BINS, BINS), largest bin :data:`SIGNATURE_TOP`;
     #: None when the mesh has no colour of its own.
     signature: NDArray[np.uint16] | None = field(repr=False)
+    #: What the pose derives from the record (its outline), kept with it: a catalogue
+    #: keeps its records, and a query fits the same views several times. So a record's
+    #: arrays must not change once used.
+    _derived: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key: Any, make: Callable[[], Any]) -> Any:
+        """``make()``, computed once per ``key`` for this record."""
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     @property
     def image_size(self) -> int:
@@ -212,6 +223,19 @@ class Appearance:
         return Appearance(h, v, np.ascontiguousarray(self.mask[::-1, ::-1]),
                           np.ascontiguousarray(last - self.edge_points[::-1]),
                           np.ascontiguousarray(self.edge_theta[::-1]), self.signature)
+
+    def mirrored(self, azimuth: float, elevation: float) -> Appearance:
+        """The appearance of view ``(azimuth, elevation)`` whose render is this one's
+        mirrored left to right (:func:`viewdb.catalogue.skimming.image_twins`): the images
+        mirrored, an edge's direction θ becoming π − θ (level ``L − 1 − l``); its edge
+        pixels in row-major order."""
+        last = self.image_size - 1
+        xs, ys = last - self.edge_points[:, 0], self.edge_points[:, 1]
+        order = np.lexsort((xs, ys))
+        points = np.stack([xs[order], ys[order]], axis=1).astype(np.int32)
+        theta = (THETA_LEVELS - 1 - self.edge_theta[order]).astype(np.uint8)
+        return Appearance(azimuth, elevation, np.ascontiguousarray(self.mask[:, ::-1]), points, theta,
+                          self.signature)
 
 
 def _quantised_signature(signature: NDArray[np.float32]) -> NDArray[np.uint16]:

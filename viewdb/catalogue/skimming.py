@@ -42,6 +42,7 @@ __all__ = [
     "candidate_poses",
     "canonical_angle",
     "canonical_generator",
+    "image_twins",
     "generator_matrix",
     "grid_pose_of",
     "grid_steps",
@@ -496,6 +497,50 @@ def skim_plan(symmetry: Symmetric, gap: float | None = None) -> ViewClasses:
     """The skim plan (view classes) of a classified object on the grid of ``gap``
     (default: the gap it was classified at)."""
     return cached_classes(tuple(symmetry.generators), float(symmetry.gap if gap is None else gap))
+
+
+@lru_cache(maxsize=64)
+def _elements(generators: tuple[Generator, ...]) -> NDArray[np.float64]:
+    """:func:`group_elements` of canonical generators as one array (k, 3, 3), cached."""
+    return np.asarray(group_elements(generators), dtype=np.float64).reshape(-1, 3, 3)
+
+
+#: The camera turned by 180° about its viewing axis: the turned twin's camera is ``C · _TURN``.
+_TURN = np.diag([-1.0, -1.0, 1.0])
+
+
+def image_twins(symmetry: Symmetric, gap: float, h: float, v: float) -> list[tuple[float, float, bool, bool]]:
+    """The grid views whose *render* is that of ``(h, v)`` mirrored left to right and/or
+    turned by 180°, by the object's symmetry: ``(h', v', mirrored, turned)``, without
+    ``(h, v)`` itself.
+
+    Unlike the silhouette relations of :func:`related_views` (whose ``M`` may look from
+    the other side, ``M``'s z-entry −1), these keep the viewing side: a rotation ``g``
+    gives the camera ``g·C`` (the same image), a reflection ``g·C·diag(−1, 1, 1)`` (the
+    image mirrored), and either times ``diag(−1, −1, 1)`` the image turned by 180°. The
+    shaded render of a mesh that has the symmetry, and no colour that breaks it, is then
+    the same up to rasterisation ties (the head-light moves with the camera).
+
+    Only the elements that keep the vertical axis are used (turns about it, mirrors
+    through vertical planes): a symmetry is verified on silhouettes, which do not see
+    what one that swaps top and bottom would change inside the outline (a mug's
+    opening, seen from above, is not its base seen from below)."""
+    mats = _elements(tuple(canonical_generator(g) for g in symmetry.generators))
+    mats = mats[np.abs(mats[:, 1, 1] - 1.0) < 1e-9]  # g·e_y = e_y: the vertical axis kept
+    det = np.sign(np.linalg.det(mats))
+    cams = mats @ pose_rotation(h, v)
+    cams[det < 0] = cams[det < 0] @ _MIRROR_X
+    n = grid_steps(gap)
+    own = _grid_indices(pose_rotation(h, v)[None], gap)[0]
+    out: dict[int, tuple[float, float, bool, bool]] = {}
+    for turned in (False, True):
+        found = _grid_indices(cams @ _TURN if turned else cams, gap)
+        for j in np.flatnonzero(found >= 0):
+            index = int(found[j])
+            if index != own and index not in out:
+                ih, iv = divmod(index, n)
+                out[index] = (float(ih * gap), float(iv * gap), bool(det[j] < 0), turned)
+    return list(out.values())
 
 
 def candidate_poses(

@@ -140,7 +140,8 @@ def pose_match(
             continue  # e.g. no silhouette at that view
         if not p.stored:
             pruned.append(len(candidates) - 1)
-    estimate = _sift_first(catalogue, match.object, query, candidates, pruned, config, intrinsics)
+    estimate = _sift_first(catalogue, match.object, query, candidates,
+                           pruned if posing.regenerate == "always" else [], config, intrinsics)
     if intrinsics is not None:
         if estimate.method == "shape":
             estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search,

@@ -29,7 +29,8 @@ from .frames import (
 )
 from .views import CandidateView, PoseEstimate, QueryView
 
-__all__ = ["Outline", "ShapeResult", "align_shape", "outline_of", "shape_fit", "shape_pose"]
+__all__ = ["Outline", "ShapeResult", "align_shape", "candidate_outline", "outline_of", "shape_fit",
+           "shape_pose"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +61,15 @@ def outline_of(mask: NDArray[np.bool_], samples: int) -> Outline:
     cv2.polylines(edges, [ring], isClosed=True, color=0, thickness=1)
     dist = cv2.distanceTransform(edges, cv2.DIST_L2, 5)  # within 2 % of exact, 10x faster
     return Outline(pts, abs(area2) / 2.0, centroid, dist)
+
+
+def candidate_outline(cand: CandidateView, samples: int) -> Outline:
+    """:func:`outline_of` the candidate's silhouette; kept with its stored appearance
+    record when the silhouette is the record's (a query fits the same views repeatedly)."""
+    stored = cand.appearance
+    if stored is not None and stored.mask is cand.mask:
+        return stored.derived(("outline", samples), lambda: outline_of(stored.mask, samples))
+    return outline_of(np.asarray(cand.mask, dtype=bool), samples)
 
 
 def _sample_distance(dist: NDArray[np.float32], x: NDArray[np.float64], y: NDArray[np.float64]
@@ -190,7 +200,7 @@ def shape_pose(
     views: dict[int, Outline] = {}
     for index, cand in enumerate(candidates):
         try:
-            views[index] = outline_of(np.asarray(cand.mask, dtype=bool), config.contour_samples)
+            views[index] = candidate_outline(cand, config.contour_samples)
         except FeatureError:
             continue
         hyps.extend((res.cost, index, res)

@@ -26,7 +26,7 @@ from ..catalogue.features import mirror_curve
 from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
 from ..catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from ..catalogue.render import RenderedView, get_renderer
-from ..catalogue.skimming import ViewClasses, plan_without_skimming, skim_plan
+from ..catalogue.skimming import ViewClasses, image_twins, plan_without_skimming, skim_plan
 from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig, SearchConfig
 from ..errors import FeatureError, NotFound, QueryError
@@ -96,6 +96,9 @@ class StoredCatalogue:
         self._store = store
         self.config = config
         self.stored_appearance = stored_appearance
+        #: Whether a view without a record takes an image twin's (:meth:`_symmetric_appearance`);
+        #: False renders it instead (to measure what that saves).
+        self.image_twins = True
         self._meshes: OrderedDict[str, NormalisedMesh] = OrderedDict()
         self._regenerated: OrderedDict[tuple[str, float, float], StoredView] = OrderedDict()
         self._renders: OrderedDict[tuple[str, float, float], RenderedView] = OrderedDict()
@@ -182,14 +185,19 @@ class StoredCatalogue:
         symmetry generators; a query matched at one view could be in any of these poses.
         """
         a, e = normalise_angle(azimuth), normalise_angle(elevation)
-        stored = set(self.views(name))
-        symmetry = self.object(name).symmetry
-        classes = skim_plan(symmetry, self.config.gap) if symmetry else self.view_plan(name)
+        stored, classes = self.derived("candidate_classes", (name,), lambda: self._candidate_classes(name),
+                                       CURVE_CACHE_OBJECTS)
         try:
             members = classes.members(a, e)
         except ValueError as exc:
             raise QueryError(str(exc)) from exc
         return [CandidatePose(h, v, m, (h, v) in stored) for h, v, m in members]
+
+    def _candidate_classes(self, name: str) -> tuple[frozenset[tuple[float, float]], ViewClasses]:
+        """The object's stored views, and the view classes its candidate poses come from."""
+        symmetry = self.object(name).symmetry
+        classes = skim_plan(symmetry, self.config.gap) if symmetry else self.view_plan(name)
+        return frozenset(self.views(name)), classes
 
     # ------------------------------------------------------------------ views
     def view(self, name: str, azimuth: float, elevation: float) -> StoredView:
@@ -229,8 +237,10 @@ class StoredCatalogue:
 
     def appearance(self, name: str, azimuth: float, elevation: float) -> Appearance:
         """The appearance of any view of a stored object: its stored record, or its turned
-        twin's turned (:meth:`~viewdb.catalogue.appearance.Appearance.turned`), or, for a
-        view without either (pruned by skimming and not opposite a stored view, off the
+        twin's turned (:meth:`~viewdb.catalogue.appearance.Appearance.turned`), or a
+        recorded view's that the symmetry of a mesh without colour makes the same image
+        mirrored or turned (:meth:`_symmetric_appearance`), or, for a view without any
+        (pruned by skimming and not opposite a stored view, of a coloured mesh, off the
         grid, or a file from before revision 0005), one made from its render. Cached
         either way."""
         a, e = normalise_angle(azimuth), normalise_angle(elevation)
@@ -244,11 +254,35 @@ class StoredCatalogue:
                     return decode_record(records[(a, e)], a, e, size)
                 if twin in records:
                     return decode_record(records[twin], *twin, size).turned()
+                derived = self._symmetric_appearance(name, a, e)
+                if derived is not None:
+                    return derived
             coloured = self.derived("carries_colour", (name,), lambda: carries_colour(self.mesh(name)),
                                     APPEARANCE_CACHE_VIEWS)
             return appearance_of(self.render(name, a, e), self.config.appearance, coloured)
 
         return self.derived("appearance", (name, a, e), make, APPEARANCE_CACHE_VIEWS)
+
+    def _symmetric_appearance(self, name: str, azimuth: float, elevation: float) -> Appearance | None:
+        """The appearance of a view without a record of its own from a recorded view whose
+        render is this one's mirrored or turned by the object's symmetry
+        (:func:`~viewdb.catalogue.skimming.image_twins`), for a mesh without colour of its
+        own (a texture need not share the symmetry of the shape); else None."""
+        symmetry = self.object(name).symmetry if self.image_twins else None
+        if symmetry is None or not symmetry.generators:
+            return None
+        twins = image_twins(symmetry, self.config.gap, azimuth, elevation)
+        records = self._store.appearance_records(name, [(h, v) for h, v, _, _ in twins])
+        for h, v, mirrored, turned in twins:
+            if (h, v) in records:
+                record = decode_record(records[(h, v)], h, v, self.config.render.image_size)
+                if record.signature is not None:
+                    return None  # a coloured mesh: its records all have a signature
+                if turned:
+                    record = replace(record.turned(), azimuth=azimuth, elevation=elevation)
+                return (record.mirrored(azimuth, elevation) if mirrored
+                        else replace(record, azimuth=azimuth, elevation=elevation))
+        return None
 
     def mesh(self, name: str) -> NormalisedMesh:
         """The stored normalised mesh of ``name`` (decoded once, then cached)."""
@@ -307,13 +341,21 @@ class StoredCatalogue:
         ``(azimuth, elevation, distance)`` (the exact distance, either orientation), best
         first: the other views a photo might show when its silhouette is ambiguous."""
         q = self.query_curve(curve)
-        stored = self.stored_curves(name)
-        if not stored:
+        keys, curves = self.derived("stacked_curves", (name,), lambda: self._stacked_curves(name),
+                                    CURVE_CACHE_OBJECTS)
+        if not keys:
             return []
-        keys = list(stored)
-        distances = scan_all(q, np.stack([np.asarray(stored[key], np.float64) for key in keys]), band)
+        distances = scan_all(q, curves, band)
         order = np.argsort(distances, kind="stable")[:n]
         return [(keys[i][0], keys[i][1], float(distances[i])) for i in order]
+
+    def _stacked_curves(self, name: str) -> tuple[list[tuple[float, float]], NDArray[np.float64]]:
+        """The object's stored views and their curves as one array, in that order."""
+        stored = self.stored_curves(name)
+        keys = list(stored)
+        if not keys:
+            return [], np.zeros((0, self.config.features.curve_samples))
+        return keys, np.stack([np.asarray(stored[key], np.float64) for key in keys])
 
     # ------------------------------------------------------------------ tiers
     def tier_reader(self) -> TierReader:
