@@ -166,6 +166,11 @@ def ingest(
                           "or 'none' (new db; default 3,4,6)."),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", help="Describe the objects as Ray tasks across a cluster instead of --jobs "
+                      "processes: 'auto' (the Ray on this machine, or a new local one) or HOST:PORT "
+                      "of a head node (ray start --head). This process still writes every object.")
+    ] = None,
     no_skim: Annotated[
         bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
     ] = False,
@@ -192,14 +197,15 @@ def ingest(
         task = bar.add_task("ingest", total=None)
 
         def on_progress(p: viewdb.IngestProgress) -> None:
+            rate = f", {p.objects_per_second:.2f} objects/s" if p.written else ""
             bar.update(task, total=p.views_total, completed=p.views_done,
-                       description=f"ingest {p.files_done}/{p.files_total} files")
+                       description=f"ingest {p.files_done}/{p.files_total} files{rate}")
             if p.outcome is not None and p.outcome.status == "failed":
                 _say(f"viewdb: {p.outcome.error}", err)
 
         report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
                             max_faces=max_faces or None,
-                            allow_missing_textures=allow_missing_textures)
+                            allow_missing_textures=allow_missing_textures, ray=ray)
     counts = report.counts()
     if as_json:
         _echo_json({
