@@ -18,22 +18,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .catalogue.describe import ObjectDescription
-from .catalogue.ingest import IngestProgress, IngestReport, IngestTarget, Upgrade, run_ingest
-from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh
+from .catalogue.ingest import IngestProgress, IngestReport, IngestTarget, Upgrade, checked_options, run_ingest
+from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import (
-    LIMITS,
-    BuildConfig,
-    ClientFileConfig,
-    OverlayConfig,
-    RayIngestConfig,
-    RenderConfig,
-    finite,
-    integer,
-)
+from .config import BuildConfig, ClientFileConfig, OverlayConfig, RayIngestConfig, RenderConfig, finite
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -169,18 +160,9 @@ class ViewDB:
         cluster instead of in ``jobs`` local processes; this process still writes each one
         (:mod:`viewdb.catalogue.distributed`). Ray is the optional extra ``viewdb[ray]``.
         """
-        try:
-            options = LoadOptions(max_faces, allow_missing_textures)
-            integer(jobs, "jobs", 1, LIMITS.max_jobs)
-        except ValueError as exc:
-            raise ViewDBError(str(exc)) from exc
-        target = self.ingest_target()
-        return run_ingest(
-            list(paths), self.config, target.existing_hashes, target.write,
-            lacking_perspective=target.lacking_perspective,
-            lacking_appearance=target.lacking_appearance, write_upgrade=target.write_upgrade,
-            jobs=jobs, skim=skim, progress=progress, options=options, ray=ray, ray_config=ray_config,
-        )
+        options = checked_options(jobs, max_faces, allow_missing_textures)
+        return run_ingest(list(paths), self.config, self.ingest_target(), jobs=jobs, skim=skim,
+                          progress=progress, options=options, ray=ray, ray_config=ray_config)
 
     def ingest_target(self) -> IngestTarget:
         """What an ingest into this file needs to know (the objects stored, what older

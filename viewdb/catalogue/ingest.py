@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..camera import grid_views
-from ..config import BuildConfig, RayIngestConfig
+from ..config import LIMITS, BuildConfig, RayIngestConfig, integer
 from ..errors import MeshError, ViewDBError
 from ..paths import not_regular
 from .appearance import Appearance
@@ -39,7 +39,8 @@ from .describe import (
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
-__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "IngestTarget", "Upgrade", "run_ingest"]
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "IngestTarget", "Upgrade", "checked_options",
+           "run_ingest"]
 
 
 @dataclass(frozen=True)
@@ -217,15 +218,21 @@ class _Job:
         return (perspective if "perspective" in self.upgrade else 0) + self.records
 
 
+def checked_options(jobs: int, max_faces: int | None, allow_missing_textures: bool) -> LoadOptions:
+    """The mesh loading options of an ingest, ``jobs`` checked too; a bad value raises
+    :class:`~viewdb.errors.ViewDBError`."""
+    try:
+        integer(jobs, "jobs", 1, LIMITS.max_jobs)
+        return LoadOptions(max_faces, allow_missing_textures)
+    except ValueError as exc:
+        raise ViewDBError(str(exc)) from exc
+
+
 def run_ingest(
     paths: Sequence[str | Path],
     config: BuildConfig,
-    existing_hashes: dict[str, str],
-    write: Callable[[ObjectDescription], None],
+    target: IngestTarget,
     *,
-    lacking_perspective: set[str] | frozenset[str] = frozenset(),
-    lacking_appearance: dict[str, list[tuple[float, float]]] | None = None,
-    write_upgrade: Callable[[Upgrade], None] | None = None,
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
@@ -233,12 +240,13 @@ def run_ingest(
     ray: str | None = None,
     ray_config: RayIngestConfig | None = None,
 ) -> IngestReport:
-    """Describe every new or changed file and hand each result to ``write``.
+    """Describe every file new to ``target`` or changed, and hand each result to its
+    ``write``.
 
-    An unchanged file whose object is in ``lacking_perspective`` (stored by an older
-    viewdb) gets only its perspective views rendered, when the configuration asks for
-    perspective views; one in ``lacking_appearance`` (name → its stored views) only its
-    appearance records; either is handed to ``write_upgrade``.
+    An unchanged file whose object is in the target's ``lacking_perspective`` (stored by
+    an older viewdb) gets only its perspective views rendered, when the configuration asks
+    for perspective views; one in ``lacking_appearance`` (name → its stored views) only
+    its appearance records; either is handed to ``write_upgrade``.
 
     ``ray`` (``"auto"`` or a head node's ``HOST:PORT``) describes the files as Ray tasks
     across that cluster instead of in ``jobs`` local processes (``ray_config``: retries
@@ -250,11 +258,10 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    upgrade = write_upgrade is not None
-    lacking = _Lacking(lacking_perspective if upgrade and config.perspective.enabled else frozenset(),
-                       (lacking_appearance or {}) if upgrade else {}, config)
-    todo = _plan_jobs(paths, existing_hashes, lacking, report)
-    run = _Run(report, todo, config, write, write_upgrade, progress)
+    lacking = _Lacking(target.lacking_perspective if config.perspective.enabled else frozenset(),
+                       target.lacking_appearance, config)
+    todo = _plan_jobs(paths, target.existing_hashes, lacking, report)
+    run = _Run(report, todo, config, target.write, target.write_upgrade, progress)
     run.report_planned()
     if ray is not None and todo:
         run.on_ray(todo, skim, options, ray, ray_config)
@@ -330,7 +337,7 @@ class _Run:
     def __init__(
         self, report: IngestReport, todo: list[_Job], config: BuildConfig,
         write: Callable[[ObjectDescription], None],
-        write_upgrade: Callable[[Upgrade], None] | None,
+        write_upgrade: Callable[[Upgrade], None],
         progress: Callable[[IngestProgress], None] | None,
     ) -> None:
         self.report, self.config = report, config
@@ -377,7 +384,6 @@ class _Run:
     def _write(self, job: _Job, result: ObjectDescription | Upgrade) -> FileOutcome:
         try:
             if isinstance(result, Upgrade):
-                assert self.write_upgrade is not None
                 self.write_upgrade(result)
             else:
                 self.write(result)
