@@ -126,4 +126,5 @@ def test_ingest_shards_cli_refusals_leave_nothing(tmp_path, capsys):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("x")
     assert main(["ingest", cone, "--shards", str(tmp_path / "full"), "--shard-count", "2"]) == 1
+    assert "exists and is not empty; remove it or choose another --shards" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full"]

@@ -112,13 +112,13 @@ def write_manifest(manifest: Manifest, folder: Path | None = None) -> None:
     os.replace(partial, folder / MANIFEST)
 
 
-def check_new_folder(out: Path) -> None:
-    """Refuse ``out`` as the folder of a new sharded catalogue unless it is missing or
-    empty and its parent exists."""
+def check_new_folder(out: Path, option: str = "--out") -> None:
+    """Refuse ``out`` (given as ``option``) as the folder of a new sharded catalogue
+    unless it is missing or empty and its parent exists."""
     if out.exists() and not out.is_dir():
-        raise ViewDBError("exists and is not a folder; choose another --out", out)
+        raise ViewDBError(f"exists and is not a folder; choose another {option}", out)
     if out.is_dir() and any(out.iterdir()):
-        raise ViewDBError("exists and is not empty; remove it or choose another --out", out)
+        raise ViewDBError(f"exists and is not empty; remove it or choose another {option}", out)
     if not out.parent.is_dir():
         raise ViewDBError("its parent folder does not exist", out)
 

@@ -85,7 +85,7 @@ def _create(folder: Path, count: int, settings: dict[str, Any]) -> None:
     """A new sharded catalogue of ``count`` empty shard files in ``folder``."""
     if not 1 <= count <= MAX_SHARDS:
         raise ViewDBError(f"--shard-count must be in [1, {MAX_SHARDS}], got {count}")
-    check_new_folder(folder)
+    check_new_folder(folder, "--shards")
     partial = folder.with_name(f".{folder.name}.partial")
     shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir()
