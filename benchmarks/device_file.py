@@ -3,6 +3,7 @@ the same run.
 
     python benchmarks/device_file.py FULL_DB [--gaps 20 30 40 50] [--out DIR]
         [--queries 100] [--fresh 5] [--exact-gap 30]
+    python benchmarks/device_file.py --cold CLIENT_DB [--baseline TREE] [--fresh 9]
 
 For each client gap both files are exported from FULL_DB (read-only): ``float32`` (curve
 bits 0 and 4 kB pages: the layout ``export-client`` wrote before compact files) and
@@ -14,12 +15,24 @@ query sends (median). At ``--exact-gap`` it also runs CS1 with the compact clien
 ``server`` on ``--queries`` grid queries and ``--queries`` synthetic photos (``viewdb
 bench``'s two protocols: :mod:`viewdb.bench.queries`) and counts the answers that differ
 (must be 0).
+
+``--cold CLIENT_DB`` measures only the fresh-process cost of that client file, in
+``--fresh`` new Pythons per source tree (this one, and ``--baseline TREE``, e.g. a worktree
+of another commit, alternating so both see the same machine load; each tree's kernels are
+loaded into its numba cache by one uncounted run first). Printed per tree, medians:
+``import`` (NumPy, ``import viewdb`` and the client tier's modules), ``open + 1st half``
+(``viewdb.open(read_only=True)``, which imports the rest of the facade, and one client half
+at k = 5: the issue's figure), their sum, and the process's wall time from launch to exit
+as the parent sees it; then the same as CPU time (user + system; what the machine's other
+jobs disturb least).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -42,26 +55,61 @@ FORMATS = {"float32": ClientFileConfig(curve_bits=0, page_size=4096), "compact":
 
 CHILD = """
 import sys, time, json
+t0, c0 = time.perf_counter(), time.process_time()
 import numpy as np
-t0 = time.perf_counter()
 import viewdb
 from viewdb.recognition.client_tier import ClientTier
-t1 = time.perf_counter()
+t1, c1 = time.perf_counter(), time.process_time()
 db = viewdb.open(sys.argv[1], read_only=True)
 q = np.array(json.loads(sys.argv[2]))
 ClientTier(db._catalogue).candidates(q, 5)
-t2 = time.perf_counter()
-print(json.dumps({"import_ms": (t1 - t0) * 1e3, "open_search_ms": (t2 - t1) * 1e3}))
+t2, c2 = time.perf_counter(), time.process_time()
+print(json.dumps({"import_ms": (t1 - t0) * 1e3, "open_search_ms": (t2 - t1) * 1e3,
+                  "import_cpu_ms": (c1 - c0) * 1e3, "open_search_cpu_ms": (c2 - c1) * 1e3}))
 """
 
 
+def child(path: Path, curve: np.ndarray, tree: Path = ROOT) -> dict[str, float]:
+    """One fresh Python importing viewdb from ``tree``: its timings (ms) and wall time."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", CHILD, str(path), json.dumps(curve.tolist())],
+                          capture_output=True, text=True, check=True, cwd=tree, env=env)
+    wall = (time.perf_counter() - start) * 1e3
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime - used.ru_utime - used.ru_stime) * 1e3
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    return {**out, "total_ms": out["import_ms"] + out["open_search_ms"], "process_ms": wall,
+            "process_cpu_ms": cpu}
+
+
 def fresh(path: Path, curve: np.ndarray, runs: int) -> dict[str, float]:
-    out = []
-    for _ in range(runs):
-        done = subprocess.run([sys.executable, "-c", CHILD, str(path), json.dumps(curve.tolist())],
-                              capture_output=True, text=True, check=True, cwd=ROOT)
-        out.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    out = [child(path, curve) for _ in range(runs)]
     return {key: statistics.median(o[key] for o in out) for key in out[0]}
+
+
+def cold_start(path: Path, runs: int, baseline: Path | None) -> None:
+    """The fresh-process figures of client file ``path``, this tree against ``baseline``."""
+    with viewdb.open(path, read_only=True) as db:
+        arrays, _ = db.search_tier("sparse")
+    rng = np.random.default_rng(0)
+    stored = arrays.curves[rng.integers(len(arrays.curves))]
+    curve = np.clip(stored + rng.normal(0, 0.02, len(stored)), 0, None)
+    trees = {"this": ROOT} | ({"baseline": baseline.resolve()} if baseline else {})
+    for tree in trees.values():
+        child(path, curve, tree)  # loads (or compiles) the tree's kernels into its cache
+    runs_of: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
+    for _ in range(runs):
+        for name, tree in trees.items():
+            runs_of[name].append(child(path, curve, tree))
+    print(f"{path}: {path.stat().st_size / 1e6:.2f} MB; median of {runs} fresh processes per tree")
+    print("tree      import_ms  open+1st_ms  sum_ms  process_ms   CPU: import  open+1st  process")
+    for name, out in runs_of.items():
+        med = {key: statistics.median(o[key] for o in out) for key in out[0]}
+        print(f"{name:<9} {med['import_ms']:9.0f} {med['open_search_ms']:12.0f} {med['total_ms']:7.0f} "
+              f"{med['process_ms']:11.0f} {med['import_cpu_ms']:13.0f} {med['open_search_cpu_ms']:9.0f} "
+              f"{med['process_cpu_ms']:8.0f}   ({trees[name]})")
 
 
 def warm(path: Path, curves: list[np.ndarray]) -> tuple[float, float]:
@@ -96,13 +144,20 @@ def exactness(full: viewdb.ViewDB, client_path: Path, grid: list, photos: list) 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("db", type=Path)
+    parser.add_argument("db", type=Path, nargs="?")
+    parser.add_argument("--cold", type=Path, default=None, metavar="CLIENT_DB")
+    parser.add_argument("--baseline", type=Path, default=None, metavar="TREE")
     parser.add_argument("--gaps", type=float, nargs="+", default=[20, 30, 40, 50])
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--queries", type=int, default=100)
     parser.add_argument("--fresh", type=int, default=5)
     parser.add_argument("--exact-gap", type=float, default=30)
     args = parser.parse_args()
+    if args.cold is not None:
+        cold_start(args.cold, args.fresh, args.baseline)
+        return
+    if args.db is None:
+        parser.error("FULL_DB is required (or --cold CLIENT_DB)")
     out = args.out or Path(tempfile.mkdtemp(prefix="device_file_"))
     out.mkdir(parents=True, exist_ok=True)
     with viewdb.open(args.db, read_only=True) as full:

@@ -154,3 +154,31 @@ def test_a_client_file_from_revision_0005_opens_read_only_and_cs1_stays_exact(tm
                         assert [c.to_dict() for c in cs1.results] == [c.to_dict() for c in server]
                         assert cs1.client_results
     assert _sha(old) == before
+
+
+_FIRST_CALL = """
+import sys
+import numpy as np
+from viewdb.search.bounds import dtw
+rng = np.random.default_rng(0)
+q, c = rng.random(64), rng.random(64)
+dtw(q, c, 6)
+print("scipy.linalg" in sys.modules, "numpy.f2py" in sys.modules)
+import numba
+@numba.njit
+def product(a, b):
+    return np.dot(a, b)
+a, b = rng.random((5, 4)), rng.random((4, 3))
+print(bool(np.allclose(product(a, b), a @ b)))
+"""
+
+
+def test_a_fresh_first_kernel_call_skips_the_blas_probe_and_blas_still_works():
+    # numba's first call would import scipy.linalg (and numpy.f2py) to probe for BLAS;
+    # the client half needs neither, and a jitted np.dot compiled later still finds BLAS
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
+                          check=True, cwd=Path(__file__).parents[1])
+    assert done.stdout.split() == ["False", "False", "True"]

@@ -161,8 +161,10 @@ class ViewDB:
         (:mod:`viewdb.catalogue.distributed`). Ray is the optional extra ``viewdb[ray]``.
         """
         options = checked_options(jobs, max_faces, allow_missing_textures)
-        return run_ingest(list(paths), self.config, self.ingest_target(), jobs=jobs, skim=skim,
-                          progress=progress, options=options, ray=ray, ray_config=ray_config)
+        report = run_ingest(list(paths), self.config, self.ingest_target(), jobs=jobs, skim=skim,
+                            progress=progress, options=options, ray=ray, ray_config=ray_config)
+        self.write_tier_files()
+        return report
 
     def ingest_target(self) -> IngestTarget:
         """What an ingest into this file needs to know (the objects stored, what older
@@ -192,6 +194,12 @@ class ViewDB:
             {name: self._catalogue.views(name) for name in self._store.objects_lacking_appearance()},
             write_upgrade,
         )
+
+    def write_tier_files(self) -> None:
+        """Write the tiers' search arrays next to the file, ready to map for the next fresh
+        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends."""
+        with self._catalogue.tier_reader().snapshot() as reader:
+            reader.write_tier_files()
 
     def export_client(
         self, out: str | Path, *, client_gap: float | None = None,

@@ -6,6 +6,8 @@ later ingest into the same file renders and describes views exactly the same way
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import numbers
 from dataclasses import asdict, dataclass, field, replace
@@ -601,6 +603,18 @@ class BuildConfig:
         """This configuration with every default that depends on others filled in (what a
         new database file records, so later changes of defaults do not change it)."""
         return replace(self, index=replace(self.index, client_gap=self.client_gap))
+
+    def curve_key(self) -> str:
+        """A short digest of the settings that decide an object's views and their stored
+        curves: the grid gap, the silhouette's rendering (all of :class:`RenderConfig` but
+        the shading's ``ambient``), the curve's samples and the skimming threshold. Two
+        files whose objects have the same content hash and the same key hold the same
+        curves at the same angles; a client's distances bound a server's only then."""
+        render = {k: v for k, v in asdict(self.render).items() if k != "ambient"}
+        made = {"gap": self.gap, "render": render, "curve_samples": self.features.curve_samples,
+                "skim_sigma": self.skim.sigma}
+        text = json.dumps(made, sort_keys=True)
+        return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

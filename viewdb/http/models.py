@@ -54,8 +54,9 @@ class CandidateModel(_Strict):
     mirrored: bool = False
     version: str | None = Field(
         default=None, max_length=128,
-        description="content hash of the object's mesh in the file the distance comes from: "
-                    "a server ignores the bounds of objects it holds in another version",
+        description="the object's version in the file the distance comes from (its mesh's "
+                    "content hash and the settings that made its curves): a server ignores "
+                    "the bounds of objects it holds in another version",
     )
     camera_distance: float | None = Field(
         default=None, gt=1, le=LIMITS.max_perspective_distance,

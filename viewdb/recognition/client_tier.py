@@ -29,7 +29,7 @@ class ClientTier:
         self, curve: NDArray[np.floating], k: int, band: int = 6, shifts: ShiftWindow | None = None
     ) -> list[Candidate]:
         """The k nearest objects on the sparse tier (over ``shifts`` of the curve), each
-        with its content hash as ``version`` (so a server can tell a stale client file's
-        bounds). A compact client file's distances are raised by their curves' proven
+        with its version (content hash and curve settings, so a server can tell a stale
+        client file's bounds). A compact client file's distances are raised by their curves' proven
         quantisation error, so each is an upper bound of the exact one and CS1 stays exact."""
         return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts, bounded=True)[0]

@@ -15,8 +15,9 @@ vectorised set-up (which triangles can show, their planes) stays in NumPy.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
+
+from ..search.jit import njit
 
 __all__ = ["face_ids"]
 

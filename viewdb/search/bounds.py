@@ -114,8 +114,9 @@ import math
 import numbers
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
+
+from .jit import njit
 
 __all__ = [
     "cascade_dtw",

@@ -106,9 +106,10 @@ def curve_from_json(x: Any, samples: int | None = None) -> NDArray[np.float64]:
 class Candidate:
     """An object with its best view found so far and that view's exact distance.
 
-    ``version`` is the content hash of the object's mesh in the file the distance comes
-    from (a client file names it, so a server can tell a stale client's bounds; None:
-    unknown)."""
+    ``version`` names what the distance was computed on in the file it comes from: the
+    content hash of the object's mesh and the settings that made its curves
+    (:meth:`~viewdb.storage.tiers.TierReader.object_versions`; a client file names it, so a
+    server can tell a stale client's bounds; None: unknown)."""
 
     object: str
     distance: float

@@ -65,12 +65,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..errors import QueryError
 from .bounds import envelope_box, fourier_coordinates, paa_edges
 from .grouping import INDEXED_COEFFICIENTS, indexed_rows
+from .jit import njit
 
 __all__ = ["CurveQuery", "ShiftWindow", "shift_turn", "shifted", "shifted_curves", "turn_window"]
 

@@ -138,8 +138,11 @@ class ShardFiles:
         """:meth:`viewdb.ViewDB.ingest` into the shards: each object goes to the shard the
         placement rule names, and is written there in one transaction."""
         options = checked_options(jobs, max_faces, allow_missing_textures)
-        return run_ingest(list(paths), self.config, self.target(), jobs=jobs, skim=skim,
-                          progress=progress, options=options, ray=ray, ray_config=ray_config)
+        report = run_ingest(list(paths), self.config, self.target(), jobs=jobs, skim=skim,
+                            progress=progress, options=options, ray=ray, ray_config=ray_config)
+        for db in self.dbs:
+            db.write_tier_files()
+        return report
 
     def target(self) -> IngestTarget:
         """The shards as one ingest target: what they hold, and a writer that places each

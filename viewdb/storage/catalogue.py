@@ -319,7 +319,8 @@ class StoredCatalogue:
     def tier_reader(self) -> TierReader:
         """The read connection the searches use (opened on first use)."""
         if self._reader is None:
-            self._reader = TierReader(self.path, self._store.connect)
+            self._reader = TierReader(self.path, self._store.connect,
+                                       write_files=not self._store.read_only)
         return self._reader
 
     def nearest_objects(

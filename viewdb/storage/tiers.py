@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import stat
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -38,6 +39,7 @@ from ..search.grouping import (
 from ..search.knn import QueryBoxes, TierArrays
 from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
+from .tier_file import map_tier_file, tier_file_path, tier_key, write_tier_file
 
 __all__ = [
     "TIERS",
@@ -81,6 +83,25 @@ def _stacked(blobs: list[Any], dtype: type) -> NDArray[Any]:
     if len(shapes) and (shapes[:, 0] != shapes[0, 0]).any():
         raise StorageError("index groups hold arrays of different lengths in one column")
     return data.reshape(len(shapes), int(shapes[0, 0]) if len(shapes) else 0)
+
+
+def _group_columns(conn: sqlite3.Connection, tier: str) -> dict[str, NDArray[Any]]:
+    """Every group's id, owner, MBR, curve range and view ids in tier ``tier``, each
+    column decoded in one go (the arrays :class:`StoredTier` keeps but its curves)."""
+    rows = conn.execute(
+        "SELECT id, object_id, lo, hi, curve_lo, curve_hi, view_ids FROM index_groups"
+        " WHERE tier = ? ORDER BY id",
+        (tier,),
+    ).fetchall()
+    object_ids, owner = np.unique(np.array([r[1] for r in rows], dtype=np.int64), return_inverse=True)
+    lo, hi, curve_lo, curve_hi = (
+        _stacked([r[i] for r in rows], dtype).astype(np.float64)
+        for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
+    )
+    views, shapes = decode_many([r[6] for r in rows], np.int64, 1)
+    return {"ids": np.array([r[0] for r in rows], dtype=np.int64), "object_ids": object_ids,
+            "group_owner": owner.astype(np.int64).reshape(-1), "group_count": shapes[:, 0].copy(),
+            "views": views, "lo": lo, "hi": hi, "curve_lo": curve_lo, "curve_hi": curve_hi}
 
 
 def create_tiers(conn: Any) -> None:
@@ -179,54 +200,68 @@ class StoredTier:
     in one read transaction per search so the R-tree pages and rows agree.
     """
 
-    def __init__(self, conn: sqlite3.Connection, tier: str) -> None:
+    def __init__(self, conn: sqlite3.Connection, tier: str,
+                 mapped: Mapping[str, NDArray[Any]] | None = None) -> None:
+        """``mapped``: the tier's arrays from its tier file (:mod:`~viewdb.storage.tier_file`),
+        every group loaded; else the groups' columns are read and their curves on demand."""
         if tier not in TIERS:
             raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {tier!r}")
         self.conn = conn
         self.tier = tier
+        #: whether the arrays are a tier file's (else decoded from the groups)
+        self.mapped = mapped is not None
         self.index = FourierIndex.open(conn, tier)
-        rows = conn.execute(
-            "SELECT id, object_id, lo, hi, curve_lo, curve_hi, view_ids FROM index_groups"
-            " WHERE tier = ? ORDER BY id",
-            (tier,),
-        ).fetchall()
-        self.n_groups = len(rows)
-        self._ids = np.array([r[0] for r in rows], dtype=np.int64)
-        object_ids, owner = np.unique(np.array([r[1] for r in rows], dtype=np.int64),
-                                      return_inverse=True)
-        self.group_owner = owner.astype(np.int64).reshape(-1)
-        self.n_objects = len(object_ids)
-        # every group's MBR, curve range and view ids, each column decoded in one go
-        self._lo, self._hi, self._curve_lo, self._curve_hi = (
-            _stacked([r[i] for r in rows], dtype).astype(np.float64)
-            for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
-        )
-        self._views, shapes = decode_many([r[6] for r in rows], np.int64, 1)
-        self.group_count = shapes[:, 0].copy()
+        columns = _group_columns(conn, tier) if mapped is None else mapped
+        self._ids = columns["ids"]
+        self._object_ids = columns["object_ids"]
+        self.group_owner = columns["group_owner"]
+        self.n_groups = len(self._ids)
+        self.n_objects = len(self._object_ids)
+        self._lo, self._hi = columns["lo"], columns["hi"]
+        self._curve_lo, self._curve_hi = columns["curve_lo"], columns["curve_hi"]
+        self._views = columns["views"]
+        self.group_count = columns["group_count"]
         self.group_start = np.concatenate([[0], np.cumsum(self.group_count)[:-1]]).astype(np.int64)
         self.row_owner = np.repeat(self.group_owner, self.group_count)
-        samples = self._curve_lo.shape[1] if rows else 0
-        # curves and coordinates of every view, filled in group by group as searches need them
-        self._curves = np.empty((len(self._views), samples), dtype=np.float32)
-        self._coords = np.empty((len(self._views), DIMENSION), dtype=np.float64)
+        samples = self._curve_lo.shape[1] if self.n_groups else 0
         self._edges = paa_edges(max(samples, 1))
-        self._means = np.empty((len(self._views), len(self._edges) - 1), dtype=np.float64)
-        self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
+        if mapped is None:
+            # curves and coordinates of every view, filled in group by group as searches need them
+            self._curves = np.empty((len(self._views), samples), dtype=np.float32)
+            self._coords = np.empty((len(self._views), DIMENSION), dtype=np.float64)
+            self._means = np.empty((len(self._views), len(self._edges) - 1), dtype=np.float64)
+            self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
+        else:
+            self._curves, self._coords, self._means = mapped["curves"], mapped["coords"], mapped["means"]
+            self._loaded = np.ones(self.n_groups, dtype=np.bool_)
         #: per view row: its quantisation error norms (L2, L-infinity); zero for exact curves
         self.errors = np.zeros((len(self._views), 2), dtype=np.float64)
+        if mapped is None:
+            self._read_errors()
+        self.quantised = bool(self.errors.any())
+        self._row_of_view = {int(v): r for r, v in enumerate(self._views.tolist())} if self.quantised else {}
+        names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
+        self._names = [names[int(i)] for i in self._object_ids]
+        self._index_by_name = {name: i for i, name in enumerate(self._names)}
+
+    def _read_errors(self) -> None:
         at = {int(gid): g for g, gid in enumerate(self._ids.tolist())}
-        for gid, blob in conn.execute(
+        for gid, blob in self.conn.execute(
             "SELECT e.group_id, e.errors FROM curve_errors e JOIN index_groups g"
-            " ON g.id = e.group_id WHERE g.tier = ?", (tier,)
+            " ON g.id = e.group_id WHERE g.tier = ?", (self.tier,)
         ):
             g = at[int(gid)]
             a, n = int(self.group_start[g]), int(self.group_count[g])
             self.errors[a : a + n] = decode_array(blob, np.float32, (n, 2))
-        self.quantised = bool(self.errors.any())
-        self._row_of_view = {int(v): r for r, v in enumerate(self._views.tolist())} if self.quantised else {}
-        names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
-        self._names = [names[int(i)] for i in object_ids]
-        self._index_by_name = {name: i for i, name in enumerate(self._names)}
+
+    def file_arrays(self) -> dict[str, NDArray[Any]]:
+        """Every array a tier file holds (:data:`~viewdb.storage.tier_file.ARRAYS`), every
+        group loaded first."""
+        self.rows(np.arange(self.n_groups, dtype=np.int64))
+        return {"ids": self._ids, "object_ids": self._object_ids, "group_owner": self.group_owner,
+                "group_count": self.group_count, "views": self._views, "lo": self._lo,
+                "hi": self._hi, "curve_lo": self._curve_lo, "curve_hi": self._curve_hi,
+                "curves": self._curves, "coords": self._coords, "means": self._means}
 
     def close(self) -> None:
         self.index.discard()
@@ -334,9 +369,13 @@ class TierReader:
     Thread-safe: snapshots are serialised.
     """
 
-    def __init__(self, path: str | Path, connect: Callable[[], sqlite3.Connection] | None = None) -> None:
-        """``connect`` makes the connection (e.g. a read-only one); default: open ``path``."""
+    def __init__(self, path: str | Path, connect: Callable[[], sqlite3.Connection] | None = None,
+                 *, write_files: bool = False) -> None:
+        """``connect`` makes the connection (e.g. a read-only one); default: open ``path``.
+        ``write_files``: write a tier's file (:mod:`~viewdb.storage.tier_file`) when it opens
+        the tier without a valid one (a tier file is used whenever valid, either way)."""
         self.path = Path(path)
+        self.write_files = write_files
         try:
             self.conn = (connect() if connect is not None else
                          sqlite3.connect(self.path, check_same_thread=False, isolation_level=None))
@@ -385,8 +424,32 @@ class TierReader:
         """Tier ``name`` (call inside :meth:`snapshot`)."""
         tier = self._tiers.get(name)
         if tier is None:
-            tier = self._tiers[name] = StoredTier(self.conn, name)
+            tier = self._tiers[name] = self._open_tier(name)
         return tier
+
+    def _open_tier(self, name: str) -> StoredTier:
+        """Tier ``name`` from its tier file if it has a valid one; else from its groups,
+        writing the file if this reader writes files and the folder allows."""
+        if name not in TIERS:
+            raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {name!r}")
+        path, key = tier_file_path(self.path, name), tier_key(self.conn, name)
+        mapped = map_tier_file(path, key, name)
+        if mapped is not None:
+            return StoredTier(self.conn, name, mapped)
+        tier = StoredTier(self.conn, name)
+        if self.write_files and tier.n_groups and not tier.quantised:
+            try:
+                mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666
+                write_tier_file(path, key, name, tier.file_arrays(), mode)
+            except OSError:
+                pass  # a folder this process may not write: the tier is read as before
+        return tier
+
+    def write_tier_files(self) -> None:
+        """Open every tier (inside :meth:`snapshot`), writing the files of those without a
+        valid one (``write_files`` readers only)."""
+        for name in TIERS:
+            self.tier(name)
 
     def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
         """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`); a perspective
@@ -411,10 +474,16 @@ class TierReader:
         return out
 
     def object_versions(self) -> dict[str, str]:
-        """``object name -> content hash`` of every object (inside :meth:`snapshot`; read
-        once per version of the file, like the tiers)."""
+        """``object name -> version`` of every object (inside :meth:`snapshot`; read once
+        per version of the file, like the tiers): its content hash, the file's
+        :meth:`~viewdb.config.BuildConfig.curve_key` and whether its views were skimmed,
+        so a client's bounds count only where both files hold the same curves."""
         if self._versions is None:
-            self._versions = dict(self.conn.execute("SELECT name, content_hash FROM objects"))
+            row = self.conn.execute("SELECT value FROM settings WHERE key = 'build'").fetchone()
+            key = "" if row is None else BuildConfig.from_dict(json.loads(row[0])).curve_key()
+            self._versions = {
+                name: f"{content_hash}{key}{'s' if skimmed else 'a'}" for name, content_hash, skimmed
+                in self.conn.execute("SELECT name, content_hash, skimmed FROM objects")}
         return self._versions
 
     def tier_arrays(self, name: str) -> tuple[TierArrays, list[tuple[int, float, float]]]:

@@ -1,0 +1,131 @@
+"""Tier files: a tier's arrays written next to the database, mapped by a fresh process
+instead of decoded from the groups; the same arrays, the same answers, never a stale or
+damaged file."""
+
+import sqlite3
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import viewdb
+from tests.conftest import sample
+from viewdb.catalogue.features import distance_curve, mirror_curve
+from viewdb.search.shifts import ShiftWindow
+from viewdb.storage.tier_file import ARRAYS, map_tier_file, tier_file_path, tier_key
+from viewdb.storage.tiers import TIERS, StoredTier
+
+
+def _copy(src, dst):
+    a, b = sqlite3.connect(src), sqlite3.connect(dst)
+    a.backup(b)
+    a.close()
+    b.close()
+    return dst
+
+
+@pytest.fixture(scope="module")
+def mapped_db(tiered_db, tmp_path_factory):
+    """A copy of the tiered file with its tier files written (a writable reader's first
+    search of each tier)."""
+    path = _copy(tiered_db, tmp_path_factory.mktemp("mapped") / "copy.db")
+    with viewdb.open(path, create=False) as db:
+        for tier in TIERS:
+            db.search(np.ones(128), k=1, tier=tier)
+    return path
+
+
+@pytest.fixture(scope="module")
+def plain_db(tiered_db, tmp_path_factory):
+    """A copy of the tiered file without tier files, opened read-only only (never gets one)."""
+    return _copy(tiered_db, tmp_path_factory.mktemp("plain") / "copy.db")
+
+
+def _decoded_and_mapped(path, tier):
+    conn = sqlite3.connect(path)
+    try:
+        conn.execute("BEGIN")
+        mapped = map_tier_file(tier_file_path(path, tier), tier_key(conn, tier), tier)
+        decoded = StoredTier(conn, tier).file_arrays()
+        conn.execute("ROLLBACK")
+    finally:
+        conn.close()
+    return decoded, mapped
+
+
+@pytest.mark.parametrize("tier", TIERS)
+def test_a_tier_file_holds_exactly_the_arrays_decoded_from_the_groups(mapped_db, tier):
+    decoded, mapped = _decoded_and_mapped(mapped_db, tier)
+    assert mapped is not None and set(mapped) == set(ARRAYS)
+    for name in ARRAYS:
+        assert mapped[name].dtype == decoded[name].dtype, name
+        np.testing.assert_array_equal(mapped[name], decoded[name], err_msg=name)
+    assert mapped["curves"].flags.writeable  # as the compiled search's signatures expect
+
+
+def _curve(db, rng, turned):
+    name = db.objects()[int(rng.integers(len(db.objects())))].name
+    q = distance_curve(db.render(name, *rng.uniform(0, 360, 2)).mask, 128)
+    q = q + rng.normal(0, 0.02, 128)
+    q = mirror_curve(q) if turned % 2 else q
+    return np.roll(q, int(turned))
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 2**32 - 1), st.integers(0, 127), st.sampled_from(TIERS), st.integers(1, 4),
+       st.booleans())
+def test_searches_through_a_tier_file_answer_as_through_the_groups(
+    mapped_db, plain_db, seed, turned, tier, k, shifts,
+):
+    with viewdb.open(mapped_db, read_only=True) as mapped, viewdb.open(plain_db, read_only=True) as plain:
+        q = _curve(plain, np.random.default_rng(seed), turned)
+        window = ShiftWindow() if shifts else None
+        a, _ = mapped.search(q, k=k, tier=tier, shifts=window)
+        b, _ = plain.search(q, k=k, tier=tier, shifts=window)
+        with mapped._catalogue.tier_reader().snapshot() as reader:
+            assert reader.tier(tier).mapped  # the tier file answered
+        with plain._catalogue.tier_reader().snapshot() as reader:
+            assert not reader.tier(tier).mapped  # the groups answered
+    assert a == b
+
+
+def test_a_read_only_open_writes_no_tier_file_and_answers_without_one(tiered_db, tmp_path):
+    path = _copy(tiered_db, tmp_path / "copy.db")
+    q = distance_curve(viewdb.render_model(sample("mug"), 20, 30, image_size=96).mask, 128)
+    with viewdb.open(path, read_only=True) as db:
+        hits, _ = db.search(q, k=2)
+    assert not [p.name for p in tmp_path.iterdir() if ".tier-" in p.name]
+    assert hits[0].object == "mug"
+
+
+def test_a_stale_tier_file_is_not_used_and_is_written_again(mapped_db, tmp_path):
+    path = _copy(mapped_db, tmp_path / "copy.db")
+    for tier in TIERS:  # the tier files of the file before the ingest
+        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    old = tier_file_path(path, "full").read_bytes()
+    with viewdb.open(path, create=False) as db:
+        db.ingest([sample("sphere")])
+    assert tier_file_path(path, "full").read_bytes() != old
+    q = distance_curve(viewdb.render_model(sample("sphere"), 10, 10, image_size=96).mask, 128)
+    with viewdb.open(path, read_only=True) as db:
+        hits, _ = db.search(q, k=1)
+    assert hits[0].object == "sphere"
+    decoded, mapped = _decoded_and_mapped(path, "full")
+    assert mapped is not None and len(mapped["ids"]) == len(decoded["ids"])
+    # the old file, put back, no longer matches the file's content: not used
+    tier_file_path(path, "full").write_bytes(old)
+    assert _decoded_and_mapped(path, "full")[1] is None
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty", "other tier"])
+def test_a_damaged_tier_file_is_ignored(mapped_db, tmp_path, damage):
+    path = _copy(mapped_db, tmp_path / "copy.db")
+    good = tier_file_path(mapped_db, "full").read_bytes()
+    bad = {"truncated": good[: len(good) // 2], "garbage": b"VDBTIER1\xff\xff\x00\x00{not json",
+           "empty": b"", "other tier": tier_file_path(mapped_db, "sparse").read_bytes()}[damage]
+    tier_file_path(path, "full").write_bytes(bad)
+    assert _decoded_and_mapped(path, "full")[1] is None
+    q = distance_curve(viewdb.render_model(sample("car"), 50, 20, image_size=96).mask, 128)
+    with viewdb.open(path, read_only=True) as db, viewdb.open(mapped_db, read_only=True) as ref:
+        assert db.search(q, k=3)[0] == ref.search(q, k=3)[0]

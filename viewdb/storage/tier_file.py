@@ -1,0 +1,135 @@
+"""A tier's arrays ready to map: a file next to the database holding every group's and
+every view's arrays of one tier as a search reads them, so a fresh process maps them
+instead of decoding the groups' BLOBs and computing their coordinates.
+
+The file (``DB.tier-full``, ``DB.tier-sparse``) is a cache derived from the database, never
+the only copy of anything: a file without one, or with a stale one, is searched as
+before (its groups decoded on first use), with the same answers. It is written, whole and
+then renamed into place (never half-written), by a writable :class:`~viewdb.storage.tiers.TierReader`
+the first time it opens the tier without a valid file (an ingest, a query on a file
+opened for writing), and only for tiers of exact curves (not a client file's quantised ones).
+
+Why a file beside the database and not a table in it: a table would hold a second copy
+of every curve (a sixth more of a 10° file) and each ingest would rewrite it; the file
+costs the database nothing, and a fresh process maps it (``mmap``), reading from disk only
+the pages a search touches.
+
+Layout: ``MAGIC``, a little-endian u32 header length, a JSON header (``key``, ``tier``,
+``arrays``: ``name -> [dtype, shape, offset]``), then each array at a 64-byte aligned offset.
+The ``key`` (:func:`tier_key`) digests what identifies the tier's content in the
+database: every object's id, name, content hash and time of writing, and the tier's
+group count, id sum and maximum and the total length of its curve and view-id BLOBs (the
+groups of an object change only when it is written again, or its perspective views added,
+which add groups). A file whose key differs from the database's is not used.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import mmap
+import os
+import sqlite3
+import struct
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["ARRAYS", "map_tier_file", "tier_file_path", "tier_key", "write_tier_file"]
+
+MAGIC = b"VDBTIER1"
+_LENGTH = struct.Struct("<I")
+_ALIGN = 64
+
+#: The arrays a file holds (:class:`~viewdb.storage.tiers.StoredTier`'s), with their dtypes.
+ARRAYS = {
+    "ids": "<i8", "object_ids": "<i8", "group_owner": "<i8", "group_count": "<i8",
+    "views": "<i8", "lo": "<f8", "hi": "<f8", "curve_lo": "<f8", "curve_hi": "<f8",
+    "curves": "<f4", "coords": "<f8", "means": "<f8",
+}
+
+
+def tier_file_path(db: str | Path, tier: str) -> Path:
+    """Where the tier file of database ``db`` lies."""
+    db = Path(db)
+    return db.with_name(f"{db.name}.tier-{tier}")
+
+
+def tier_key(conn: sqlite3.Connection, tier: str) -> str:
+    """The digest of what identifies tier ``tier``'s content in the open database (module
+    doc); read inside the caller's read transaction."""
+    digest = hashlib.sha256(f"{MAGIC!r} {tier}".encode())
+    groups = conn.execute(
+        "SELECT count(*), total(id), max(id), total(length(curves)), total(length(view_ids))"
+        " FROM index_groups WHERE tier = ?", (tier,),
+    ).fetchone()
+    digest.update(repr(tuple(groups)).encode())
+    for row in conn.execute("SELECT id, name, content_hash, created_at FROM objects ORDER BY id"):
+        digest.update(repr(tuple(row)).encode())
+    return digest.hexdigest()
+
+
+def write_tier_file(
+    path: Path, key: str, tier: str, arrays: Mapping[str, NDArray], mode: int = 0o644
+) -> None:
+    """Write ``arrays`` (every name of :data:`ARRAYS`) to ``path`` with permissions ``mode``:
+    to a temporary file in the same folder, then renamed over ``path``, so a reader sees
+    the old file or the whole new one. Raises OSError if the folder is not writable."""
+    layout: dict[str, list] = {}
+    offset = 0
+    for name, dtype in ARRAYS.items():
+        a = arrays[name]
+        layout[name] = [dtype, list(a.shape), offset]
+        offset += -(-np.dtype(dtype).itemsize * a.size // _ALIGN) * _ALIGN
+    header = json.dumps({"key": key, "tier": tier, "arrays": layout}).encode()
+    start = -(-(len(MAGIC) + _LENGTH.size + len(header)) // _ALIGN) * _ALIGN
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as out:
+            out.write(MAGIC + _LENGTH.pack(len(header)) + header)
+            for name, dtype in ARRAYS.items():
+                out.seek(start + layout[name][2])
+                out.write(np.ascontiguousarray(arrays[name], dtype=dtype).tobytes())
+            out.truncate(start + offset)
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def map_tier_file(path: Path, key: str, tier: str) -> dict[str, NDArray] | None:
+    """The arrays of the tier file at ``path`` if it exists, is whole and was written for
+    ``key`` and ``tier``; else None. The arrays are a private (copy-on-write) mapping of
+    the file: writable as NumPy arrays, never written back."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC) + _LENGTH.size)
+            if len(head) < len(MAGIC) + _LENGTH.size or head[: len(MAGIC)] != MAGIC:
+                return None
+            (length,) = _LENGTH.unpack(head[len(MAGIC):])
+            header = json.loads(f.read(length))
+            if header.get("key") != key or header.get("tier") != tier:
+                return None
+            start = -(-(len(MAGIC) + _LENGTH.size + length) // _ALIGN) * _ALIGN
+            size = os.fstat(f.fileno()).st_size
+            layout = header["arrays"]
+            if set(layout) != set(ARRAYS):
+                return None
+            ends = [start + off + np.dtype(dt).itemsize * int(np.prod(shape))
+                    for dt, shape, off in layout.values()]
+            if max(ends, default=start) > size or size == 0:
+                return None
+            mapped = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_COPY)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    out = {}
+    for name, (dtype, shape, off) in layout.items():
+        if dtype != ARRAYS[name]:
+            return None
+        count = int(np.prod(shape))
+        out[name] = np.frombuffer(mapped, dtype=dtype, count=count, offset=start + off).reshape(shape)
+    return out
