@@ -93,10 +93,12 @@ def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote
                 assert there.results[0].pose is not None
                 assert (there.results[1].pose is None) == (top == 1)
             t, x = there.timing_ms, there.transfer
-            # 6 turns, the colour signatures (a photo with colour), the shape fits, the pose
+            # the search (server, cs1: one stack of the 6 turns; cs2: a walk per turn), the
+            # colour signatures (a photo with colour), the shape fits, the pose
             assert any(m.colour is not None for m in there.results) == coloured
             assert all(m.shape_fit is not None for m in there.results)
-            assert x["round_trips"] == 6 + coloured + 1 + pose and x["bytes_sent"] > 0 and x["bytes_received"] > 0
+            searches = 6 if plan == "cs2" else 1
+            assert x["round_trips"] == searches + coloured + 1 + pose and x["bytes_sent"] > 0 and x["bytes_received"] > 0
             assert t["server"] > 0 and t["network"] >= 0 and t["total"] >= t["segment"]
             if plan == "server":
                 assert t["client"] < 1.0  # nothing runs on the client's tier
@@ -137,6 +139,37 @@ def test_shift_searches_over_http_equal_the_local_ones(tiered_db, files, remote)
             there = client.query(img, server=remote, **kw)
             assert there.to_dict()["results"] == local.to_dict()["results"], options
             assert there.transfer["round_trips"] == 1  # one search, not one per turn
+
+
+def test_turn_stacks_over_http_equal_separate_turns_locally(tiered_db, files, remote):
+    """The 12 turns go to the server as one stack (one /refine) and come back with the
+    local answer of one search per turn, for server and cs1."""
+    _, client_path = files
+    with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
+        for name, h, v, turn in (("mug", 47, 22, 30), ("l_bracket", 120, 40, 10), ("chair", 250, 65, -100)):
+            img = photo(full, name, h, v, turn)
+            for plan in ("server", "cs1"):
+                kw = dict(k=3, plan=plan, pose=False, colour=False, verify=False)
+                separate = viewdb.QueryOptions(**kw, recognition=viewdb.RecognitionConfig(turn_search="separate"))
+                local = full.query(img, client=client if plan == "cs1" else None, options=separate)
+                there = client.query(img, server=remote, **kw)
+                assert there.to_dict()["results"] == local.to_dict()["results"], (name, plan)
+                assert there.transfer["round_trips"] == 1
+                old = client.query(img, server=remote, options=separate)  # an older client: a request per turn
+                assert old.to_dict()["results"] == local.to_dict()["results"]
+                assert old.transfer["round_trips"] == 12
+
+
+def test_a_stack_of_more_curves_than_the_limit_is_refused(server):
+    body = {**_valid(), "client": [], "curves": [[1.0] * 128] * 73}
+    del body["curve"]
+    status, reply = request(server.url, "POST", "/refine", body, token=TOKEN)
+    assert status == 422 and "curves" in reply["error"], reply
+    status, reply = request(server.url, "POST", "/refine", {**body, "curves": body["curves"][:72]}, token=TOKEN)
+    assert status == 200 and len(reply["results"]) == 3
+    assert all(0 <= c["curve_index"] < 72 for c in reply["results"])
+    status, info = request(server.url, "GET", "/info", token=TOKEN)
+    assert info["limits"]["max_curves"] == 72
 
 
 def test_walk_names_each_object_once_however_often_the_client_does(server):
@@ -424,10 +457,10 @@ def test_cli_query_against_the_server_equals_the_local_query(tiered_db, files, s
     assert main(["query", *common, "--db", str(tiered_db), "--client", str(client)]) == 0
     local = json.loads(capsys.readouterr().out)
     assert there["results"] == local["results"] and there["results"][0]["object"] == "car"
-    # 4 turns, the colour signatures (the car is coloured) and the shape fits
+    # one stack of the 4 turns, the colour signatures (the car is coloured) and the shape fits
     assert there["results"][0]["colour_distance"] is not None
     assert there["results"][0]["shape_fit"] is not None
-    assert there["transfer"]["round_trips"] == 4 + 1 + 1 and "network" in there["timing_ms"]
+    assert there["transfer"]["round_trips"] == 1 + 1 + 1 and "network" in there["timing_ms"]
 
 
 def test_cli_errors_for_remote_queries(files, server, tmp_path, capsys):
@@ -561,7 +594,8 @@ def _candidate():
          "distance": _plausible_or(st.floats(0, 5)), "azimuth": _plausible_or(ANGLES),
          "elevation": _plausible_or(ANGLES)},
         optional={"mirrored": st.booleans(), "version": st.text(max_size=140),
-                  "camera_distance": _plausible_or(st.sampled_from([3.0, 4.0, 6.0, 1000.0]))})
+                  "camera_distance": _plausible_or(st.sampled_from([3.0, 4.0, 6.0, 1000.0])),
+                  "curve_index": _plausible_or(st.integers(0, 71), st.integers(-2, 80))})
 
 
 def _curve():
@@ -592,8 +626,10 @@ INTRINSICS = st.none() | st.tuples(st.floats(1, 1e7), st.floats(1, 1e7), st.floa
 
 BODY_MODELS = {
     "/refine": st.fixed_dictionaries({
-        "curve": _curve(), "band": _plausible_or(st.integers(0, 64), st.integers(-3, 70) | NASTY_FLOATS),
-        "k": _plausible_or(st.integers(1, 100), st.integers(-3, 110)), "client": st.lists(_candidate(), max_size=6)}),
+        "band": _plausible_or(st.integers(0, 64), st.integers(-3, 70) | NASTY_FLOATS),
+        "k": _plausible_or(st.integers(1, 100), st.integers(-3, 110)), "client": st.lists(_candidate(), max_size=6)},
+        optional={"curve": _curve(), "curves": _plausible_or(st.lists(_curve(), min_size=1, max_size=3),
+                                                               st.lists(_curve(), max_size=74))}),
     "/walk": st.fixed_dictionaries({
         "curve": _curve(), "band": _plausible_or(st.integers(0, 64), st.integers(-3, 70)),
         "k": _plausible_or(st.integers(1, 100), st.integers(-3, 110)), "client": st.lists(_candidate(), max_size=6),

@@ -93,7 +93,7 @@ def test_bounded_and_unbounded_shift_searches_report_the_same_views(seed, k, r, 
                                                                     initial_radius, slack):
     """What a CS1 server is handed (the k-th distance, some objects' distances, tight or
     loose) changes neither the objects, the distances, nor the view, orientation and shift
-    reported (the lowest row, unmirrored, the window's earliest shift at a tie), with
+    reported (the window's earliest shift, the lowest row, unmirrored at a tie), with
     repeated and symmetric views making ties."""
     rng = np.random.default_rng(seed)
     n = 32

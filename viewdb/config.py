@@ -662,6 +662,10 @@ class ShardConfig:
             raise ValueError(f"timeout must be positive, got {self.timeout}")
 
 
+#: The ways of searching a query's in-plane turns (:attr:`RecognitionConfig.turn_search`).
+TURN_SEARCHES = ("stack", "separate")
+
+
 @dataclass(frozen=True)
 class RayIngestConfig:
     """Tunables of an ingest whose objects are described by Ray tasks
@@ -699,8 +703,16 @@ class RecognitionConfig:
     #: With a gravity hint (``roll``), the in-plane turns searched: those within this many
     #: degrees of the hint's (:func:`viewdb.search.shifts.turn_window`).
     roll_tolerance: float = 15.0
+    #: How the in-plane turns (``rotations``) are searched by the ``server`` and ``cs1``
+    #: plans: "stack" (one search whose distance is the smallest over the turned curves,
+    #: :func:`viewdb.search.knn.knn_stack`) or "separate" (one search per turn, each
+    #: bounded by the turns before it). Both give the same answer; ``cs2`` walks per turn.
+    turn_search: str = "stack"
 
     def __post_init__(self) -> None:
+        if self.turn_search not in TURN_SEARCHES:
+            raise ValueError(f"turn_search must be one of {', '.join(TURN_SEARCHES)}, "
+                             f"got {self.turn_search!r}")
         if self.pool < 1:
             raise ValueError(f"pool must be at least 1, got {self.pool}")
         if not 0.0 <= self.hidden_min_share <= 1.0:
@@ -717,10 +729,16 @@ class SearchConfig:
     #: Consecutive curves (shifts) bounded together by one wedge before they are tried one
     #: by one (``benchmarks/shift_search.py`` measured the choice).
     shift_block: int = 8
+    #: The same for a stack of in-plane turns (:meth:`viewdb.search.plans.RefineRequest.of_stack`):
+    #: turns 30 degrees apart make wide wedges, so each is bounded on its own
+    #: (``benchmarks/shift_search.py``'s ``stack12``).
+    stack_block: int = 1
 
     def __post_init__(self) -> None:
         if self.shift_block < 1:
             raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
+        if self.stack_block < 1:
+            raise ValueError(f"stack_block must be at least 1, got {self.stack_block}")
 
 
 @dataclass(frozen=True)

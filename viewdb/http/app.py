@@ -60,7 +60,7 @@ from ..api import ViewDB
 from ..api import open as open_db
 from ..config import HttpConfig, WebConfig
 from ..errors import NotFound, QueryError, StorageError, ViewDBError
-from ..search.plans import MAX_BAND, MAX_K, RefineRequest, ServerReply, WalkRequest
+from ..search.plans import MAX_BAND, MAX_CURVES, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models, web
 from .wire import (
     ColourReply,
@@ -360,7 +360,8 @@ def _routes(server: _Server) -> APIRouter:
         data, _ = await run(lambda db: db.info().to_dict())
         data.pop("path", None)
         return {**data, "viewdb": __version__, "role": "full", "read_only": True,
-                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_body": server.max_body,
+                "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_curves": MAX_CURVES,
+                           "max_body": server.max_body,
                            "max_image_body": server.max_image_body, "max_pixels": server.max_pixels,
                            "curve_samples": state().curve_samples},
                 "auth": server.token is not None}

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..config import LIMITS
-from ..search.plans import MAX_BAND, MAX_K
+from ..search.plans import MAX_BAND, MAX_CURVES, MAX_K
 
 #: A distance-curve sample: curves have mean 1, so no sample of an n-sample curve exceeds
 #: n (the server checks the bound against the curve's own length).
@@ -68,6 +68,11 @@ class CandidateModel(_Strict):
         description="the query curve matched started at this sample (a shift search; absent: "
                     "the curve as given)",
     )
+    curve_index: int | None = Field(
+        default=None, ge=0, lt=MAX_CURVES,
+        description="the row of the request's curves that matched (a search of a stack of "
+                    "curves; absent: a search of one curve)",
+    )
 
 
 class ShiftWindowModel(_Strict):
@@ -89,12 +94,22 @@ class _CurveRequest(_Strict):
 
 
 class RefineRequestModel(_CurveRequest):
-    """CS1: the query's distance curve and the client's top-k on its sparse tier (an empty
-    ``client`` list gives the ``server`` plan: exact k-NN on the full tier)."""
+    """CS1: the query's distance curve (or a stack of curves) and the client's top-k on its
+    sparse tier (an empty ``client`` list gives the ``server`` plan: exact k-NN on the full
+    tier)."""
 
+    curve: list[Sample] | None = Field(  # type: ignore[assignment]
+        default=None, min_length=8,
+        description="the server's curve_samples numbers (see /info), each in [0, curve_samples] "
+                    "(a curve has mean 1); give either curve or curves")
+    curves: list[list[Sample]] | None = Field(
+        default=None, min_length=1, max_length=MAX_CURVES,
+        description="instead of curve: a stack of curves (e.g. the in-plane turns of the "
+                    "silhouette), searched in one search for the smallest distance over them; "
+                    "each result's curve_index is the row that matched")
     shifts: ShiftWindowModel | None = Field(
         default=None, description="search the smallest distance over these circular shifts of "
-                                  "the curve (absent: the curve as given)")
+                                  "the curve (absent: the curve as given; not with curves)")
 
 
 class WalkRequestModel(_CurveRequest):

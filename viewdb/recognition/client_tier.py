@@ -28,8 +28,9 @@ class ClientTier:
     def candidates(
         self, curve: NDArray[np.floating], k: int, band: int = 6, shifts: ShiftWindow | None = None
     ) -> list[Candidate]:
-        """The k nearest objects on the sparse tier (over ``shifts`` of the curve), each
-        with its version (content hash and curve settings, so a server can tell a stale
-        client file's bounds). A compact client file's distances are raised by their curves' proven
+        """The k nearest objects on the sparse tier (over ``shifts`` of the curve, or the
+        smallest distance over the rows of a ``(T, N)`` stack of curves), each with its
+        version (content hash and curve settings, so a server can tell a stale client
+        file's bounds). A compact client file's distances are raised by their curves' proven
         quantisation error, so each is an upper bound of the exact one and CS1 stays exact."""
         return self.catalogue.nearest_objects(curve, k, band, "sparse", shifts, bounded=True)[0]

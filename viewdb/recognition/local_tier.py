@@ -81,11 +81,14 @@ class LocalServerTier:
     def _refine(self, request: RefineRequest) -> ServerReply:
         self._full_tier_only()
         q = self.catalogue.query_curve(request.curve, request.k, "full")
+        curves = (None if request.curves is None
+                  else np.stack([self.catalogue.query_curve(c, request.k, "full") for c in request.curves]))
         with self.catalogue.tier_reader().snapshot() as reader:
             versions = reader.object_versions()
-            found, stats = refine(reader.tier("full"), replace(request, curve=q), versions)
+            found, stats = refine(reader.tier("full"), replace(request, curve=q, curves=curves), versions)
             angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None),
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None,
+                                                    stacked=request.curves is not None),
                            stats.to_dict())
 
     def walk(self, request: WalkRequest) -> tuple[ServerReply, Exchange]:

@@ -41,7 +41,7 @@ from ..catalogue.features import distance_curve, sample_bearings
 from ..config import RecognitionConfig, SegmentationConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
-from ..search.plans import Candidate
+from ..search.plans import MAX_CURVES, Candidate
 from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
 from .colour import colour_signature, has_colour, rerank
@@ -170,8 +170,11 @@ def _search(
     shape: QueryShape, options: QueryOptions, pool: int, server: ServerTier, client: ClientTier | None,
     traffic: _Traffic,
 ) -> tuple[list[Pooled], float, float]:
-    """Stage 3: every curve by the plan, each bounded by the turns searched before it (the
-    merged result is unchanged); the pool and the client's and the server's time."""
+    """Stage 3: every curve by the plan, in one search over the stack of them
+    (:func:`_search_stack`) or each bounded by the turns searched before it (the merged
+    result is the same); the pool and the client's and the server's time."""
+    if _stacked(shape, options):
+        return _search_stack(shape, options, pool, server, client, traffic)
     per_curve: list[tuple[float, list[Candidate]]] = []
     client_ms = server_ms = 0.0
     for i, (angle, curve) in enumerate(shape.curves):
@@ -190,6 +193,26 @@ def _search(
         server_ms += found.server_ms
         traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
     return merge(per_curve, pool), client_ms, server_ms
+
+
+def _stacked(shape: QueryShape, options: QueryOptions) -> bool:
+    """Whether the turned curves are searched as one stack
+    (:attr:`~viewdb.config.RecognitionConfig.turn_search`; ``cs2`` walks each turn)."""
+    return (options.recognition.turn_search == "stack" and options.plan != "cs2" and len(shape.curves) > 1
+            and shape.bearings is None and len(shape.curves) <= MAX_CURVES)
+
+
+def _search_stack(
+    shape: QueryShape, options: QueryOptions, pool: int, server: ServerTier, client: ClientTier | None,
+    traffic: _Traffic,
+) -> tuple[list[Pooled], float, float]:
+    """Stage 3 in one search: each view's distance is the smallest over the curves, each
+    result at the in-plane angle of the curve that matched."""
+    stack = np.stack([curve for _, curve in shape.curves])
+    found = recognise_curve(stack, pool, options.band, options.plan, server, client)
+    traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
+    pooled = [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in found.results]
+    return pooled, found.client_ms, found.server_ms
 
 
 def _window(shape: QueryShape, i: int, options: QueryOptions) -> ShiftWindow | None:

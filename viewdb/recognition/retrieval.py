@@ -4,8 +4,11 @@
 client tier's k-NN on its sparse tier bounds the server's exact refinement (Algorithm 3;
 the same answer as ``server``). ``cs2``: the server walks the grid from the client's
 views (Algorithm 4; heuristic). A query searches several curves (in-plane turns, a
-completed silhouette); :func:`merge` keeps each object's best, and each search is bounded
-by the objects found so far (``prior``), which leaves the merged answer unchanged.
+completed silhouette): ``server`` and ``cs1`` in one search over the stack of them (a
+``(T, N)`` curve: each view's distance is the smallest over the rows, each result's
+``curve_index`` the row that matched), or one search per curve, where :func:`merge` keeps
+each object's best and each search is bounded by the objects found so far (``prior``),
+which leaves the merged answer unchanged. Both give the same answer.
 """
 
 from __future__ import annotations
@@ -63,12 +66,16 @@ def recognise_curve(
     half of ``cs1``/``cs2`` (unused by ``server``). ``prior``: the best objects already
     found for the same photo by other curves; their distances bound the search as a CS1
     client's do (``server``, ``cs1``). ``shifts``: both halves search the smallest distance
-    over these circular shifts of the curve (:class:`~viewdb.search.shifts.ShiftWindow`)."""
+    over these circular shifts of the curve (:class:`~viewdb.search.shifts.ShiftWindow`).
+    A ``(T, N)`` ``curve`` (``server``, ``cs1``): both halves search the smallest distance
+    over its rows."""
     if plan not in PLANS:
         raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
     if plan != "server" and client is None:
         raise QueryError(f"the {plan} plan needs a client tier")
     q = np.asarray(curve, dtype=np.float64)
+    if q.ndim == 2 and plan == "cs2":
+        raise QueryError("the cs2 plan walks one curve at a time, not a stack")
     start = time.perf_counter()
     mine = [] if client is None or plan == "server" else client.candidates(q, k, band, shifts)
     client_ms = (time.perf_counter() - start) * 1e3
@@ -76,7 +83,10 @@ def recognise_curve(
         assert client is not None
         reply, exchange = server.walk(WalkRequest(q, band, k, client.client_gap, mine))
     else:
-        reply, exchange = server.refine(RefineRequest(q, band, k, best_of(mine, prior, k), shifts))
+        bounds = best_of(mine, prior, k)
+        request = (RefineRequest.of_stack(q, band, k, bounds) if q.ndim == 2
+                   else RefineRequest(q, band, k, bounds, shifts))
+        reply, exchange = server.refine(request)
     return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                        exchange.sent, exchange.received, max(exchange.wall_ms - exchange.server_ms, 0.0),
                        exchange.trips)

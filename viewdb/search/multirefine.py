@@ -33,9 +33,11 @@ as well cost more than it saved: the cascade computes it anyway.)
 
 Per object the loop keeps, besides ``bound`` and ``exact`` (as :mod:`.refine`), the
 curve ``exact_curve[o]`` of the best view; among entries at exactly the same distance
-the lowest row, then the unmirrored view, then the lowest curve wins, whatever order
+the lowest curve, then the lowest row, then the unmirrored view wins, whatever order
 they were refined in (every entry at an object's final distance is refined, whatever
-the bounds), so bounded (CS1) and unbounded searches report the same view and shift.
+the bounds), so bounded (CS1) and unbounded searches report the same view and shift,
+and a stack reports what one search per curve, merged in the stack's order keeping the
+first of equals, reports.
 
 The heap holds at most a few entries per pushed parent; when a pop could overflow it the
 kernel returns :data:`FULL` before popping and the caller grows the heap.
@@ -62,12 +64,13 @@ _GB, _VB, _VBC, _VC, _GBC = 0, 1, 2, 3, 4
 
 @njit(cache=True, nogil=True)
 def _first(row, mirrored, curve, other_row, other_mirrored, other_curve):  # pragma: no cover
-    # canonical order among entries at exactly the same distance: row, unmirrored, curve
+    # canonical order among entries at exactly the same distance: curve, row, unmirrored
+    # (what separate searches of the curves in turn, merged keeping the first, report)
+    if curve != other_curve:
+        return curve < other_curve
     if row != other_row:
         return row < other_row
-    if mirrored != other_mirrored:
-        return not mirrored
-    return curve < other_curve
+    return other_mirrored and not mirrored
 
 
 @njit(cache=True, nogil=True)

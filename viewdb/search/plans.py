@@ -31,13 +31,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.features import mirror_curve
-from ..config import LIMITS, finite
+from ..config import LIMITS, SearchConfig, finite
 from ..errors import QueryError
 from .bounds import dtw
-from .knn import Neighbour, SearchStats, TierSource, knn
+from .knn import Neighbour, SearchStats, TierSource, knn, knn_stack
 from .shifts import ShiftWindow, shifted
 
 __all__ = [
+    "MAX_CURVES",
     "PLANS",
     "Candidate",
     "RefineRequest",
@@ -123,6 +124,9 @@ class Candidate:
     #: The query curve matched started at this sample (a shift search,
     #: :class:`~viewdb.search.shifts.ShiftWindow`); None: the curve as given.
     shift: int | None = None
+    #: The row of the request's stack of curves that matched (a stack search,
+    #: :attr:`RefineRequest.curves`); None: a search of one curve.
+    curve_index: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out = {"object": self.object, "distance": self.distance, "azimuth": self.azimuth,
@@ -133,6 +137,8 @@ class Candidate:
             out["camera_distance"] = self.camera_distance
         if self.shift is not None:
             out["shift"] = self.shift
+        if self.curve_index is not None:
+            out["curve_index"] = self.curve_index
         return out
 
     @classmethod
@@ -164,9 +170,12 @@ class Candidate:
             shift = data.get("shift")
             if shift is not None:
                 shift = _int(shift, "candidate shift", 0, MAX_SAMPLES - 1)
+            index = data.get("curve_index")
+            if index is not None:
+                index = _int(index, "candidate curve_index", 0, MAX_CURVES - 1)
             return cls(name, distance, json_number(data["azimuth"], "candidate azimuth"),
                        json_number(data["elevation"], "candidate elevation"), mirrored, version,
-                       None if camera is None else float(camera), shift)
+                       None if camera is None else float(camera), shift, index)
         except KeyError as exc:
             raise QueryError(f"candidate lacks {exc.args[0]!r}") from exc
 
@@ -185,6 +194,9 @@ MAX_K = 100
 MAX_BAND = 64
 #: Longest curve a candidate's shift may refer to.
 MAX_SAMPLES = 4096
+#: Most curves a request's stack may hold (e.g. 12 in-plane turns of a silhouette and of
+#: its completed outline need 24).
+MAX_CURVES = 72
 
 
 def _shifts(data: Any) -> ShiftWindow | None:
@@ -199,20 +211,62 @@ def _shifts(data: Any) -> ShiftWindow | None:
     return window
 
 
+def curves_from_json(x: Any, samples: int | None = None) -> NDArray[np.float64]:
+    """A stack of 1 to :data:`MAX_CURVES` distance curves of one length, as ``(T, N)``."""
+    if not isinstance(x, list) or not 1 <= len(x) <= MAX_CURVES:
+        raise QueryError(f"curves must be a list of 1 to {MAX_CURVES} curves, got "
+                         f"{len(x) if isinstance(x, list) else type(x).__name__}")
+    stack = [curve_from_json(c, samples) for c in x]
+    if len({len(c) for c in stack}) > 1:
+        raise QueryError(f"curves must all have the same number of samples, got "
+                         f"{sorted({len(c) for c in stack})}")
+    return np.ascontiguousarray(stack)
+
+
 @dataclass(frozen=True)
 class RefineRequest:
     """CS1, client → server: the query curve and the client's top-k on its sparse tier
-    (searched over the same ``shifts`` of the curve; None: the curve as given)."""
+    (searched over the same ``shifts`` of the curve; None: the curve as given).
+
+    With ``curves`` (``(T, N)``, at most :data:`MAX_CURVES`; :meth:`of_stack`) the
+    distance is the smallest over that stack of curves, found in one search
+    (:func:`~viewdb.search.knn.knn_stack`), and ``curve`` is its first row; on the wire
+    the stack goes as ``"curves"`` instead of ``"curve"`` (a server that predates stacks
+    refuses it as lacking ``"curve"`` rather than answering for one curve). A stack
+    goes without ``shifts``."""
 
     curve: NDArray[np.float64] = field(repr=False)
     band: int
     k: int
     client: list[Candidate]
     shifts: ShiftWindow | None = None
+    curves: NDArray[np.float64] | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.curves is not None and self.shifts is not None:
+            raise QueryError("a request searches either a stack of curves or shifts of one curve, not both")
+
+    @classmethod
+    def of_stack(
+        cls, curves: NDArray[np.floating], band: int, k: int, client: list[Candidate]
+    ) -> RefineRequest:
+        """A request searching the smallest distance over the rows of ``curves``."""
+        stack = np.ascontiguousarray(curves, dtype=np.float64)
+        if stack.ndim != 2 or not 1 <= len(stack) <= MAX_CURVES:
+            raise QueryError(f"a stack must hold 1 to {MAX_CURVES} curves, got shape {stack.shape}")
+        return cls(stack[0], band, k, client, curves=stack)
+
+    @property
+    def stack(self) -> NDArray[np.float64]:
+        """The curves searched, ``(T, N)`` (one row without ``curves``)."""
+        return self.curves if self.curves is not None else np.asarray(self.curve, np.float64)[None, :]
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"curve": [float(x) for x in self.curve], "band": self.band, "k": self.k,
-               "client": [c.to_dict() for c in self.client]}
+        out: dict[str, Any] = {"band": self.band, "k": self.k, "client": [c.to_dict() for c in self.client]}
+        if self.curves is None:
+            out["curve"] = [float(x) for x in self.curve]
+        else:
+            out["curves"] = [[float(x) for x in c] for c in self.curves]
         if self.shifts is not None:
             out["shifts"] = self.shifts.to_dict()
         return out
@@ -221,10 +275,17 @@ class RefineRequest:
     def from_dict(cls, data: Any, samples: int | None = None) -> RefineRequest:
         if not isinstance(data, dict):
             raise QueryError("request must be an object")
+        if "curves" in data and "curve" in data:
+            raise QueryError("request must have either curve or curves, not both")
         try:
-            return cls(curve_from_json(data["curve"], samples), _int(data["band"], "band", 0, MAX_BAND),
-                       _int(data["k"], "k", 1, MAX_K), candidates_from_json(data["client"], MAX_K),
-                       _shifts(data.get("shifts")))
+            band, k = _int(data["band"], "band", 0, MAX_BAND), _int(data["k"], "k", 1, MAX_K)
+            client = candidates_from_json(data["client"], MAX_K)
+            shifts = _shifts(data.get("shifts"))
+            if "curves" in data:
+                if shifts is not None:
+                    raise QueryError("a request with curves must not have shifts")
+                return cls.of_stack(curves_from_json(data["curves"], samples), band, k, client)
+            return cls(curve_from_json(data["curve"], samples), band, k, client, shifts)
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -279,14 +340,17 @@ def usable_client(
 ) -> list[Candidate]:
     """The request's client candidates whose distances bound a server's (module doc of
     :func:`refine`), nearest first: of an object the server ``holds``, in the version
-    the server holds (``versions``), at a shift the request's window allows."""
+    the server holds (``versions``), at a shift the request's window allows and of a
+    curve of the request's stack."""
     n = len(request.curve)
     allowed = {0} if request.shifts is None else set(request.shifts.shifts(n).tolist())
+    rows = len(request.stack)
     return sorted(
         (c for c in request.client
          if holds(c.object)
          and (c.version is None or versions is None or versions.get(c.object) == c.version)
-         and (c.shift is None or c.shift in allowed)),
+         and (c.shift is None or c.shift in allowed)
+         and (c.curve_index is None or c.curve_index < rows)),
         key=lambda c: c.distance,
     )
 
@@ -306,7 +370,9 @@ def refine(
     the request's shift window: its distance is not one the window allows.
 
     With ``request.shifts`` the distance is the smallest over those shifts of the curve
-    (:func:`~viewdb.search.knn.knn`), the client's too. ``upper``: a further upper bound
+    (:func:`~viewdb.search.knn.knn`), the client's too; with ``request.curves`` the
+    smallest over that stack (:func:`~viewdb.search.knn.knn_stack`, each result's
+    ``shift`` the row that matched). ``upper``: a further upper bound
     of the k-th distance from elsewhere (a sharded catalogue's other shards); objects
     farther than it may be left out of the answer."""
     client = usable_client(request, lambda name: source.object_index(name) is not None, versions)
@@ -317,6 +383,9 @@ def refine(
         index = source.object_index(c.object)
         if index is not None:
             known[index] = min(c.distance, known.get(index, math.inf))
+    if request.curves is not None:
+        return knn_stack(request.curves, source, request.k, request.band, upper=upper, known=known,
+                         block=SearchConfig().stack_block)
     return knn(request.curve, source, request.k, request.band, upper=upper, known=known,
                shifts=request.shifts)
 
@@ -401,14 +470,18 @@ def neighbours_to_candidates(
     views: Mapping[int, tuple[float, float] | tuple[float, float, float | None]],
     versions: Mapping[str, str] | None = None,
     shifted: bool = False,
+    stacked: bool = False,
 ) -> list[Candidate]:
     """k-NN results as candidates, given ``view id -> (azimuth, elevation[, camera
     distance])`` (and the objects' content hashes, ``versions``); ``shifted``: the results
-    of a shift search, whose candidates carry the shift that matched."""
+    of a shift search, whose candidates carry the shift that matched; ``stacked``: of a
+    stack search (:func:`~viewdb.search.knn.knn_stack`), whose candidates carry the row of
+    the curve that matched."""
     out = []
     for n in found:
         azimuth, elevation, *camera = views[n.view]
         out.append(Candidate(n.object, n.distance, azimuth, elevation, n.mirrored,
                              None if versions is None else versions.get(n.object),
-                             camera[0] if camera else None, n.shift if shifted else None))
+                             camera[0] if camera else None, n.shift if shifted else None,
+                             n.shift if stacked else None))
     return out

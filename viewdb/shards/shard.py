@@ -82,7 +82,8 @@ class Shard:
                 return ServerReply([], {}).to_dict()
             found, stats = refine(source, parsed, reader.object_versions(), upper)
             angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles, shifted=parsed.shifts is not None),
+        return ServerReply(neighbours_to_candidates(found, angles, shifted=parsed.shifts is not None,
+                                                    stacked=parsed.curves is not None),
                            stats.to_dict()).to_dict()
 
     def walk(self, request: dict[str, Any]) -> dict[str, Any]:

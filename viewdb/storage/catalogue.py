@@ -28,9 +28,9 @@ from ..catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from ..catalogue.render import RenderedView, get_renderer
 from ..catalogue.skimming import ViewClasses, plan_without_skimming, skim_plan
 from ..catalogue.symmetry import SymmetryType
-from ..config import BuildConfig
+from ..config import BuildConfig, SearchConfig
 from ..errors import FeatureError, NotFound, QueryError
-from ..search.knn import Neighbour, SearchStats, TierArrays, knn, objects_within
+from ..search.knn import Neighbour, SearchStats, TierArrays, knn, knn_stack, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
 from ..search.quantised import distance_bound, upper_distance
 from ..search.refine import scan_all
@@ -330,22 +330,33 @@ class StoredCatalogue:
         """Algorithm 2 on one tier, in one read snapshot: the ``k`` nearest objects, each
         with its best view (and the object's content hash as its ``version``); over the
         circular ``shifts`` of the curve in one search (each with the shift that matched).
+        A ``(T, N)`` stack of curves (no ``shifts``): the smallest distance over its rows,
+        in one search (:func:`~viewdb.search.knn.knn_stack`; each with the row that
+        matched as its ``curve_index``).
 
         The distances are those of the stored curves. ``bounded``: each is raised by its
         view's proven quantisation error (a compact client file; nothing to add for exact
         curves), so it bounds the distance to the exact curve from above, as a CS1 client
         must send (:mod:`viewdb.search.quantised`)."""
-        q = self.query_curve(curve, k, tier)
+        stacked = np.ndim(curve) == 2
+        if stacked and (shifts is not None or len(curve) == 0):
+            raise QueryError("a stack of curves needs at least one curve and no shifts")
+        q = (np.stack([self.query_curve(c, k, tier) for c in curve]) if stacked
+             else self.query_curve(curve, k, tier))
         with self.tier_reader().snapshot() as reader:
             source = reader.tier(tier)
             if source.n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
-            found, stats = knn(q, source, k, band, shifts=shifts)
+            if stacked:
+                found, stats = knn_stack(q, source, k, band, block=SearchConfig().stack_block)
+            else:
+                found, stats = knn(q, source, k, band, shifts=shifts)
             if bounded and source.quantised:
-                found = raised_distances(found, source, len(q), band)
+                found = raised_distances(found, source, q.shape[-1], band)
             angles = reader.view_projections([n.view for n in found])
             versions = reader.object_versions()
-        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None), stats
+        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None,
+                                        stacked=stacked), stats
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, band: int = 6, tier: str = "full"
