@@ -150,7 +150,15 @@ def ingest(
     paths: Annotated[
         list[Path], typer.Argument(help="Mesh files (OBJ, PLY, STL, OFF, GLB, glTF) or folders.")
     ],
-    db: DbOption,
+    db: Annotated[Path | None, typer.Option("--db", help="Database file (created if missing).",
+                                            dir_okay=False)] = None,
+    shards: Annotated[Path | None, typer.Option(
+        "--shards", help="Ingest into a sharded catalogue instead of --db: each object goes to the "
+                         "shard file blake2b(name) mod N of this folder (viewdb shard --out).",
+        file_okay=False)] = None,
+    shard_count: Annotated[int | None, typer.Option(
+        "--shard-count", help="With --shards: the number of shard files of a new sharded catalogue.",
+        min=1, max=4096)] = None,
     gap: Annotated[float | None, typer.Option(help="Grid gap in degrees (new db; default 10).",
                                               callback=_number(*GAP_RANGE))] = None,
     image_size: Annotated[int | None, typer.Option(help="View size in pixels (new db; default 256).",
@@ -166,6 +174,11 @@ def ingest(
                           "or 'none' (new db; default 3,4,6)."),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", help="Describe the objects as Ray tasks across a cluster instead of --jobs "
+                      "processes: 'auto' (the Ray on this machine, or a new local one) or HOST:PORT "
+                      "of a head node (ray start --head). This process still writes every object.")
+    ] = None,
     no_skim: Annotated[
         bool, typer.Option("--no-skim", help="Store the whole grid, not just the skim plan's views.")
     ] = False,
@@ -184,22 +197,36 @@ def ingest(
     are not the same as (or the mirror of) a stored one are rendered and kept, unless
     --no-skim.
     """
+    if (db is None) == (shards is None):
+        raise typer.BadParameter("give either --db FILE or --shards DIR", param_hint="--db")
+    if shard_count is not None and shards is None:
+        raise typer.BadParameter("--shard-count needs --shards", param_hint="--shard-count")
     files = viewdb.describe_paths(paths)
     distances = None if perspective is None else _parse_distances(perspective)
-    with viewdb.open(db, gap=gap, image_size=image_size, client_gap=client_gap,
-                     perspective=distances) as vdb, \
-            _progress() as bar:
+    settings = {"gap": gap, "image_size": image_size, "client_gap": client_gap, "perspective": distances}
+    if shards is not None:
+        from viewdb.shards.writing import open_shards
+
+        target: Any = open_shards(shards, count=shard_count, **settings)
+    else:
+        target = viewdb.open(db, **settings)  # type: ignore[arg-type]
+    with target, _progress() as bar:
         task = bar.add_task("ingest", total=None)
 
         def on_progress(p: viewdb.IngestProgress) -> None:
+            rate = f", {p.objects_per_second:.2f} objects/s" if p.written else ""
             bar.update(task, total=p.views_total, completed=p.views_done,
-                       description=f"ingest {p.files_done}/{p.files_total} files")
+                       description=f"ingest {p.files_done}/{p.files_total} files{rate}")
             if p.outcome is not None and p.outcome.status == "failed":
                 _say(f"viewdb: {p.outcome.error}", err)
 
-        report = vdb.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
-                            max_faces=max_faces or None,
-                            allow_missing_textures=allow_missing_textures)
+        report = target.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
+                               max_faces=max_faces or None,
+                               allow_missing_textures=allow_missing_textures, ray=ray)
+    _print_ingest(report, as_json)
+
+
+def _print_ingest(report: viewdb.IngestReport, as_json: bool) -> None:
     counts = report.counts()
     if as_json:
         _echo_json({
@@ -568,9 +595,12 @@ def _client_limits(total: float) -> viewdb_config.HttpConfig:
 
 @app.command("export-client")
 def export_client(
-    db: DbOption,
     out_path: Annotated[Path, typer.Option("--out", help="Client file to write (must not exist).",
                                            dir_okay=False)],
+    db: Annotated[Path | None, typer.Option("--db", help="The full database file.", dir_okay=False)] = None,
+    shards: Annotated[Path | None, typer.Option(
+        "--shards", help="Export from a sharded catalogue (viewdb shard --out, ingest --shards) "
+                         "instead of --db: one client file of all its shards.", file_okay=False)] = None,
     gap: Annotated[
         float | None,
         typer.Option(help="Client grid gap, a multiple of the db's gap (default: its client gap).",
@@ -583,18 +613,32 @@ def export_client(
     ] = viewdb_config.ClientFileConfig().curve_bits,
 ) -> None:
     """Write the small file that ships to devices: the sparse tier only (no meshes, no SIFT)."""
-    with _open_read(db) as vdb, _progress() as bar:
+    if (db is None) == (shards is None):
+        raise typer.BadParameter("give either --db FILE or --shards DIR", param_hint="--db")
+    file = viewdb_config.ClientFileConfig(curve_bits=curve_bits)
+    with _progress() as bar:
         task = bar.add_task("export", total=None)
-        config = vdb.export_client(out_path, client_gap=gap,
-                                   progress=lambda done, total: bar.update(task, completed=done, total=total),
-                                   file=viewdb_config.ClientFileConfig(curve_bits=curve_bits))
-        full = vdb.info()
+
+        def on_progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        if shards is not None:
+            from viewdb.shards.layout import read_manifest
+            from viewdb.shards.writing import export_client_from_shards
+
+            config = export_client_from_shards(shards, out_path, client_gap=gap, progress=on_progress,
+                                               file=file)
+            full_bytes = sum(f.stat().st_size for f in read_manifest(shards).files)
+        else:
+            with _open_read(db) as vdb:  # type: ignore[arg-type]
+                config = vdb.export_client(out_path, client_gap=gap, progress=on_progress, file=file)
+                full_bytes = vdb.info().file_bytes
     with _open_read(out_path) as client:
         small = client.info()
     _say(
         f"wrote {out_path}: {len(small.objects)} objects, {small.rows['views']} views on the "
         f"{config.client_gap:g}° client grid, {small.file_bytes / 1e6:.2f} MB "
-        f"({small.file_bytes / max(full.file_bytes, 1):.1%} of {full.file_bytes / 1e6:.1f} MB)"
+        f"({small.file_bytes / max(full_bytes, 1):.1%} of {full_bytes / 1e6:.1f} MB)"
     )
 
 

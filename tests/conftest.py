@@ -71,7 +71,23 @@ def small_db_full(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _build_small_db(tmp_path_factory, skim=False)
 
 
+@pytest.fixture(scope="module")
+def local_ray():
+    """A private local Ray of two CPUs for one test module (skipped without Ray)."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield ray
+    ray.shutdown()
+
+
 TIERED_DB_MODELS = ("marked_cube", "car", "mug", "l_bracket", "chair", "arrow")
+
+
+def tiered_config():
+    """The build configuration of :func:`tiered_db`."""
+    from viewdb.config import BuildConfig, IndexConfig, RenderConfig
+
+    return BuildConfig(gap=30, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=90))
 
 
 @pytest.fixture(scope="session")
@@ -79,11 +95,9 @@ def tiered_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Six sample models (skimmed) on a 30° server grid with a 90° client grid, so the
     sparse tier is a real subset of the full one; built once."""
     import viewdb
-    from viewdb.config import BuildConfig, IndexConfig, RenderConfig
 
     path = tmp_path_factory.mktemp("db") / "tiered.db"
-    config = BuildConfig(gap=30, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=90))
-    with viewdb.open(path, config=config) as db:
+    with viewdb.open(path, config=tiered_config()) as db:
         report = db.ingest([sample(n) for n in TIERED_DB_MODELS])
     assert not report.failed, report.failed
     return path

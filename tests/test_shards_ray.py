@@ -22,13 +22,6 @@ ray = pytest.importorskip("ray")
 
 
 @pytest.fixture(scope="module")
-def local_ray():
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    yield
-    ray.shutdown()
-
-
-@pytest.fixture(scope="module")
 def three_shards(tiered_db, tmp_path_factory):
     return split_catalogue(tiered_db, 3, tmp_path_factory.mktemp("ray") / "shards")
 

@@ -51,7 +51,7 @@ from .errors import (
 _LAZY: dict[str, str] = {
     **dict.fromkeys(("DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"), "api"),
     "Appearance": "catalogue.appearance",
-    **dict.fromkeys(("FileOutcome", "IngestProgress", "IngestReport"), "catalogue.ingest"),
+    **dict.fromkeys(("FileOutcome", "IngestProgress", "IngestReport", "IngestTarget"), "catalogue.ingest"),
     "NormalisedMesh": "catalogue.mesh",
     **dict.fromkeys(("CandidatePose", "CatalogueReader", "ObjectInfo", "StoredView"), "catalogue.reading"),
     "RenderedView": "catalogue.render",
@@ -76,7 +76,7 @@ _LAZY: dict[str, str] = {
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .api import DatabaseInfo, ViewDB, describe_paths, open, render_model
     from .catalogue.appearance import Appearance
-    from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport
+    from .catalogue.ingest import FileOutcome, IngestProgress, IngestReport, IngestTarget
     from .catalogue.mesh import NormalisedMesh
     from .catalogue.reading import CandidatePose, CatalogueReader, ObjectInfo, StoredView
     from .catalogue.render import RenderedView
@@ -132,6 +132,7 @@ __all__ = [
     "IndexConfig",
     "IngestProgress",
     "IngestReport",
+    "IngestTarget",
     "Intrinsics",
     "LocalServerTier",
     "MeshError",

@@ -18,13 +18,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .catalogue.describe import ObjectDescription
-from .catalogue.ingest import IngestProgress, IngestReport, Upgrade, run_ingest
-from .catalogue.mesh import DEFAULT_MAX_FACES, LoadOptions, NormalisedMesh, load_mesh
+from .catalogue.ingest import IngestProgress, IngestReport, IngestTarget, Upgrade, checked_options, run_ingest
+from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import LIMITS, BuildConfig, ClientFileConfig, OverlayConfig, RenderConfig, finite, integer
+from .config import BuildConfig, ClientFileConfig, OverlayConfig, RayIngestConfig, RenderConfig, finite
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -136,6 +136,8 @@ class ViewDB:
         progress: Callable[[IngestProgress], None] | None = None,
         max_faces: int | None = DEFAULT_MAX_FACES,
         allow_missing_textures: bool = False,
+        ray: str | None = None,
+        ray_config: RayIngestConfig | None = None,
     ) -> IngestReport:
         """Add mesh files; an object is named after its file's stem.
 
@@ -152,7 +154,22 @@ class ViewDB:
         still go in: among them meshes with more than ``max_faces`` triangles (``None``:
         no cap) and meshes naming texture files that do not exist (unless
         ``allow_missing_textures``: then they go in untextured).
+
+        ``ray`` (``"auto"``: the Ray cluster on this machine, or a new local one;
+        ``"HOST:PORT"``: a head node) describes the objects as Ray tasks across the
+        cluster instead of in ``jobs`` local processes; this process still writes each one
+        (:mod:`viewdb.catalogue.distributed`). Ray is the optional extra ``viewdb[ray]``.
         """
+        options = checked_options(jobs, max_faces, allow_missing_textures)
+        report = run_ingest(list(paths), self.config, self.ingest_target(), jobs=jobs, skim=skim,
+                            progress=progress, options=options, ray=ray, ray_config=ray_config)
+        self.write_tier_files()
+        return report
+
+    def ingest_target(self) -> IngestTarget:
+        """What an ingest into this file needs to know (the objects stored, what older
+        ones lack) and how it writes an object (one transaction each); for an ingest that
+        spreads objects over several files (:mod:`viewdb.shards.writing`)."""
         if self.role == "client":
             raise ViewDBError(
                 "is a client database (export-client): ingest into the full database and "
@@ -172,22 +189,17 @@ class ViewDB:
                 self._store.add_appearance(upgrade.name, upgrade.appearance)
             self._catalogue.forget(upgrade.name)
 
-        try:
-            options = LoadOptions(max_faces, allow_missing_textures)
-            integer(jobs, "jobs", 1, LIMITS.max_jobs)
-        except ValueError as exc:
-            raise ViewDBError(str(exc)) from exc
-        report = run_ingest(
-            list(paths), self.config, self._store.object_hashes(), write,
-            lacking_perspective=self._store.objects_lacking_perspective(),
-            lacking_appearance={name: self._catalogue.views(name)
-                                for name in self._store.objects_lacking_appearance()},
-            write_upgrade=write_upgrade,
-            jobs=jobs, skim=skim, progress=progress, options=options,
+        return IngestTarget(
+            self._store.object_hashes(), write, self._store.objects_lacking_perspective(),
+            {name: self._catalogue.views(name) for name in self._store.objects_lacking_appearance()},
+            write_upgrade,
         )
+
+    def write_tier_files(self) -> None:
+        """Write the tiers' search arrays next to the file, ready to map for the next fresh
+        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends."""
         with self._catalogue.tier_reader().snapshot() as reader:
-            reader.write_tier_files()  # the tiers ready to map for the next fresh process
-        return report
+            reader.write_tier_files()
 
     def export_client(
         self, out: str | Path, *, client_gap: float | None = None,

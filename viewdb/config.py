@@ -16,7 +16,8 @@ from typing import Any
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "ClientFileConfig", "FeatureConfig", "HttpConfig",
     "ImageConfig", "IndexConfig",
-    "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RecognitionConfig",
+    "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RayIngestConfig",
+    "RecognitionConfig",
     "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
     "SkimConfig",
     "WebConfig",
@@ -663,6 +664,29 @@ class ShardConfig:
 
 #: The ways of searching a query's in-plane turns (:attr:`RecognitionConfig.turn_search`).
 TURN_SEARCHES = ("stack", "separate")
+
+
+@dataclass(frozen=True)
+class RayIngestConfig:
+    """Tunables of an ingest whose objects are described by Ray tasks
+    (:mod:`viewdb.catalogue.distributed`)."""
+
+    #: Times Ray runs an object's task again when its worker dies (SIGKILL, out of memory,
+    #: a lost node) before the object is reported failed.
+    max_retries: int = 3
+    #: CPUs Ray reserves for each object's task (rendering and features use one core).
+    task_cpus: float = 1.0
+    #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while the
+    #: writer commits, few enough that described objects do not pile up in memory.
+    in_flight_per_cpu: int = 2
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.max_retries <= 100:
+            raise ValueError(f"max_retries must be in [0, 100], got {self.max_retries}")
+        if not 0 < self.task_cpus <= 64:
+            raise ValueError(f"task_cpus must be in (0, 64], got {self.task_cpus}")
+        if not 1 <= self.in_flight_per_cpu <= 64:
+            raise ValueError(f"in_flight_per_cpu must be in [1, 64], got {self.in_flight_per_cpu}")
 
 
 @dataclass(frozen=True)

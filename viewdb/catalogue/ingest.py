@@ -1,9 +1,10 @@
 """Running an ingest: which files to describe, in how many processes, and reporting.
 
 Workers (``jobs > 1``) are spawned processes: each imports pyrender itself and keeps one
-renderer for its life. They only compute (:func:`~viewdb.catalogue.describe.describe_object`); the
-calling process writes each object in one transaction, so an interrupted ingest leaves
-every object either complete or absent.
+renderer for its life. With ``ray`` the workers are Ray tasks anywhere in a cluster
+(:mod:`viewdb.catalogue.distributed`). Either way they only compute
+(:func:`~viewdb.catalogue.describe.describe_object`); the calling process writes each object
+in one transaction, so an interrupted ingest leaves every object either complete or absent.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..camera import grid_views
-from ..config import BuildConfig
+from ..config import LIMITS, BuildConfig, RayIngestConfig, integer
 from ..errors import MeshError, ViewDBError
 from ..paths import not_regular
 from .appearance import Appearance
@@ -38,7 +39,8 @@ from .describe import (
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
-__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "Upgrade", "run_ingest"]
+__all__ = ["FileOutcome", "IngestProgress", "IngestReport", "IngestTarget", "Upgrade", "checked_options",
+           "run_ingest"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,14 @@ class IngestProgress:
     files_total: int
     #: The file just finished (None for a per-view tick).
     outcome: FileOutcome | None = None
+    #: Objects written so far (added, replaced or upgraded), and the seconds since the
+    #: ingest began: their ratio is the throughput of all workers, local or on Ray.
+    written: int = 0
+    seconds: float = 0.0
+
+    @property
+    def objects_per_second(self) -> float:
+        return self.written / self.seconds if self.seconds > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -173,6 +183,19 @@ def _describe_file(
     return _describe(job, config, skim, options, _tick)
 
 
+@dataclass(frozen=True)
+class IngestTarget:
+    """Where an ingest writes: the objects already stored (name → content hash), how it
+    writes a described object and an upgrade (each in one transaction), and what objects
+    stored by an older viewdb lack (:func:`run_ingest`)."""
+
+    existing_hashes: dict[str, str]
+    write: Callable[[ObjectDescription], None]
+    lacking_perspective: set[str] | frozenset[str]
+    lacking_appearance: dict[str, list[tuple[float, float]]]
+    write_upgrade: Callable[[Upgrade], None]
+
+
 @dataclass
 class _Job:
     path: str
@@ -195,26 +218,39 @@ class _Job:
         return (perspective if "perspective" in self.upgrade else 0) + self.records
 
 
+def checked_options(jobs: int, max_faces: int | None, allow_missing_textures: bool) -> LoadOptions:
+    """The mesh loading options of an ingest, ``jobs`` checked too; a bad value raises
+    :class:`~viewdb.errors.ViewDBError`."""
+    try:
+        integer(jobs, "jobs", 1, LIMITS.max_jobs)
+        return LoadOptions(max_faces, allow_missing_textures)
+    except ValueError as exc:
+        raise ViewDBError(str(exc)) from exc
+
+
 def run_ingest(
     paths: Sequence[str | Path],
     config: BuildConfig,
-    existing_hashes: dict[str, str],
-    write: Callable[[ObjectDescription], None],
+    target: IngestTarget,
     *,
-    lacking_perspective: set[str] | frozenset[str] = frozenset(),
-    lacking_appearance: dict[str, list[tuple[float, float]]] | None = None,
-    write_upgrade: Callable[[Upgrade], None] | None = None,
     jobs: int = 1,
     skim: bool = True,
     progress: Callable[[IngestProgress], None] | None = None,
     options: LoadOptions = LoadOptions(),  # noqa: B008 - frozen, shared on purpose
+    ray: str | None = None,
+    ray_config: RayIngestConfig | None = None,
 ) -> IngestReport:
-    """Describe every new or changed file and hand each result to ``write``.
+    """Describe every file new to ``target`` or changed, and hand each result to its
+    ``write``.
 
-    An unchanged file whose object is in ``lacking_perspective`` (stored by an older
-    viewdb) gets only its perspective views rendered, when the configuration asks for
-    perspective views; one in ``lacking_appearance`` (name → its stored views) only its
-    appearance records; either is handed to ``write_upgrade``.
+    An unchanged file whose object is in the target's ``lacking_perspective`` (stored by
+    an older viewdb) gets only its perspective views rendered, when the configuration asks
+    for perspective views; one in ``lacking_appearance`` (name → its stored views) only
+    its appearance records; either is handed to ``write_upgrade``.
+
+    ``ray`` (``"auto"`` or a head node's ``HOST:PORT``) describes the files as Ray tasks
+    across that cluster instead of in ``jobs`` local processes (``ray_config``: retries
+    and queue depth); they are written here all the same.
 
     A file that fails (unreadable, no area, …) is reported as ``failed`` and the others
     still go in. ``KeyboardInterrupt`` stops the workers and propagates; objects already
@@ -222,13 +258,14 @@ def run_ingest(
     """
     start = time.perf_counter()
     report = IngestReport()
-    upgrade = write_upgrade is not None
-    lacking = _Lacking(lacking_perspective if upgrade and config.perspective.enabled else frozenset(),
-                       (lacking_appearance or {}) if upgrade else {}, config)
-    todo = _plan_jobs(paths, existing_hashes, lacking, report)
-    run = _Run(report, todo, config, write, write_upgrade, progress)
+    lacking = _Lacking(target.lacking_perspective if config.perspective.enabled else frozenset(),
+                       target.lacking_appearance, config)
+    todo = _plan_jobs(paths, target.existing_hashes, lacking, report)
+    run = _Run(report, todo, config, target.write, target.write_upgrade, progress)
     run.report_planned()
-    if jobs <= 1 or len(todo) <= 1:
+    if ray is not None and todo:
+        run.on_ray(todo, skim, options, ray, ray_config)
+    elif jobs <= 1 or len(todo) <= 1:
         run.serial(todo, skim, options)
     else:
         run.pooled(todo, jobs, skim, options)
@@ -300,7 +337,7 @@ class _Run:
     def __init__(
         self, report: IngestReport, todo: list[_Job], config: BuildConfig,
         write: Callable[[ObjectDescription], None],
-        write_upgrade: Callable[[Upgrade], None] | None,
+        write_upgrade: Callable[[Upgrade], None],
         progress: Callable[[IngestProgress], None] | None,
     ) -> None:
         self.report, self.config = report, config
@@ -310,11 +347,14 @@ class _Run:
         self.total_views = sum(job.views(self.grid, self.perspective) for job in todo)
         self.done_views = 0
         self.files_total = len(report.outcomes) + len(todo)
+        self.written = 0
+        self.start = time.perf_counter()
 
     def notify(self, outcome: FileOutcome | None = None, files_done: int | None = None) -> None:
         if self.progress is not None:
             done = len(self.report.outcomes) if files_done is None else files_done
-            self.progress(IngestProgress(self.done_views, self.total_views, done, self.files_total, outcome))
+            self.progress(IngestProgress(self.done_views, self.total_views, done, self.files_total,
+                                         outcome, self.written, time.perf_counter() - self.start))
 
     def report_planned(self) -> None:
         """Report the files dealt with while planning (refused, or unchanged) now, so a
@@ -337,13 +377,13 @@ class _Run:
             )
         else:
             outcome = self._write(job, result)
+            self.written += outcome.status != "failed"
         self.report.outcomes.append(outcome)
         self.notify(outcome)
 
     def _write(self, job: _Job, result: ObjectDescription | Upgrade) -> FileOutcome:
         try:
             if isinstance(result, Upgrade):
-                assert self.write_upgrade is not None
                 self.write_upgrade(result)
             else:
                 self.write(result)
@@ -365,6 +405,19 @@ class _Run:
                 result = exc
             self.done_views = expected_done  # a failed file counts as dealt with
             self.finish(job, result)
+
+    def on_ray(self, todo: list[_Job], skim: bool, options: LoadOptions, address: str,
+               config: RayIngestConfig | None) -> None:
+        """Describe the files as Ray tasks (:mod:`viewdb.catalogue.distributed`); write
+        them here as they come back. A task's views are counted when it comes back."""
+        from .distributed import describe_on_ray
+
+        def finish(job: _Job, result: ObjectDescription | Upgrade | BaseException) -> None:
+            self.done_views += job.views(self.grid, self.perspective)
+            self.finish(job, result)
+
+        describe_on_ray(_describe_file, todo, (self.config, skim, options), finish,
+                        address=address, config=config)
 
     def pooled(self, todo: list[_Job], jobs: int, skim: bool, options: LoadOptions) -> None:
         """Describe the files in ``jobs`` spawned worker processes; write them here."""

@@ -32,6 +32,8 @@ from ..config import ShardConfig
 from ..errors import NotFound, QueryError, ShardUnavailable, StorageError, ViewDBError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
+from ..ray_cluster import connect
+from ..ray_cluster import ray_module as _ray
 from ..recognition.server_tier import Exchange
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .gather import scatter_gather
@@ -40,34 +42,6 @@ from .layout import Manifest, read_manifest, shard_of
 __all__ = ["ShardedServerTier", "connect"]
 
 T = TypeVar("T")
-
-
-def _ray() -> Any:
-    try:
-        import ray
-    except ImportError:
-        raise ViewDBError("sharded catalogues need Ray: pip install 'viewdb[ray]'") from None
-    return ray
-
-
-def connect(address: str | None = "auto") -> None:
-    """Join a Ray cluster (``address``: ``"auto"`` joins the one running on this machine,
-    or starts a local one if none is; ``"HOST:PORT"`` joins that head node). A process
-    already connected stays so."""
-    ray = _ray()
-    if ray.is_initialized():
-        return
-    options = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-    if address in (None, "auto"):
-        try:
-            ray.init(address="auto", **options)
-        except ConnectionError:
-            ray.init(**options)
-        return
-    try:
-        ray.init(address=address, **options)
-    except (ConnectionError, ValueError, RuntimeError) as exc:
-        raise ViewDBError(f"cannot join the Ray cluster at {address}: {str(exc).splitlines()[0]}") from None
 
 
 class _Host:

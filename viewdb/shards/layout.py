@@ -33,7 +33,8 @@ from ..storage.codecs import decode_array
 from ..storage.spatial import FourierIndex
 from ..storage.tiers import TIERS
 
-__all__ = ["MANIFEST", "Manifest", "read_manifest", "shard_of", "split_catalogue"]
+__all__ = ["MANIFEST", "Manifest", "check_new_folder", "read_manifest", "shard_file", "shard_of",
+           "split_catalogue", "write_manifest"]
 
 #: The manifest's file name inside a shard folder.
 MANIFEST = "manifest.json"
@@ -41,6 +42,11 @@ FORMAT = "viewdb-shards"
 VERSION = 1
 #: Most shards a catalogue may be split into.
 MAX_SHARDS = 4096
+
+
+def shard_file(index: int) -> str:
+    """The file name of shard ``index`` in its folder."""
+    return f"shard-{index:03d}.viewdb"
 
 
 def shard_of(name: str, shards: int) -> int:
@@ -97,11 +103,22 @@ def read_manifest(folder: str | Path) -> Manifest:
     return Manifest(folder, files, objects)
 
 
-def _check_out(out: Path) -> None:
+def write_manifest(manifest: Manifest, folder: Path | None = None) -> None:
+    """Write ``manifest`` into ``folder`` (default its own), atomically: a reader sees the
+    old manifest or the new one, never half of one."""
+    folder = manifest.folder if folder is None else folder
+    partial = folder / f".{MANIFEST}.partial"
+    partial.write_text(json.dumps(manifest.to_dict(), indent=1) + "\n", encoding="utf-8")
+    os.replace(partial, folder / MANIFEST)
+
+
+def check_new_folder(out: Path, option: str = "--out") -> None:
+    """Refuse ``out`` (given as ``option``) as the folder of a new sharded catalogue
+    unless it is missing or empty and its parent exists."""
     if out.exists() and not out.is_dir():
-        raise ViewDBError("exists and is not a folder; choose another --out", out)
+        raise ViewDBError(f"exists and is not a folder; choose another {option}", out)
     if out.is_dir() and any(out.iterdir()):
-        raise ViewDBError("exists and is not empty; remove it or choose another --out", out)
+        raise ViewDBError(f"exists and is not empty; remove it or choose another {option}", out)
     if not out.parent.is_dir():
         raise ViewDBError("its parent folder does not exist", out)
 
@@ -115,7 +132,7 @@ def split_catalogue(
     source, out = Path(source), Path(out)
     if not 1 <= shards <= MAX_SHARDS:
         raise ViewDBError(f"--shards must be in [1, {MAX_SHARDS}], got {shards}")
-    _check_out(out)
+    check_new_folder(out)
     names = _object_names(source)
     partial = out.with_name(f".{out.name}.partial")
     shutil.rmtree(partial, ignore_errors=True)
@@ -124,14 +141,14 @@ def split_catalogue(
         files, counts = [], []
         for i in range(shards):
             keep = [n for n in names if shard_of(n, shards) == i]
-            target = partial / f"shard-{i:03d}.viewdb"
+            target = partial / shard_file(i)
             _write_shard(source, target, set(keep))
             files.append(out / target.name)
             counts.append(len(keep))
             if progress is not None:
                 progress(i + 1, shards)
         manifest = Manifest(out, files, counts)
-        (partial / MANIFEST).write_text(json.dumps(manifest.to_dict(), indent=1) + "\n", encoding="utf-8")
+        write_manifest(manifest, partial)
         if out.is_dir():
             out.rmdir()
         os.replace(partial, out)

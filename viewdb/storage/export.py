@@ -8,7 +8,9 @@ R-tree. No meshes, no SIFT features, no full tier. By default the file is *compa
 tier's groups, as 8-bit codes with a per-curve offset and scale and each curve's proven
 error (``curve_errors``, :mod:`viewdb.search.quantised`); no per-view curve or Fourier
 rows (a reader derives both from the groups); the R-tree boxes are the decoded curves';
-small pages and a final ``VACUUM``. The file is written under a temporary
+small pages and a final ``VACUUM``. A catalogue split over several files (the shards of
+:mod:`viewdb.shards`) exports to the same one file: the objects of all of them, in name
+order, as the single file they were split from would give. The file is written under a temporary
 name next to the target and renamed into place when complete, so a failed or interrupted
 export leaves nothing behind.
 """
@@ -18,9 +20,11 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,24 +40,23 @@ __all__ = ["export_client"]
 
 
 def export_client(
-    source: Store,
+    source: Store | Sequence[Store],
     out: str | Path,
     client_gap: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     file: ClientFileConfig | None = None,
 ) -> BuildConfig:
-    """Write the client file of ``source`` to ``out``; returns the client's configuration.
+    """Write the client file of ``source`` (one full file, or several built with the same
+    settings and holding different objects) to ``out``; returns the client's configuration.
 
     ``client_gap`` (default: the source's client gap) must be a multiple of the source's
     grid gap. ``out`` must not exist. ``file``: how the file is written (default compact).
     """
     file = file or ClientFileConfig()
     out = Path(out)
-    config = source.build_config()
-    if config is None:
-        raise StorageError("has no build configuration", source.path)
-    if source.role() != "full":
-        raise ViewDBError("is a client database; export from the full database", source.path)
+    sources = [source] if isinstance(source, Store) else list(source)
+    config = _common_config(sources)
+    source = sources[0]
     if out.exists():
         raise ViewDBError("already exists; remove it or choose another --out", out)
     if not out.parent.is_dir():
@@ -69,7 +72,7 @@ def export_client(
     try:
         target = Store(partial, initial=(client, "client"))
         try:
-            _copy(source, target, client, progress, file.curve_bits)
+            _copy(sources, target, client, progress, file.curve_bits)
         finally:
             target.close()
         with sqlite3.connect(partial) as conn:  # fold the WAL in: one self-contained file
@@ -85,15 +88,47 @@ def export_client(
     return client
 
 
-def _copy(source: Store, target: Store, client: BuildConfig, progress, bits: int) -> None:  # type: ignore[no-untyped-def]
-    with source.read() as sconn:
-        src = sconn.connection.driver_connection
-        objects = src.execute(
+def _common_config(sources: Sequence[Store]) -> BuildConfig:
+    """The build configuration of full files that share it."""
+    if not sources:
+        raise ViewDBError("nothing to export: no database files given")
+    configs = []
+    for source in sources:
+        config = source.build_config()
+        if config is None:
+            raise StorageError("has no build configuration", source.path)
+        if source.role() != "full":
+            raise ViewDBError("is a client database; export from the full database", source.path)
+        if configs and config != configs[0]:
+            raise ViewDBError(f"was built with other settings than {sources[0].path}", source.path)
+        configs.append(config)
+    return configs[0]
+
+
+def _objects_by_name(
+    connections: list[sqlite3.Connection], where: Path,
+) -> list[tuple[tuple[Any, ...], sqlite3.Connection]]:
+    """Every object row of the files, with the file's connection, in name order (as
+    SQLite's ``ORDER BY name``: binary, which is code point order); a name in two files
+    is refused."""
+    objects = sorted(
+        ((row, src) for src in connections for row in src.execute(
             "SELECT id, name, source, content_hash, n_faces, n_vertices, centre, scale,"
             " empty_views, ingest_seconds, created_at, skimmed, h_type, v_type, h_period,"
-            " v_period, symmetry FROM objects ORDER BY name"
-        ).fetchall()
-        for done, row in enumerate(objects, 1):
+            " v_period, symmetry FROM objects")),
+        key=lambda found: str(found[0][1]),
+    )
+    for (a, _), (b, _) in zip(objects, objects[1:], strict=False):
+        if a[1] == b[1]:
+            raise ViewDBError(f"object {a[1]!r} is in more than one of the files exported", where)
+    return objects
+
+
+def _copy(sources: Sequence[Store], target: Store, client: BuildConfig, progress, bits: int) -> None:  # type: ignore[no-untyped-def]
+    with ExitStack() as stack:
+        connections = [stack.enter_context(s.read()).connection.driver_connection for s in sources]
+        objects = _objects_by_name(connections, sources[0].path)
+        for done, (row, src) in enumerate(objects, 1):
             (oid, name, path, digest, faces, vertices, centre, scale, empty, seconds, created,
              skimmed, h_type, v_type, h_period, v_period, symmetry) = row
             views = src.execute(
