@@ -39,6 +39,7 @@ def test_healthy_db_passes(copy_db, capsys):
         ("UPDATE curves SET samples = x'00' WHERE view_id = 3", "array blob"),
         ("DELETE FROM sift_features WHERE view_id = 5", "missing curve, Fourier point or SIFT row"),
         ("UPDATE objects SET mesh_glb = x'0000000000' WHERE name = 'car'", "not a GLB"),
+        ("UPDATE objects SET mesh_glb = x'' WHERE name = 'car'", "not a GLB"),
         ("DELETE FROM views WHERE id = 7", "views + 0 empty != "),
         ("UPDATE objects SET symmetry = '{}' WHERE name = 'mug'", "symmetry type does not decode"),
         ("UPDATE sift_features SET count = count + 1 WHERE view_id = 9", "array blob has shape"),

@@ -231,7 +231,7 @@ def _check_objects(conn: sa.Connection, gap: float, report: CheckReport, client:
             report.add(f"object {name!r}: centre: {exc.message}")
         if client:
             continue  # a client file has no meshes and only the client grid's views
-        if bytes(magic) != b"glTF":
+        if magic is None or bytes(magic) != b"glTF":  # an empty blob's first bytes are NULL
             report.add(f"object {name!r}: stored mesh is not a GLB")
         if n_views + empty != expected:
             report.add(
