@@ -42,8 +42,7 @@ def build(folder: Path) -> Path:
     from viewdb.config import BuildConfig, IndexConfig
 
     path = folder / "full.db"
-    models = [p for p in sorted((ROOT / "sample_models").iterdir())
-              if p.suffix.lower() in (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")]
+    models = viewdb.describe_paths([ROOT / "sample_models"])
     with viewdb.open(path, config=BuildConfig(gap=30, index=IndexConfig(client_gap=90))) as db:
         db.ingest(models, jobs=2)
     return path

@@ -42,8 +42,7 @@ from viewdb_cli.main import _demo_photo  # noqa: E402
 
 def build(folder: Path) -> Path:
     path = folder / "demo.db"
-    models = [p for p in sorted((ROOT / "sample_models").iterdir())
-              if p.suffix.lower() in (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")]
+    models = viewdb.describe_paths([ROOT / "sample_models"])
     with viewdb.open(path, gap=30) as db:
         db.ingest(models, jobs=2)
     return path

@@ -741,8 +741,7 @@ def demo(
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 2,
 ) -> None:
     """Build a database from the bundled sample models and show what is in it."""
-    models = sorted(p for p in SAMPLE_MODELS.iterdir() if p.suffix.lower() in
-                    (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")) if SAMPLE_MODELS.is_dir() else []
+    models = viewdb.describe_paths([SAMPLE_MODELS]) if SAMPLE_MODELS.is_dir() else []
     if not models:
         raise viewdb.ViewDBError("no sample models found; run python sample_models/make_samples.py",
                                  SAMPLE_MODELS)
