@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import TIERED_DB_MODELS
+from viewdb.catalogue.coverage import MeshTriangles, silhouette
 from viewdb.catalogue.pinhole import get_pinhole_renderer
 from viewdb.catalogue.render import get_renderer
 from viewdb.config import OverlayConfig, RenderConfig
@@ -127,6 +128,31 @@ def test_pinhole_silhouette_equals_the_pinhole_render_in_both_units(db, name, h,
     in_mesh = OverlayPose(name, r, to_mesh_units(r, t, info.centre, info.scale), frame="opencv", units="mesh")
     placed = project_silhouette(in_mesh, mesh, (size, size), k, (info.centre, info.scale))
     assert (placed ^ mine).sum() <= 2
+
+
+@settings(max_examples=20, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, turn=angles, depth=st.floats(1.8, 6.0),
+       tx=st.floats(-0.5, 0.5), ty=st.floats(-0.5, 0.5), size=st.sampled_from([48, 80, 131]))
+def test_cpu_silhouette_equals_the_pinhole_render(db, name, h, v, turn, depth, tx, ty, size):
+    """What a silhouette fit renders hundreds of times: the CPU scan conversion
+    (viewdb.catalogue.coverage) gives OpenGL's silhouette, window sizes of a fit included."""
+    k = (size * 1.2, size * 1.3, size * 0.47, size * 0.52)
+    mesh = db.mesh(name)
+    r, t = GL_TO_CV @ view_rotation(h, v, turn), np.array([tx, ty, depth])
+    renderer = get_pinhole_renderer()
+    truth, _ = renderer.render(mesh, r, t, k, size)
+    assert_same_silhouette(truth, renderer.silhouette(mesh, r, t, k, size))
+
+
+def test_cpu_silhouette_leaves_out_triangles_behind_the_camera():
+    triangles = MeshTriangles(np.array([[-1.0, -1, 2], [1, -1, 2], [0, 1, 2], [-1, -1, -2], [1, -1, -2], [0, 1, -2]]),
+                              np.array([[0, 1, 2], [3, 4, 5]]))
+    front = silhouette(triangles, np.eye(3), np.zeros(3), (10.0, 10.0, 10.0, 10.0), 21)
+    alone = silhouette(MeshTriangles(triangles.vertices[:3], [[0, 1, 2]]), np.eye(3), np.zeros(3),
+                       (10.0, 10.0, 10.0, 10.0), 21)
+    assert front.sum() > 20 and np.array_equal(front, alone)
+    with pytest.raises(ValueError, match="vertex"):
+        MeshTriangles(triangles.vertices, [[0, 1, 6]])
 
 
 # ------------------------------------------------------------------ drawn outline

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from ..errors import RenderError
 from ..interrupts import interrupts_held
 from ..typed import Intrinsics
+from .coverage import MeshTriangles, silhouette
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 from .render import render_depth, reraise_interrupt
@@ -84,6 +85,7 @@ class PinholeRenderer:
         self._scene = None
         self._mesh_node = None
         self._camera_node = None
+        self._triangles: tuple[NormalisedMesh, MeshTriangles] | None = None
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -126,6 +128,17 @@ class PinholeRenderer:
         self._scene.set_pose(self._mesh_node, pose)
         depth = render_depth(self._scene, size, mesh.name)
         return depth > 0, depth
+
+    def silhouette(
+        self, mesh: NormalisedMesh, rotation: NDArray[np.floating], translation: NDArray[np.floating],
+        intrinsics: Intrinsics, size: int,
+    ) -> NDArray[np.bool_]:
+        """The silhouette alone, as :meth:`render` gives it, scan-converted on the CPU
+        (:mod:`viewdb.catalogue.coverage`: no GL call, 10–20x quicker for a small window)."""
+        if self._triangles is None or self._triangles[0] is not mesh:
+            geometry = mesh.geometry
+            self._triangles = (mesh, MeshTriangles(geometry.vertices, geometry.faces))
+        return silhouette(self._triangles[1], rotation, translation, intrinsics, size)
 
 
 @dataclass

@@ -168,7 +168,7 @@ def pose_silhouette(
     render = catalogue.config.render
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
-        lambda r, t, k, s: pinhole.render(mesh, r, t, k, s)[0],
+        lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s),
         render.image_size, render.xmag, ignore=query.ignore,
         directions=grid_directions(catalogue.config.gap, (search or SilhouetteConfig()).directions),
         starts=starts, config=config, search=search,

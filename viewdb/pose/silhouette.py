@@ -12,7 +12,8 @@ finds that pose in two steps.
    ``(h, v, inplane, magnification, origin pixel)``.
 2. **Lift and refine.** Each hypothesis is lifted to the pinhole camera (below), then the
    6-DoF pose is refined by a pattern search that maximises the silhouette IoU between the
-   mesh rendered through the intrinsics (:mod:`viewdb.catalogue.pinhole`) and the query mask, in a
+   mesh's silhouette through the intrinsics (scan-converted on the CPU,
+   :mod:`viewdb.catalogue.coverage`) and the query mask, in a
    window around the object. The best few hypotheses are refined coarsely, the best of
    those finely.
 

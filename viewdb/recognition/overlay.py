@@ -250,11 +250,14 @@ def project_silhouette(
     ``placement``: ``(centre, scale)`` of the mesh in its file, for a pose in the mesh's
     units (default the mesh's own: a mesh read from a database file has none, see
     :func:`draw_overlay`)."""
+    from ..catalogue.coverage import cover
+
     photo = (int(shape[0]), int(shape[1]))
     geometry = mesh.geometry
     place = placement or (mesh.centre, mesh.scale)
     proj = _project(pose, place, np.asarray(geometry.vertices), photo, photo, intrinsics)
-    return _face_ids(proj, np.asarray(geometry.faces, dtype=np.int64), photo) >= 0
+    points = np.where(proj.valid[:, None], proj.uv, np.nan)
+    return cover(points, np.asarray(geometry.faces, dtype=np.int64), photo)
 
 
 def _corners(geometry: Any) -> NDArray[np.int64]:
