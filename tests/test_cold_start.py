@@ -76,8 +76,8 @@ def test_a_missing_lazy_module_fails_when_used_not_when_named():
 
 def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
     """The warm-up, in a fresh kernel cache, leaves nothing for the first queries of a
-    new process to compile: the CLI's query with each plan, with and without pose and
-    with a gravity hint, on another database."""
+    new process to compile: the CLI's query with each plan, with and without pose, with
+    a gravity hint and with silhouette fits through intrinsics, on another database."""
     import cv2
 
     import viewdb
@@ -88,13 +88,15 @@ def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
     photo[view.mask] = view.color[view.mask]
     path = tmp_path / "photo.png"
     cv2.imwrite(str(path), photo[:, :, ::-1])
+    side = float(photo.shape[1])
     env = {"NUMBA_CACHE_DIR": str(tmp_path / "kernels")}
     warmed = _child("import json\nfrom viewdb.warm import warm_up\n"
                     "r = warm_up()\nprint(json.dumps([r.compiled, r.cached]))", env)
     assert warmed[0] > 0  # the fresh cache was filled
     queries = [["query", str(path), "--db", str(small_db), "--json", *extra]
                for extra in ([], ["--no-pose"], ["--plan", "cs1"], ["--plan", "cs2", "--no-pose"],
-                             ["--upright", "--no-pose"], ["--plan", "cs1", "--roll", "30", "--no-pose"])]
+                             ["--upright", "--no-pose"], ["--plan", "cs1", "--roll", "30", "--no-pose"],
+                             ["-k", "2", "--intrinsics", f"{side},{side},{side / 2},{side / 2}", "--rerank"])]
     out = _child(
         "import contextlib, io, json\n"
         "from viewdb_cli.main import main\n"

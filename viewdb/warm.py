@@ -7,8 +7,9 @@ Compiling them takes tens of seconds; loading them from the cache takes millisec
 types a query passes, by doing what a user does on a throw-away catalogue: it ingests two
 generated meshes into a database in a temporary folder and queries a photo of one of
 them with every plan, with and without pose and with a gravity hint (the search over
-circular shifts), and draws a result over the photo (the overlay's scan conversion,
-:mod:`viewdb.recognition.raster`). ``install.sh`` runs it, so an installed
+circular shifts), draws a result over the photo (the overlay's scan conversion,
+:mod:`viewdb.recognition.raster`) and re-ranks by silhouette fits through intrinsics (their
+scan conversion, :mod:`viewdb.catalogue.coverage`). ``install.sh`` runs it, so an installed
 viewdb never compiles during a query; :func:`kernel_report` tells what a process compiled.
 
 >>> report = warm_up()                                   # doctest: +SKIP
@@ -79,10 +80,10 @@ def _meshes(folder: Path) -> list[Path]:
 
 
 def warm_up(progress: Callable[[str], None] | None = None) -> KernelReport:
-    """Run every plan's query, with and without pose and with a gravity hint, and draw
-    an overlay, on a catalogue built in a temporary folder, so that each kernel a query
-    (and the web page) uses is compiled
-    (or found) in the cache.
+    """Run every plan's query, with and without pose and with a gravity hint, draw an
+    overlay and fit silhouettes through intrinsics, on a catalogue built in a temporary
+    folder, so that each kernel a query (and the web page) uses is compiled (or found)
+    in the cache.
     Returns what the kernels did; ``progress`` hears each step."""
     from .api import open as open_db
 
@@ -105,4 +106,7 @@ def warm_up(progress: Callable[[str], None] | None = None) -> KernelReport:
                 db.query(photo, plan=plan, pose=False, k=2, roll=0.0)
             say("drawing a result over its photo")
             db.query(photo, k=1).overlay()  # the scan conversion's kernel
+            say("fitting silhouettes through a calibrated camera")
+            side = float(view.mask.shape[1])
+            db.query(photo, k=2, intrinsics=(side, side, side / 2.0, side / 2.0), rerank=True)
     return kernel_report()
