@@ -6,6 +6,8 @@ import json
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import sample
@@ -126,6 +128,19 @@ def test_lifting_an_on_axis_alignment_keeps_the_view_rotation():
     d = ray_rotation(400.0, 10.0, k) @ [0.0, 0.0, 1.0]
     assert np.allclose(d / d[2], [(400 - 160) / 500, (10 - 120) / 500, 1.0])
     assert len(fibonacci_directions(50)) == 50
+
+
+@given(u=st.floats(-5000, 5000), w=st.floats(-5000, 5000))
+def test_the_ray_rotation_is_the_smallest_rotation_onto_the_ray(u, w):
+    """A rotation (orthonormal, det 1) taking the optical axis onto the ray through the
+    pixel, by the angle between them (its axis is perpendicular to both)."""
+    k = np.array([[500.0, 0, 160], [0, 520.0, 120], [0, 0, 1]])
+    r = ray_rotation(u, w, k)
+    assert np.allclose(r.T @ r, np.eye(3), atol=1e-12) and np.isclose(np.linalg.det(r), 1.0)
+    ray = np.array([(u - 160) / 500, (w - 120) / 520, 1.0])
+    ray /= np.linalg.norm(ray)
+    assert np.allclose(r @ [0.0, 0.0, 1.0], ray, atol=1e-12)
+    assert np.isclose((np.trace(r) - 1.0) / 2.0, ray[2], atol=1e-12)  # cos of its angle
 
 
 # ---------------------------------------------------------------------- pose in mesh units

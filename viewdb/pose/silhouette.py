@@ -98,14 +98,21 @@ def fibonacci_directions(n: int) -> list[tuple[float, float]]:
 
 def ray_rotation(u: float, w: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
     """The smallest rotation turning the optical axis (0, 0, 1) onto the ray through pixel
-    ``(u, w)`` of a camera with matrix ``k``."""
-    d = np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
-    d /= np.linalg.norm(d)
-    axis = np.cross([0.0, 0.0, 1.0], d)
-    s, c = float(np.linalg.norm(axis)), float(d[2])
-    if s < 1e-12:
+    ``(u, w)`` of a camera with matrix ``k``: about the axis ``z × d = (−d_y, d_x, 0)``
+    by the angle between them (Rodrigues' formula written out: a fit calls this for
+    every pose it tries)."""
+    dx, dy = (u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1]
+    norm = math.sqrt(dx * dx + dy * dy + 1.0)
+    dx, dy, c = dx / norm, dy / norm, 1.0 / norm  # the unit ray; c = cos of the angle
+    s2 = dx * dx + dy * dy  # sin² of the angle
+    if s2 < 1e-24:
         return np.eye(3)
-    return rodrigues(axis / s * math.atan2(s, c))
+    a = (1.0 - c) / s2  # (1 − cos) / sin², times the unnormalised axis (−dy, dx, 0) twice
+    return np.array([
+        [1.0 - a * dx * dx, -a * dx * dy, dx],
+        [-a * dx * dy, 1.0 - a * dy * dy, dy],
+        [-dx, -dy, c],
+    ])
 
 
 def lift_alignment(
