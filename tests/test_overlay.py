@@ -155,6 +155,23 @@ def test_cpu_silhouette_leaves_out_triangles_behind_the_camera():
         MeshTriangles(triangles.vertices, [[0, 1, 6]])
 
 
+@pytest.mark.parametrize("name", ["car", "mug"])
+def test_a_decimated_mesh_keeps_the_silhouette(db, name):
+    """The coarse steps of a silhouette fit use the mesh decimated (asked for a quarter
+    of its faces; a small mesh keeps more to keep its shape): its silhouette stays the
+    full mesh's up to a thin rim."""
+    geometry = db.mesh(name).geometry
+    full = MeshTriangles(geometry.vertices, geometry.faces)
+    small = full.simplified(len(full.faces) // 4)
+    assert len(small.faces) <= len(full.faces) // 2 and full.simplified(len(full.faces)) is full
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        r = GL_TO_CV @ view_rotation(*rng.uniform(0, 360, 3))
+        t, k = np.array([0.0, 0.0, 3.0]), (100.0, 100.0, 47.5, 47.5)
+        a, b = silhouette(full, r, t, k, 96), silhouette(small, r, t, k, 96)
+        assert (a & b).sum() / (a | b).sum() >= 0.97
+
+
 # ------------------------------------------------------------------ drawn outline
 @pytest.mark.parametrize("name, h, v", [("car", 37, 22), ("mug", 200, 300), ("chair", 120, 15)])
 def test_drawn_outline_lies_on_the_true_silhouette_edge(db, name, h, v):

@@ -525,6 +525,9 @@ class SilhouetteConfig:
     #: Window sizes (pixels) of the coarse and fine IoU refinement.
     coarse_size: int = 96
     fine_size: int = 160
+    #: The coarse refinement fits the mesh decimated to about this many faces (its
+    #: silhouette in a coarse window is the full mesh's to an IoU of 0.99); 0: the full mesh.
+    coarse_faces: int = 4096
     #: Most IoU evaluations (renders) per refinement.
     max_evaluations: int = 400
     #: Pattern-search steps: rotation (radians), origin pixel (window pixels), log depth;
@@ -539,6 +542,8 @@ class SilhouetteConfig:
             raise ValueError("need directions >= 1, coarse_starts >= 1, fine_starts >= 0")
         if not (16 <= self.coarse_size <= 1024 and 16 <= self.fine_size <= 1024):
             raise ValueError("window sizes must be in [16, 1024]")
+        if self.coarse_faces < 0:
+            raise ValueError("coarse_faces must be at least 0")
 
 
 def default_client_gap(gap: float) -> float:

@@ -166,12 +166,14 @@ def pose_silhouette(
     mesh = catalogue.mesh(name)
     pinhole = get_pinhole_renderer()
     render = catalogue.config.render
+    search = search or SilhouetteConfig()
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
         lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s),
         render.image_size, render.xmag, ignore=query.ignore,
-        directions=grid_directions(catalogue.config.gap, (search or SilhouetteConfig()).directions),
+        directions=grid_directions(catalogue.config.gap, search.directions),
         starts=starts, config=config, search=search,
+        render_coarse=lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s, search.coarse_faces or None),
     )
     h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
     width = query.mask.shape[1]

@@ -250,6 +250,7 @@ def search_silhouette_pose(
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
     config: PoseConfig | None = None,
     search: SilhouetteConfig | None = None,
+    render_coarse: PinholeRender | None = None,
 ) -> SilhouetteFit:
     """The pinhole pose of a mesh whose silhouette is ``query`` (module doc).
 
@@ -257,6 +258,8 @@ def search_silhouette_pose(
     square, half-extent ``xmag``) in the viewdb convention; ``render_pinhole(R, t, K, S)``
     its silhouette at an OpenCV pose through intrinsics ``K = (fx, fy, cx, cy)`` in an
     ``S × S`` image. ``starts`` adds pinhole poses to refine (e.g. from SIFT).
+    ``render_coarse`` (default ``render_pinhole``) serves the coarse refinement, e.g. a
+    decimated mesh's silhouette (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`).
 
     Raises
     ------
@@ -293,7 +296,8 @@ def search_silhouette_pose(
     chosen = [(s.rotation, s.translation, (s.azimuth, s.elevation, s.inplane))
               for s in found[:search.coarse_starts]]
     chosen += [(np.asarray(r, np.float64), np.asarray(t, np.float64), (math.nan,) * 3) for r, t in starts]
-    coarse = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.coarse_size), k)
+    window = Window.around(mask, search.coarse_size)
+    coarse = _Objective(render_coarse or render_pinhole, mask, ignore, window, k)
     refined = []
     for rot, t, origin in chosen:
         r2, t2, iou = _pattern_search(coarse, rot, t, search.coarse_min_steps, search.start_steps,
