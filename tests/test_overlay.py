@@ -12,6 +12,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import pytest
+import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -155,21 +156,34 @@ def test_cpu_silhouette_leaves_out_triangles_behind_the_camera():
         MeshTriangles(triangles.vertices, [[0, 1, 6]])
 
 
-@pytest.mark.parametrize("name", ["car", "mug"])
-def test_a_decimated_mesh_keeps_the_silhouette(db, name):
-    """The coarse steps of a silhouette fit use the mesh decimated (asked for a quarter
-    of its faces; a small mesh keeps more to keep its shape): its silhouette stays the
-    full mesh's up to a thin rim."""
-    geometry = db.mesh(name).geometry
-    full = MeshTriangles(geometry.vertices, geometry.faces)
+def decimated_share(db, name: str) -> float:
+    """The share of faces :meth:`MeshTriangles.simplified` keeps of the mesh made 16 times
+    denser and asked for a quarter of that; asserts its silhouette stays the full mesh's
+    up to a thin rim from 12 random directions."""
+    vertices, faces = db.mesh(name).geometry.vertices, db.mesh(name).geometry.faces
+    for _ in range(2):  # as dense as a scan: 16 times the faces, the same surface
+        vertices, faces = trimesh.remesh.subdivide(vertices, faces)
+    full = MeshTriangles(vertices, faces)
     small = full.simplified(len(full.faces) // 4)
-    assert len(small.faces) <= len(full.faces) // 2 and full.simplified(len(full.faces)) is full
+    assert full.simplified(len(full.faces)) is full
     rng = np.random.default_rng(3)
-    for _ in range(10):
+    ious = []
+    for _ in range(12):
         r = GL_TO_CV @ view_rotation(*rng.uniform(0, 360, 3))
         t, k = np.array([0.0, 0.0, 3.0]), (100.0, 100.0, 47.5, 47.5)
         a, b = silhouette(full, r, t, k, 96), silhouette(small, r, t, k, 96)
-        assert (a & b).sum() / (a | b).sum() >= 0.97
+        ious.append((a & b).sum() / (a | b).sum())
+    assert min(ious) >= 0.98
+    return len(small.faces) / len(full.faces)
+
+
+def test_a_decimated_mesh_keeps_the_silhouette(db):
+    """The coarse steps of a silhouette fit use a dense mesh decimated to about a quarter
+    of its faces, or the mesh itself where decimation would change its silhouette (the
+    thin-walled mug): either way the silhouette stays the full mesh's up to a thin rim,
+    and the car and the bracket are decimated."""
+    shares = {name: decimated_share(db, name) for name in ("car", "mug", "chair", "l_bracket")}
+    assert shares["car"] <= 0.3 and shares["l_bracket"] <= 0.3 and shares["mug"] == 1.0
 
 
 # ------------------------------------------------------------------ drawn outline
