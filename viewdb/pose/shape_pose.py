@@ -17,6 +17,7 @@ from ..camera import normalise_angle
 from ..catalogue.features import largest_contour
 from ..config import PoseConfig
 from ..errors import FeatureError, PoseError
+from ..search.jit import njit
 from .edges import QueryDetail, ViewDetail, view_detail
 from .frames import (
     CAMERA_DISTANCE,
@@ -72,37 +73,40 @@ def candidate_outline(cand: CandidateView, samples: int) -> Outline:
     return outline_of(np.asarray(cand.mask, dtype=bool), samples)
 
 
-def _sample_distance(dist: NDArray[np.float32], x: NDArray[np.float64], y: NDArray[np.float64]
-                     ) -> NDArray[np.float64]:
-    """Distance-map values at points ``(x, y)`` (nearest pixel); points outside the image
-    get the value at the nearest border pixel plus their distance to it."""
-    h, w = dist.shape
-    cx, cy = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
-    flat = np.rint(cy).astype(np.intp) * w + np.rint(cx).astype(np.intp)
-    inside = dist.ravel().take(flat).astype(np.float64)
-    return inside + np.hypot(x - cx, y - cy)
-
-
-def _rotate_up(d: NDArray[np.float64], degrees: NDArray[np.float64]
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Rotate y-down offsets (n, 2) counter-clockwise on screen by each angle → x and y,
-    each (T, n)."""
-    t = np.radians(degrees)[:, None]
-    c, s = np.cos(t), np.sin(t)
-    x, y = d[None, :, 0], -d[None, :, 1]  # to y up
-    return c * x - s * y, -(s * x + c * y)  # back to y down
-
-
 def _chamfer(query: Outline, view: Outline, lam: float, angles: NDArray[np.float64]) -> NDArray[np.float64]:
     """Symmetric mean chamfer distance (query pixels) for each in-plane angle, with the view
-    scaled by ``lam`` and its centroid put on the query's."""
-    x, y = _rotate_up(view.points - view.centroid, angles)
-    d1 = _sample_distance(query.distance, query.centroid[0] + lam * x,
-                             query.centroid[1] + lam * y).mean(axis=1)
-    x, y = _rotate_up(query.points - query.centroid, -angles)
-    d2 = lam * _sample_distance(view.distance, view.centroid[0] + x / lam,
-                                   view.centroid[1] + y / lam).mean(axis=1)
-    return (d1 + d2) / 2.0
+    scaled by ``lam`` and its centroid put on the query's: the mean distance-map value of
+    the query at the view's turned outline points and of the view at the query's turned
+    back (both :func:`_mean_sampled`)."""
+    radians = np.radians(np.asarray(angles, dtype=np.float64))
+    d1 = np.empty(len(radians))
+    d2 = np.empty(len(radians))
+    _mean_sampled(np.ascontiguousarray(view.points - view.centroid), float(query.centroid[0]),
+                  float(query.centroid[1]), lam, query.distance, radians, d1)
+    _mean_sampled(np.ascontiguousarray(query.points - query.centroid), float(view.centroid[0]),
+                  float(view.centroid[1]), 1.0 / lam, view.distance, -radians, d2)
+    return (d1 + lam * d2) / 2.0
+
+
+@njit(cache=True, nogil=True)
+def _mean_sampled(points, cx, cy, scale, dist, radians, out):  # pragma: no cover - compiled
+    """For each angle: the mean of ``dist`` (nearest pixel) at ``points`` (offsets, y
+    down) turned counter-clockwise on screen by it, scaled by ``scale`` and placed at
+    ``(cx, cy)``; a point outside the image gets the value at the nearest border pixel
+    plus its distance to it."""
+    h, w = dist.shape
+    n = points.shape[0]
+    for a in range(radians.shape[0]):
+        c, s = math.cos(radians[a]), math.sin(radians[a])
+        total = 0.0
+        for i in range(n):
+            dx, dy = points[i, 0], points[i, 1]
+            x = cx + scale * (c * dx + s * dy)
+            y = cy + scale * (c * dy - s * dx)
+            qx = min(max(x, 0.0), w - 1.0)
+            qy = min(max(y, 0.0), h - 1.0)
+            total += float(dist[int(np.rint(qy)), int(np.rint(qx))]) + math.hypot(x - qx, y - qy)
+        out[a] = total / n
 
 
 @dataclass(frozen=True, eq=False)
