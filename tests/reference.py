@@ -374,10 +374,13 @@ def naive_face_ids(tri, planes, faces, shape) -> np.ndarray:
     nearest whose projection holds the pixel's centre, ``y_min <= y < y_max`` and, where
     row ``y`` crosses its edges, ``left <= x < right``; the depth ``a·x + b·y + c`` is
     taken as the kernel takes it, from the row's first pixel on the image; on a tie the
-    later triangle."""
+    later triangle. The corners are first rounded to the nearest 1/256 pixel (half up),
+    as a GPU's 8 sub-pixel bits put them."""
     h, w = shape
     ids = np.full((h, w), -1, dtype=np.int32)
     best = np.full((h, w), np.inf)
+    tri = [[(math.floor(float(x) * 256 + 0.5) / 256, math.floor(float(y) * 256 + 0.5) / 256) for x, y in t]
+           for t in tri]
     for f in range(len(tri)):
         ys = [float(p[1]) for p in tri[f]]
         a, b, c = (float(v) for v in planes[f])

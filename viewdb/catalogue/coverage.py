@@ -31,7 +31,12 @@ from numpy.typing import NDArray
 from ..search.jit import njit
 from ..typed import Intrinsics
 
-__all__ = ["MeshTriangles", "cover", "silhouette"]
+__all__ = ["SUBPIXELS", "MeshTriangles", "cover", "silhouette"]
+
+#: Projected corners are put on a grid of 1/SUBPIXELS pixel first, as a GPU's rasteriser
+#: does (8 bits of sub-pixel precision): an edge a hair past a pixel centre then leaves
+#: it out as OpenGL does, instead of filling a whole column along a straight edge.
+SUBPIXELS = 256.0
 
 
 class MeshTriangles:
@@ -138,12 +143,18 @@ def _project(vertices, r, t, camera, near, px, py):  # pragma: no cover - compil
 
 
 @njit(cache=True, nogil=True)
+def _snap(x):  # pragma: no cover - compiled
+    """``x`` on the grid of 1/256 pixel a GPU puts projected corners on (NaN stays NaN)."""
+    return np.floor(x * SUBPIXELS + 0.5) / SUBPIXELS
+
+
+@njit(cache=True, nogil=True)
 def _fill(px, py, faces, out):  # pragma: no cover - compiled
     h, w = out.shape
     for f in range(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-        xs = (px[i0], px[i1], px[i2])
-        ys = (py[i0], py[i1], py[i2])
+        xs = (_snap(px[i0]), _snap(px[i1]), _snap(px[i2]))
+        ys = (_snap(py[i0]), _snap(py[i1]), _snap(py[i2]))
         if not (xs[0] == xs[0] and xs[1] == xs[1] and xs[2] == xs[2]):  # a corner behind the camera
             continue
         ymin = min(ys[0], min(ys[1], ys[2]))

@@ -4,9 +4,10 @@ face-index image, :mod:`viewdb.recognition.overlay`).
 A pixel shows the nearest triangle whose projection holds its centre (pixel centres on
 integers). A centre on a triangle's right or bottom edge is left to its neighbour (a
 GPU's rule): row ``y`` is crossed where ``y_min <= y < y_max``, and in it the pixels
-``left <= x < right``. Depth is linear across a triangle's projection (the plane
-``a·x + b·y + c`` through its corners); between equally near triangles the later one
-wins.
+``left <= x < right``, the corners first put on a GPU's sub-pixel grid
+(:data:`viewdb.catalogue.coverage.SUBPIXELS`). Depth is linear across a triangle's
+projection (the plane ``a·x + b·y + c`` through its corners); between equally near
+triangles the later one wins.
 
 The loops run in a numba kernel (compiled once, cached on disk, ``nogil``); the
 vectorised set-up (which triangles can show, their planes) stays in NumPy.
@@ -17,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.coverage import SUBPIXELS
 from ..search.jit import njit
 
 __all__ = ["face_ids"]
@@ -31,6 +33,7 @@ def face_ids(tri: NDArray[np.float64], planes: NDArray[np.float64], faces: NDArr
     h, w = shape
     ids = np.full(h * w, -1, dtype=np.int32)
     if len(tri):
+        tri = np.floor(np.asarray(tri, dtype=np.float64) * SUBPIXELS + 0.5) / SUBPIXELS  # a GPU's grid
         y0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)), 0, h).astype(np.int64)
         y1 = np.clip(np.ceil(tri[:, :, 1].max(axis=1)) - 1, -1, h - 1).astype(np.int64)
         _scan(np.ascontiguousarray(tri, dtype=np.float64), np.ascontiguousarray(planes, dtype=np.float64),
