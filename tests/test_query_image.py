@@ -25,9 +25,11 @@ from scipy.ndimage import binary_fill_holes
 
 import viewdb
 from tests.conftest import sample
+from tests.reference import naive_kmeans
 from viewdb.catalogue.features import distance_curve
 from viewdb.config import SegmentationConfig
 from viewdb.errors import ImageError
+from viewdb.recognition import segmentation
 from viewdb.recognition.image import LoadedImage, load_image
 from viewdb.recognition.segmentation import Segmentation, query_curve, segment
 
@@ -200,6 +202,15 @@ def test_every_colour_method_finds_an_object_on_a_plain_background(method):
     assert seg.method == method
     assert iou(seg.mask, truth) >= 0.9
     assert np.count_nonzero(seg.mask) == np.count_nonzero(binary_fill_holes(seg.mask))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(*[st.integers(-6, 6)] * 3), min_size=1, max_size=40), st.integers(1, 5),
+       st.sampled_from([0.0, 0.05, 0.3]), st.integers(1, 12))
+def test_border_kmeans_stopping_at_convergence_gives_every_updates_centres(points, k, share, iterations):
+    x = np.array(points, dtype=np.float64) * 2.5
+    np.testing.assert_array_equal(segmentation._kmeans(x, k, share, iterations),
+                                  naive_kmeans(x, k, share, iterations))
 
 
 def test_segmentation_is_repeatable():

@@ -502,7 +502,8 @@ def _background_distance(
 
 
 def _kmeans(x: NDArray[np.float64], k: int, min_share: float, iterations: int = 10) -> NDArray[np.float64]:
-    """Deterministic k-means (farthest-point start); drops clusters of < ``min_share``."""
+    """Deterministic k-means (farthest-point start, at most ``iterations`` updates, fewer
+    once no sample changes cluster); drops clusters of < ``min_share``."""
     centres = [np.median(x, axis=0)]
     d = ((x - centres[0]) ** 2).sum(axis=1)
     for _ in range(1, k):
@@ -513,8 +514,12 @@ def _kmeans(x: NDArray[np.float64], k: int, min_share: float, iterations: int = 
     def assign(c: np.ndarray) -> np.ndarray:
         return np.argmin((c * c).sum(axis=1)[None, :] - 2.0 * x @ c.T, axis=1)
 
+    previous = None
     for _ in range(iterations):
         labels = assign(c)
+        if previous is not None and np.array_equal(labels, previous):
+            break  # converged: the centres would not move again
+        previous = labels
         counts = np.bincount(labels, minlength=len(c))
         for i in range(x.shape[1]):
             sums = np.bincount(labels, weights=x[:, i], minlength=len(c))
