@@ -100,6 +100,8 @@ __all__ = [
 
 #: Every ``method`` :func:`segment` accepts; the last three are the colour methods.
 METHODS = ("auto", "mask", "alpha", "border", "otsu", "grabcut")
+#: Gaussians in each of OpenCV GrabCut's colour models (each needs a sample to start).
+_GMM_COMPONENTS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -589,9 +591,7 @@ def grabcut_from(
         return seed, "border"
     bgr = np.ascontiguousarray(rgb[y0:y1, x0:x1, ::-1])
     try:
-        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
-        cv2.grabCut(bgr, crop, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.grabcut_iterations,
-                    cv2.GC_INIT_WITH_MASK)
+        _grabcut(bgr, crop, cfg)
     except cv2.error:
         return seed, "border"
     out = np.zeros((h, w), dtype=bool)
@@ -605,3 +605,46 @@ def grabcut_from(
         thick = np.isin(labels, np.unique(labels[core & (labels > 0)]))
         out = (seed & ~thick) | (out & ~seed)
     return _bridge(out, dist, cfg), "grabcut"
+
+
+def _grabcut(bgr: NDArray[np.uint8], labels: NDArray[np.uint8], cfg: SegmentationConfig) -> None:
+    """GrabCut on ``bgr`` from the ``GC_*`` ``labels``, which it overwrites with its result.
+
+    OpenCV's GrabCut starts each colour model by a k-means of its samples (every pixel of
+    the crop), which costs as much as an iteration; with ``cfg.grabcut_start_scale`` below
+    1 the models are started on a scaled-down copy instead (:func:`_started_models`) and
+    the ``cfg.grabcut_iterations`` iterations at this scale begin from them (``GC_EVAL``:
+    each iteration assigns every pixel to a Gaussian, re-learns both models from this
+    scale's pixels, then cuts). Without a usable copy (too few pixels of either kind on
+    it) the models are started at this scale. Raises ``cv2.error`` when GrabCut cannot run.
+    """
+    models = _started_models(bgr, labels, cfg) if cfg.grabcut_start_scale < 1.0 else None
+    if models is None:
+        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
+        cv2.grabCut(bgr, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.grabcut_iterations,
+                    cv2.GC_INIT_WITH_MASK)
+    else:
+        cv2.grabCut(bgr, labels, None, *models, cfg.grabcut_iterations, cv2.GC_EVAL)
+
+
+def _started_models(
+    bgr: NDArray[np.uint8], labels: NDArray[np.uint8], cfg: SegmentationConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """GrabCut's background and object colour models (OpenCV's 1 x 65 arrays) as its
+    start makes them (no iteration), on a copy of ``bgr`` and ``labels`` scaled by
+    ``cfg.grabcut_start_scale`` (colours averaged, labels nearest); None when the copy
+    holds fewer pixels of either kind than a model has Gaussians, or GrabCut fails on it."""
+    h, w = labels.shape
+    size = (max(1, round(w * cfg.grabcut_start_scale)), max(1, round(h * cfg.grabcut_start_scale)))
+    small = cv2.resize(bgr, size, interpolation=cv2.INTER_AREA)
+    coarse = cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST)
+    background = np.count_nonzero((coarse == cv2.GC_BGD) | (coarse == cv2.GC_PR_BGD))
+    if min(background, coarse.size - background) < _GMM_COMPONENTS:
+        return None
+    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    try:
+        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
+        cv2.grabCut(small, coarse, None, bgd, fgd, 0, cv2.GC_INIT_WITH_MASK)
+    except cv2.error:
+        return None
+    return bgd, fgd
