@@ -332,8 +332,8 @@ class SegmentationConfig:
     #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``) ...
     default_method: str = "grabcut"
     #: ... except, when ``plain_border`` is on, on a plain background, where the border
-    #: model alone is as good on average (mean IoU 0.986 against 0.987) at a fifth of the
-    #: time (about 7 against 35 ms). Off by default: its outline differs from GrabCut's
+    #: model alone is as good on average (mean IoU 0.984 against 0.985) at about a third of
+    #: the time (about 7 against 20 ms). Off by default: its outline differs from GrabCut's
     #: by a few pixels, which is enough to change the matched view of a nearly symmetric
     #: object (the demo's mug) and with it the pose.
     plain_border: bool = False

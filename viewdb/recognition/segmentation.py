@@ -32,15 +32,22 @@ be background) and starts from a model of it:
   not clean background, so real narrow gaps stay open).
 * **otsu**: the same, with the threshold chosen by Otsu's method on the distance image
   (never below the strip's noise).
-* **grabcut**: OpenCV's GrabCut (``grabcut_iterations`` iterations) on a crop around
-  the border-model result, initialised from it: object well inside it, probably object
-  in the rest of it, probably background in a band around it, background beyond.  It
-  re-learns both colour models and so drops background patches the border model let in
-  (clutter next to the object); where it only shaves a thin rim off that result, the
-  border model's outline is kept.  GrabCut starts its colour models from OpenCV's random
-  generator, which is seeded (``cv2.setRNGSeed``) before each run so that the same
-  photo always gives the same mask; this resets the calling thread's OpenCV RNG.  It
-  falls back to the border-model result ("border") when it cannot run.
+* **grabcut**: OpenCV's GrabCut on a crop around the border-model result, initialised
+  from it: object well inside it, probably object in the rest of it, probably background
+  in a band around it, background beyond.  It re-learns both colour models and so drops
+  background patches the border model let in (clutter next to the object); where it only
+  shaves a thin rim off that result, the border model's outline is kept.  GrabCut's start
+  (a k-means of each colour model's samples, as costly as an iteration) runs on a copy of
+  the crop scaled by ``grabcut_start_scale`` (a half), and ``grabcut_iterations`` (one)
+  iteration at the working scale begins from those models: it re-learns them from every
+  pixel of the crop, then cuts.  From the border model's mask that gives the masks of a
+  start and four iterations at the working scale (mean IoU with them 0.999; with the
+  true silhouettes 0.985 either way on the synthetic photos of the 212 catalogue models)
+  in 0.43 of the time of :func:`segment` (``python benchmarks/segmentation.py
+  --catalogue-photos 1-6``).  The start uses OpenCV's random generator, which is seeded
+  (``cv2.setRNGSeed``) before each run so that the same photo always gives the same
+  mask; this resets the calling thread's OpenCV RNG.  It falls back to the border-model
+  result ("border") when it cannot run.
 
 The colour methods run on a copy scaled down to at most ``work_max_side`` pixels on
 the longer side; the mask is scaled back up.  ``method="auto"`` uses ``default_method``,
@@ -52,8 +59,8 @@ is plain when the border strip's Lab colours lie within ``plain_spread`` of thei
 does (their variance at most ``plain_noise_ratio`` times half the mean squared step
 between neighbouring pixels; a gradient or blobs vary smoothly).  There GrabCut refines
 nothing (mean IoU 0.997 / 0.995 with or without it on the benchmark's plain
-backgrounds, 0.986 on synthetic photos of the 212 catalogue models) and takes five
-times the time (about 35 against 7 ms of CPU for a 256 x 256 photo).  GrabCut was
+backgrounds, 0.985 / 0.984 on the synthetic photos of the 212 catalogue models) and takes
+about 2.7 times the time (20 against 7.4 ms of CPU for a 256 x 256 photo).  GrabCut was
 chosen by measurement: ``python
 benchmarks/segmentation.py`` scores each method by intersection over union (IoU) with
 the true silhouette, and by the RMS difference of the distance curves, on renders of all
@@ -61,8 +68,8 @@ the true silhouette, and by the RMS difference of the distance curves, on render
 backgrounds.  Border model and GrabCut tie on IoU (mean 0.997 / 0.995-0.996 on plain
 backgrounds, 0.96 on gradients, 0.99 on mild clutter), but GrabCut keeps more distance
 curves within 0.05 RMS of the truth (gradients 93 % of cases against 89 %, mild clutter
-98 % against 89 %), for about five times the CPU time (44 against 9 ms for a 320 x 240
-photo, 0.3-0.8 against 0.1 s at the full working size).  Otsu's threshold
+98 % against 89 %), for about two and a half times the CPU time (24 against 10 ms for a
+320 x 240 photo, 0.17-0.36 against 0.1 s at the full working size).  Otsu's threshold
 often cuts low-contrast parts of the object off (mean IoU 0.82-0.96).  Thin parts (the
 arrow's shaft) as pale as a gradient behind them are lost by every method, and strong
 clutter (blobs of twice the contrast) defeats them in about one case in five.
