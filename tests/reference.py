@@ -403,3 +403,44 @@ def naive_face_ids(tri, planes, faces, shape) -> np.ndarray:
                         best[row, x] = z
                         ids[row, x] = faces[f]
     return ids
+
+
+# ---------------------------------------------------------------------------------------
+# The border colour model's k-means (viewdb.recognition.segmentation), every update run.
+# ---------------------------------------------------------------------------------------
+
+__all__ += ["naive_kmeans"]
+
+
+def naive_kmeans(x: np.ndarray, k: int, min_share: float, iterations: int) -> np.ndarray:
+    """Farthest-point start (the median, then the sample farthest from every centre so far),
+    then exactly ``iterations`` updates, each sample to the centre of least
+    ``|c|^2 - 2 x . c`` (the first on a tie), each centre to its samples' mean summed in
+    sample order (kept when it has none); clusters of under ``min_share`` of the samples
+    dropped (the largest kept if none is left)."""
+    rows = [np.asarray(r, dtype=np.float64) for r in x]
+    centres = [np.median(x, axis=0)]
+    nearest = [float(((r - centres[0]) ** 2).sum()) for r in rows]
+    for _ in range(1, k):
+        far = max(range(len(rows)), key=lambda i: (nearest[i], -i))
+        centres.append(rows[far].copy())
+        nearest = [min(d, float(((r - centres[-1]) ** 2).sum())) for d, r in zip(nearest, rows, strict=True)]
+
+    def assign() -> list[int]:
+        c = np.array(centres)
+        scores = (c * c).sum(axis=1)[None, :] - 2.0 * np.asarray(x, np.float64) @ c.T
+        return [min(range(len(centres)), key=lambda j: (s[j], j)) for s in scores]
+
+    for _ in range(iterations):
+        labels = assign()
+        for j in range(len(centres)):
+            members = [r for r, label in zip(rows, labels, strict=True) if label == j]
+            if members:
+                total = np.zeros(x.shape[1])
+                for r in members:
+                    total = total + r
+                centres[j] = total / len(members)
+    labels = assign()
+    share = np.array([labels.count(j) for j in range(len(centres))]) / len(rows)
+    keep = [j for j in range(len(centres)) if share[j] >= min_share]
+    return np.array([centres[j] for j in keep] if keep else [centres[int(np.argmax(share))]])

@@ -332,8 +332,8 @@ class SegmentationConfig:
     #: The colour method ``method="auto"`` uses (see ``benchmarks/segmentation.py``) ...
     default_method: str = "grabcut"
     #: ... except, when ``plain_border`` is on, on a plain background, where the border
-    #: model alone is as good on average (mean IoU 0.986 against 0.987) at a fifth of the
-    #: time (about 7 against 35 ms). Off by default: its outline differs from GrabCut's
+    #: model alone is as good on average (mean IoU 0.984 against 0.985) at about a third of
+    #: the time (about 7 against 20 ms). Off by default: its outline differs from GrabCut's
     #: by a few pixels, which is enough to change the matched view of a nearly symmetric
     #: object (the demo's mug) and with it the pose.
     plain_border: bool = False
@@ -361,8 +361,15 @@ class SegmentationConfig:
     #: The closing that bridges cracks adds only pixels at least this share of the local
     #: object contrast away from the background.
     bridge_share: float = 0.1
-    #: GrabCut iterations.
-    grabcut_iterations: int = 4
+    #: GrabCut starts its two colour models (a k-means of each one's samples, which costs
+    #: as much as an iteration) on a copy of its crop scaled by this factor, then runs
+    #: ``grabcut_iterations`` iterations at the working scale from them; 1 starts them at
+    #: the working scale.
+    grabcut_start_scale: float = 0.5
+    #: GrabCut iterations. From the border model's mask one is enough: 4 (from a start at
+    #: the working scale) give the same IoU with the true silhouettes for about twice the time
+    #: (``benchmarks/segmentation.py --methods grabcut+full,grabcut``).
+    grabcut_iterations: int = 1
     #: How a box prompt is cut out (:mod:`viewdb.recognition.regions`): "grabcut" (GrabCut
     #: initialised from the box) or "border" (the crop's border colours); chosen by
     #: ``benchmarks/prompts.py``.
@@ -411,6 +418,8 @@ class SegmentationConfig:
                              "point_reach >= 0")
         if self.max_objects < 1 or self.max_prompts < 1:
             raise ValueError("need max_objects >= 1 and max_prompts >= 1")
+        if not (0 < self.grabcut_start_scale <= 1 and self.grabcut_iterations >= 1):
+            raise ValueError("need 0 < grabcut_start_scale <= 1 and grabcut_iterations >= 1")
 
 
 @dataclass(frozen=True)

@@ -32,15 +32,22 @@ be background) and starts from a model of it:
   not clean background, so real narrow gaps stay open).
 * **otsu**: the same, with the threshold chosen by Otsu's method on the distance image
   (never below the strip's noise).
-* **grabcut**: OpenCV's GrabCut (``grabcut_iterations`` iterations) on a crop around
-  the border-model result, initialised from it: object well inside it, probably object
-  in the rest of it, probably background in a band around it, background beyond.  It
-  re-learns both colour models and so drops background patches the border model let in
-  (clutter next to the object); where it only shaves a thin rim off that result, the
-  border model's outline is kept.  GrabCut starts its colour models from OpenCV's random
-  generator, which is seeded (``cv2.setRNGSeed``) before each run so that the same
-  photo always gives the same mask; this resets the calling thread's OpenCV RNG.  It
-  falls back to the border-model result ("border") when it cannot run.
+* **grabcut**: OpenCV's GrabCut on a crop around the border-model result, initialised
+  from it: object well inside it, probably object in the rest of it, probably background
+  in a band around it, background beyond.  It re-learns both colour models and so drops
+  background patches the border model let in (clutter next to the object); where it only
+  shaves a thin rim off that result, the border model's outline is kept.  GrabCut's start
+  (a k-means of each colour model's samples, as costly as an iteration) runs on a copy of
+  the crop scaled by ``grabcut_start_scale`` (a half), and ``grabcut_iterations`` (one)
+  iteration at the working scale begins from those models: it re-learns them from every
+  pixel of the crop, then cuts.  From the border model's mask that gives the masks of a
+  start and four iterations at the working scale (mean IoU with them 0.999; with the
+  true silhouettes 0.985 either way on the synthetic photos of the 212 catalogue models)
+  in 0.43 of the time of :func:`segment` (``python benchmarks/segmentation.py
+  --catalogue-photos 1-6``).  The start uses OpenCV's random generator, which is seeded
+  (``cv2.setRNGSeed``) before each run so that the same photo always gives the same
+  mask; this resets the calling thread's OpenCV RNG.  It falls back to the border-model
+  result ("border") when it cannot run.
 
 The colour methods run on a copy scaled down to at most ``work_max_side`` pixels on
 the longer side; the mask is scaled back up.  ``method="auto"`` uses ``default_method``,
@@ -52,8 +59,8 @@ is plain when the border strip's Lab colours lie within ``plain_spread`` of thei
 does (their variance at most ``plain_noise_ratio`` times half the mean squared step
 between neighbouring pixels; a gradient or blobs vary smoothly).  There GrabCut refines
 nothing (mean IoU 0.997 / 0.995 with or without it on the benchmark's plain
-backgrounds, 0.986 on synthetic photos of the 212 catalogue models) and takes five
-times the time (about 35 against 7 ms of CPU for a 256 x 256 photo).  GrabCut was
+backgrounds, 0.985 / 0.984 on the synthetic photos of the 212 catalogue models) and takes
+about 2.7 times the time (20 against 7.4 ms of CPU for a 256 x 256 photo).  GrabCut was
 chosen by measurement: ``python
 benchmarks/segmentation.py`` scores each method by intersection over union (IoU) with
 the true silhouette, and by the RMS difference of the distance curves, on renders of all
@@ -61,8 +68,8 @@ the true silhouette, and by the RMS difference of the distance curves, on render
 backgrounds.  Border model and GrabCut tie on IoU (mean 0.997 / 0.995-0.996 on plain
 backgrounds, 0.96 on gradients, 0.99 on mild clutter), but GrabCut keeps more distance
 curves within 0.05 RMS of the truth (gradients 93 % of cases against 89 %, mild clutter
-98 % against 89 %), for about five times the CPU time (44 against 9 ms for a 320 x 240
-photo, 0.3-0.8 against 0.1 s at the full working size).  Otsu's threshold
+98 % against 89 %), for about two and a half times the CPU time (24 against 10 ms for a
+320 x 240 photo, 0.17-0.36 against 0.1 s at the full working size).  Otsu's threshold
 often cuts low-contrast parts of the object off (mean IoU 0.82-0.96).  Thin parts (the
 arrow's shaft) as pale as a gradient behind them are lost by every method, and strong
 clutter (blobs of twice the contrast) defeats them in about one case in five.
@@ -100,6 +107,8 @@ __all__ = [
 
 #: Every ``method`` :func:`segment` accepts; the last three are the colour methods.
 METHODS = ("auto", "mask", "alpha", "border", "otsu", "grabcut")
+#: Gaussians in each of OpenCV GrabCut's colour models (each needs a sample to start).
+_GMM_COMPONENTS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -502,7 +511,8 @@ def _background_distance(
 
 
 def _kmeans(x: NDArray[np.float64], k: int, min_share: float, iterations: int = 10) -> NDArray[np.float64]:
-    """Deterministic k-means (farthest-point start); drops clusters of < ``min_share``."""
+    """Deterministic k-means (farthest-point start, at most ``iterations`` updates, fewer
+    once no sample changes cluster); drops clusters of < ``min_share``."""
     centres = [np.median(x, axis=0)]
     d = ((x - centres[0]) ** 2).sum(axis=1)
     for _ in range(1, k):
@@ -513,8 +523,12 @@ def _kmeans(x: NDArray[np.float64], k: int, min_share: float, iterations: int = 
     def assign(c: np.ndarray) -> np.ndarray:
         return np.argmin((c * c).sum(axis=1)[None, :] - 2.0 * x @ c.T, axis=1)
 
+    previous = None
     for _ in range(iterations):
         labels = assign(c)
+        if previous is not None and np.array_equal(labels, previous):
+            break  # converged: the centres would not move again
+        previous = labels
         counts = np.bincount(labels, minlength=len(c))
         for i in range(x.shape[1]):
             sums = np.bincount(labels, weights=x[:, i], minlength=len(c))
@@ -584,9 +598,7 @@ def grabcut_from(
         return seed, "border"
     bgr = np.ascontiguousarray(rgb[y0:y1, x0:x1, ::-1])
     try:
-        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
-        cv2.grabCut(bgr, crop, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.grabcut_iterations,
-                    cv2.GC_INIT_WITH_MASK)
+        _grabcut(bgr, crop, cfg)
     except cv2.error:
         return seed, "border"
     out = np.zeros((h, w), dtype=bool)
@@ -600,3 +612,46 @@ def grabcut_from(
         thick = np.isin(labels, np.unique(labels[core & (labels > 0)]))
         out = (seed & ~thick) | (out & ~seed)
     return _bridge(out, dist, cfg), "grabcut"
+
+
+def _grabcut(bgr: NDArray[np.uint8], labels: NDArray[np.uint8], cfg: SegmentationConfig) -> None:
+    """GrabCut on ``bgr`` from the ``GC_*`` ``labels``, which it overwrites with its result.
+
+    OpenCV's GrabCut starts each colour model by a k-means of its samples (every pixel of
+    the crop), which costs as much as an iteration; with ``cfg.grabcut_start_scale`` below
+    1 the models are started on a scaled-down copy instead (:func:`_started_models`) and
+    the ``cfg.grabcut_iterations`` iterations at this scale begin from them (``GC_EVAL``:
+    each iteration assigns every pixel to a Gaussian, re-learns both models from this
+    scale's pixels, then cuts). Without a usable copy (too few pixels of either kind on
+    it) the models are started at this scale. Raises ``cv2.error`` when GrabCut cannot run.
+    """
+    models = _started_models(bgr, labels, cfg) if cfg.grabcut_start_scale < 1.0 else None
+    if models is None:
+        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
+        cv2.grabCut(bgr, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.grabcut_iterations,
+                    cv2.GC_INIT_WITH_MASK)
+    else:
+        cv2.grabCut(bgr, labels, None, *models, cfg.grabcut_iterations, cv2.GC_EVAL)
+
+
+def _started_models(
+    bgr: NDArray[np.uint8], labels: NDArray[np.uint8], cfg: SegmentationConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """GrabCut's background and object colour models (OpenCV's 1 x 65 arrays) as its
+    start makes them (no iteration), on a copy of ``bgr`` and ``labels`` scaled by
+    ``cfg.grabcut_start_scale`` (colours averaged, labels nearest); None when the copy
+    holds fewer pixels of either kind than a model has Gaussians, or GrabCut fails on it."""
+    h, w = labels.shape
+    size = (max(1, round(w * cfg.grabcut_start_scale)), max(1, round(h * cfg.grabcut_start_scale)))
+    small = cv2.resize(bgr, size, interpolation=cv2.INTER_AREA)
+    coarse = cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST)
+    background = np.count_nonzero((coarse == cv2.GC_BGD) | (coarse == cv2.GC_PR_BGD))
+    if min(background, coarse.size - background) < _GMM_COMPONENTS:
+        return None
+    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    try:
+        cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
+        cv2.grabCut(small, coarse, None, bgd, fgd, 0, cv2.GC_INIT_WITH_MASK)
+    except cv2.error:
+        return None
+    return bgd, fgd
