@@ -121,7 +121,7 @@ def cover(
     """The pixels of an image of ``shape`` covered by triangles already projected:
     ``points`` (n, 2) pixel positions ``(x, y)`` of the vertices (NaN: behind the camera,
     its triangles left out), ``faces`` (m, 3) vertex indices."""
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    p = np.floor(np.asarray(points, dtype=np.float64).reshape(-1, 2) * SUBPIXELS + 0.5) / SUBPIXELS
     out = np.zeros((int(shape[0]), int(shape[1])), dtype=np.bool_)
     _fill(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]),
           np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3), out)
@@ -135,8 +135,8 @@ def _project(vertices, r, t, camera, near, px, py):  # pragma: no cover - compil
         x, y, z = vertices[i, 0], vertices[i, 1], vertices[i, 2]
         zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
         if zc > near:
-            px[i] = fx * (r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]) / zc + cx
-            py[i] = fy * (r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]) / zc + cy
+            px[i] = _snap(fx * (r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]) / zc + cx)
+            py[i] = _snap(fy * (r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]) / zc + cy)
         else:
             px[i] = np.nan
             py[i] = np.nan
@@ -149,33 +149,40 @@ def _snap(x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _crossing(ax, ay, bx, by, y, left, right):  # pragma: no cover - compiled
+    """``(left, right)`` widened by where edge a–b crosses row ``y``, if it does."""
+    dy = by - ay
+    if dy != 0.0 and (ay - y) * (by - y) <= 0.0:
+        x = ax + (y - ay) * (bx - ax) / dy
+        left = min(left, x)
+        right = max(right, x)
+    return left, right
+
+
+@njit(cache=True, nogil=True)
 def _fill(px, py, faces, out):  # pragma: no cover - compiled
+    """Mark the pixels whose centres lie in each triangle of corners already snapped."""
     h, w = out.shape
     for f in range(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-        xs = (_snap(px[i0]), _snap(px[i1]), _snap(px[i2]))
-        ys = (_snap(py[i0]), _snap(py[i1]), _snap(py[i2]))
-        if not (xs[0] == xs[0] and xs[1] == xs[1] and xs[2] == xs[2]):  # a corner behind the camera
+        x0, y0, x1, y1, x2, y2 = px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]
+        ymin = min(y0, min(y1, y2))
+        ymax = max(y0, max(y1, y2))
+        if not (ymax >= 0.0 and ymin <= h):  # off the image, or a corner behind the camera (NaN)
             continue
-        ymin = min(ys[0], min(ys[1], ys[2]))
-        ymax = max(ys[0], max(ys[1], ys[2]))
-        xmin = min(xs[0], min(xs[1], xs[2]))
-        xmax = max(xs[0], max(xs[1], xs[2]))
-        if ymax < 0.0 or ymin > h or xmax < 0.0 or xmin > w:
+        r0 = max(np.ceil(ymin), 0.0)
+        r1 = min(np.ceil(ymax) - 1.0, float(h - 1))
+        if r0 > r1:  # no row of pixel centres crosses it
             continue
-        r0 = int(max(np.ceil(ymin), 0.0))
-        r1 = int(min(np.ceil(ymax) - 1.0, float(h - 1)))
-        for row in range(r0, r1 + 1):
+        xmin = min(x0, min(x1, x2))
+        xmax = max(x0, max(x1, x2))
+        if not (xmax >= 0.0 and xmin <= w) or np.ceil(xmin) >= xmax:
+            continue  # off the image, or no column of pixel centres inside it (NaN too)
+        for row in range(int(r0), int(r1) + 1):
             y = float(row)
-            left, right = np.inf, -np.inf
-            for k in range(3):
-                ax, ay = xs[k], ys[k]
-                bx, by = xs[(k + 1) % 3], ys[(k + 1) % 3]
-                dy = by - ay
-                if dy != 0.0 and (ay - y) * (by - y) <= 0.0:
-                    x = ax + (y - ay) * (bx - ax) / dy
-                    left = min(left, x)
-                    right = max(right, x)
+            left, right = _crossing(x0, y0, x1, y1, y, np.inf, -np.inf)
+            left, right = _crossing(x1, y1, x2, y2, y, left, right)
+            left, right = _crossing(x2, y2, x0, y0, y, left, right)
             if not left <= right:
                 continue
             c0 = int(min(max(np.ceil(left), 0.0), float(w)))
