@@ -29,6 +29,10 @@ from .render import render_depth, reraise_interrupt
 
 __all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
 
+#: Meshes whose triangles :meth:`PinholeRenderer.silhouette` keeps (a query re-ranking its
+#: results fits each of up to k meshes, some twice; the objects of one photo share them).
+TRIANGLE_CACHE_MESHES = 32
+
 #: OpenCV camera frame → OpenGL camera frame (flip y and z).
 CV_TO_GL = np.diag([1.0, -1.0, -1.0])
 
@@ -85,7 +89,9 @@ class PinholeRenderer:
         self._scene = None
         self._mesh_node = None
         self._camera_node = None
-        self._triangles: tuple[NormalisedMesh, dict[int | None, MeshTriangles]] | None = None
+        #: Per mesh (by identity; the mesh is kept so its id stays its own): its triangles
+        #: at each level of detail asked for, the least recently used dropped first.
+        self._triangles: dict[int, tuple[NormalisedMesh, dict[int | None, MeshTriangles]]] = {}
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -137,10 +143,13 @@ class PinholeRenderer:
         (:mod:`viewdb.catalogue.coverage`: no GL call, 10–20x quicker for a small window);
         with ``max_faces``, of the mesh decimated to about that many faces
         (:meth:`~viewdb.catalogue.coverage.MeshTriangles.simplified`)."""
-        if self._triangles is None or self._triangles[0] is not mesh:
+        levels = self._triangles.pop(id(mesh), (None, {}))[1]
+        if not levels:
             geometry = mesh.geometry
-            self._triangles = (mesh, {None: MeshTriangles(geometry.vertices, geometry.faces)})
-        levels = self._triangles[1]
+            levels[None] = MeshTriangles(geometry.vertices, geometry.faces)
+        self._triangles[id(mesh)] = (mesh, levels)  # most recently used last
+        while len(self._triangles) > TRIANGLE_CACHE_MESHES:
+            del self._triangles[next(iter(self._triangles))]
         if max_faces not in levels:
             full = levels[None]
             levels[max_faces] = full.simplified(max_faces) if max_faces is not None else full
