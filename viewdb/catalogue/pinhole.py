@@ -14,6 +14,7 @@ downscaled, so a pose search renders only the pixels around the object.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,6 +93,7 @@ class PinholeRenderer:
         #: Per mesh (by identity; the mesh is kept so its id stays its own): its triangles
         #: at each level of detail asked for, the least recently used dropped first.
         self._triangles: dict[int, tuple[NormalisedMesh, dict[int | None, MeshTriangles]]] = {}
+        self._triangles_lock = threading.Lock()
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -143,17 +145,19 @@ class PinholeRenderer:
         (:mod:`viewdb.catalogue.coverage`: no GL call, 10–20x quicker for a small window);
         with ``max_faces``, of the mesh decimated to about that many faces
         (:meth:`~viewdb.catalogue.coverage.MeshTriangles.simplified`)."""
-        levels = self._triangles.pop(id(mesh), (None, {}))[1]
-        if not levels:
-            geometry = mesh.geometry
-            levels[None] = MeshTriangles(geometry.vertices, geometry.faces)
-        self._triangles[id(mesh)] = (mesh, levels)  # most recently used last
-        while len(self._triangles) > TRIANGLE_CACHE_MESHES:
-            del self._triangles[next(iter(self._triangles))]
-        if max_faces not in levels:
-            full = levels[None]
-            levels[max_faces] = full.simplified(max_faces) if max_faces is not None else full
-        return silhouette(levels[max_faces], rotation, translation, intrinsics, size)
+        with self._triangles_lock:  # a server's threads share this renderer
+            levels = self._triangles.pop(id(mesh), (None, {}))[1]
+            if not levels:
+                geometry = mesh.geometry
+                levels[None] = MeshTriangles(geometry.vertices, geometry.faces)
+            self._triangles[id(mesh)] = (mesh, levels)  # most recently used last
+            while len(self._triangles) > TRIANGLE_CACHE_MESHES:
+                del self._triangles[next(iter(self._triangles))]
+            if max_faces not in levels:
+                full = levels[None]
+                levels[max_faces] = full.simplified(max_faces) if max_faces is not None else full
+            triangles = levels[max_faces]
+        return silhouette(triangles, rotation, translation, intrinsics, size)
 
 
 @dataclass
