@@ -40,21 +40,12 @@ import numpy as np
 import viewdb
 from viewdb.bench.config import MissConfig, TwinConfig
 from viewdb.bench.misses import CAUSES, Miss, cause_of, filled, iou, outline_rank
-from viewdb.bench.photos import PhotoSpec, decoded_photo, photo_series, true_silhouette
+from viewdb.bench.photos import PhotoSpec, decoded_photo, parse_seeds, photo_series, true_silhouette
 from viewdb.bench.twins import Twins
 from viewdb.config import RecognitionConfig
 from viewdb.recognition.options import QueryOptions
 from viewdb.recognition.pipeline import segment_photo, segment_query
 from viewdb.recognition.results import QueryMatch
-
-
-def seeds(text: str) -> list[int]:
-    """``"1-6"`` or ``"1,3,5"`` (or both: ``"1-4,7"``)."""
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
 
 
 def rank_of(name: str, matches: list[QueryMatch]) -> int | None:
@@ -178,7 +169,7 @@ def main() -> None:
     names = [o.name for o in db.objects()]
     twins = Twins(db.mesh, config.twins)
     rows: dict[int, tuple[list[int | None], list[float], list[Miss]]] = {}
-    for seed in seeds(args.seeds):
+    for seed in parse_seeds(args.seeds):
         ranks: list[int | None] = []
         times: list[float] = []
         misses: list[Miss] = []

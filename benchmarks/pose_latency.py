@@ -43,7 +43,7 @@ import viewdb
 import viewdb.pose.estimate as estimate_module
 import viewdb.pose.matched as matched_module
 import viewdb.pose.sift_pose as sift_module
-from viewdb.bench.photos import decoded_photo, photo_series
+from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
 from viewdb.config import PosingConfig
 from viewdb.pose.estimate import PoseConfig
 from viewdb.pose.matched import pose_matches
@@ -74,15 +74,6 @@ def timed(label: str, function):
     return wrapper
 
 
-def seeds(text: str) -> list[int]:
-    if not text:
-        return []
-    if "-" in text:
-        low, high = (int(x) for x in text.split("-"))
-        return list(range(low, high + 1))
-    return [int(x) for x in text.split(",")]
-
-
 def view_error(pose, spec) -> float:
     cos = direction(pose.azimuth, pose.elevation) @ direction(spec.azimuth, spec.elevation)
     return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))
@@ -91,9 +82,9 @@ def view_error(pose, spec) -> float:
 def photos_of(db, args) -> list[tuple[str, object, np.ndarray]]:
     names = [o.name for o in db.objects()]
     out = [("latency", spec, decoded_photo(db.mesh(spec.object), spec))
-           for seed in seeds(args.seeds) for spec in photo_series(names, seed, args.photos)]
+           for seed in parse_seeds(args.seeds) for spec in photo_series(names, seed, args.photos)]
     eligible: dict[str, bool] = {}
-    for seed in seeds(args.textured_seeds):
+    for seed in parse_seeds(args.textured_seeds):
         for spec in photo_series(names, seed, args.textured_photos):
             if spec.object not in eligible:
                 sym = db.symmetry(spec.object)

@@ -42,7 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import decoded_photo, photo_series
+from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
 from viewdb.config import RecognitionConfig
 from viewdb.recognition.client_tier import ClientTier
 from viewdb.recognition.pipeline import segment_query
@@ -57,13 +57,6 @@ CONFIGS = {
     "no-pose-separate": {"pose": False, "recognition": RecognitionConfig(turn_search="separate")},
     "default-separate": {"recognition": RecognitionConfig(turn_search="separate")},
 }
-
-
-def seeds(text: str) -> list[int]:
-    if "-" in text:
-        low, high = (int(x) for x in text.split("-"))
-        return list(range(low, high + 1))
-    return [int(x) for x in text.split(",")]
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -176,7 +169,7 @@ def main() -> None:
     with viewdb.open(args.db, read_only=True) as db:
         names = [o.name for o in db.objects()]
         photos = []
-        for seed in seeds(args.seeds):
+        for seed in parse_seeds(args.seeds):
             for spec in photo_series(names, seed, args.photos):
                 photos.append((spec.object, decoded_photo(db.mesh(spec.object), spec)))
         print(f"{args.db}: {len(names)} objects; {len(photos)} photos (seeds {args.seeds}); "

@@ -30,18 +30,10 @@ from typing import Any
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import decoded_photo, photo_series
+from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
 from viewdb.recognition.colour import colour_distance, colour_signature, has_colour, rerank_by_colour
 from viewdb.recognition.pipeline import segment_photo
 from viewdb.recognition.verify import physical_view, rerank_by_fit
-
-
-def seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
 
 
 def floats(text: str) -> list[float]:
@@ -111,7 +103,7 @@ def main() -> None:
     parser.add_argument("--shape-weights", default="0,4,8,12")
     parser.add_argument("--cache")
     args = parser.parse_args()
-    key = {"db": str(Path(args.db).resolve()), "seeds": seeds(args.seeds), "photos": args.photos,
+    key = {"db": str(Path(args.db).resolve()), "seeds": parse_seeds(args.seeds), "photos": args.photos,
            "shortlist": args.shortlist, "rotations": args.rotations}
     cache = Path(args.cache) if args.cache else None
     if cache is not None and cache.exists() and json.loads(cache.read_text())["key"] == key:

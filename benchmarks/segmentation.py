@@ -53,15 +53,6 @@ ROOT = Path(__file__).resolve().parent.parent
 SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
 
 
-def seeds(text: str) -> list[int]:
-    """``"1-6"`` or ``"1,3,5"`` (or both: ``"1-4,7"``)."""
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        out += list(range(int(lo), int(hi or lo) + 1))
-    return out
-
-
 def segmenter(method: str) -> Callable[[object], np.ndarray]:
     """``image -> mask`` for a method name with its optional configuration suffix."""
     from viewdb.config import SegmentationConfig
@@ -162,7 +153,7 @@ def catalogue_photos(args: argparse.Namespace, methods: list[str]) -> None:
     from scipy.ndimage import binary_fill_holes
 
     import viewdb
-    from viewdb.bench.photos import decoded_photo, photo_series, true_silhouette
+    from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series, true_silhouette
     from viewdb.catalogue.features import distance_curve
     from viewdb.catalogue.mesh import load_mesh
     from viewdb.errors import ImageError
@@ -182,7 +173,7 @@ def catalogue_photos(args: argparse.Namespace, methods: list[str]) -> None:
     errors: dict[str, list[float]] = {m: [] for m in methods}
     agree: dict[str, list[float]] = {m: [] for m in methods}
     count = 0
-    for seed in seeds(args.catalogue_photos):
+    for seed in parse_seeds(args.catalogue_photos):
         for spec in photo_series(names, seed, args.photos):
             if spec.object not in meshes:
                 meshes[spec.object] = load_mesh(paths[spec.object])

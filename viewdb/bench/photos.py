@@ -31,8 +31,8 @@ from ..catalogue.render import RenderedView, offscreen, pyrender_mesh, reraise_i
 from ..errors import RenderError
 
 __all__ = [
-    "PhotoSpec", "composite_photo", "decoded_photo", "draw_photo_spec", "encode_jpeg", "photo_series",
-    "render_photo", "table_photo", "true_silhouette",
+    "PhotoSpec", "composite_photo", "decoded_photo", "draw_photo_spec", "encode_jpeg", "parse_seeds",
+    "photo_series", "render_photo", "table_photo", "true_silhouette",
 ]
 
 #: A wooden table top's colour (RGB).
@@ -89,6 +89,16 @@ def draw_photo_spec(rng: np.random.Generator, name: str, image_size: int = 256) 
         noise=float(rng.uniform(1.0, 6.0)), noise_seed=int(rng.integers(2**31)),
         jpeg_quality=int(rng.integers(60, 96)), image_size=image_size,
     )
+
+
+def parse_seeds(text: str) -> list[int]:
+    """The seeds of :func:`photo_series` a benchmark's ``--seeds`` names: ``"1-6"`` or
+    ``"1,3,5"`` (or both: ``"1-4,7"``; ``""`` is none)."""
+    out: list[int] = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        lo, _, hi = part.partition("-")
+        out += list(range(int(lo), int(hi or lo) + 1))
+    return out
 
 
 def photo_series(names: Sequence[str], seed: int, count: int, image_size: int = 256) -> list[PhotoSpec]:
