@@ -146,6 +146,27 @@ def test_overlapping_claims_go_to_the_smaller_object():
     assert np.array_equal(out[1], b) and np.array_equal(out[0], a & ~b)
 
 
+def test_a_box_cut_out_keeps_its_holes_for_the_pose():
+    """A ring on a plain background: the region (its curve) is the ring filled, the pose
+    is fitted to the ring with the background seen through it; a disc has no pose mask."""
+    rng = np.random.default_rng(0)
+    photo = np.clip(rng.normal((200, 200, 190), 4, (160, 200, 3)), 0, 255).astype(np.uint8)
+    yy, xx = np.mgrid[:160, :200]
+    r = np.hypot(xx - 100, yy - 80)
+    ring, hole = (r <= 50) & (r >= 25), r < 25
+    photo[ring] = (170, 30, 30)
+    disc = photo.copy()
+    disc[hole] = (170, 30, 30)
+    image = load_image(photo)
+    region, = find_regions(image, Prompts.of(boxes=[[40, 20, 160, 140]]))
+    assert region.pose_mask is not None
+    assert not (region.pose_mask & ~region.mask).any()
+    assert region.mask[hole].mean() > 0.95  # filled for the curve
+    assert region.pose_mask[hole].mean() < 0.05 and region.pose_mask[ring].mean() > 0.95
+    solid, = find_regions(load_image(disc), Prompts.of(boxes=[[40, 20, 160, 140]]))
+    assert solid.pose_mask is None
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.tuples(st.integers(0, 15), st.integers(0, 15), st.integers(1, 8), st.integers(1, 8)),
                 min_size=1, max_size=5))

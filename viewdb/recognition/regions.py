@@ -15,7 +15,10 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   with the colour model of its border (:func:`~viewdb.recognition.segmentation.segment`'s
   way), then keeps what lies in the box. ``python benchmarks/prompts.py`` measures both
   on the YCB-Video frames against their label maps: GrabCut from the box, mean IoU 0.88;
-  the border model fails in clutter (the crop's border crosses other objects).
+  the border model fails in clutter (the crop's border crosses other objects). The
+  region's curve is that of the cut-out with its holes filled; its pose is fitted to the
+  cut-out with the holes the cut left in it (:attr:`Region.pose_mask`: the background
+  seen through a handle, which the mesh's silhouette shows too).
 * **point**: a square of ``point_start`` of the photo's shorter side around the point is
   cut as a box; while the object reaches a side of the square that is not the photo's
   edge, that side moves out by ``point_growth`` of the square's side (at most
@@ -185,7 +188,8 @@ class Region:
     label: int | None = None
     #: bool (H, W): the other objects' pixels (what may hide this one), or None.
     others: NDArray[np.bool_] | None = field(default=None, repr=False)
-    #: The pixels the pose is fitted to (a label keeps its holes); None: the segmentation's.
+    #: The pixels the pose is fitted to (a label's or a box's cut-out keeps its holes);
+    #: None: the segmentation's.
     pose_mask: NDArray[np.bool_] | None = field(default=None, repr=False)
 
     @property
@@ -303,8 +307,16 @@ def _border_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig) -> ND
 
 def segment_box(image: LoadedImage, box: Box, cfg: SegmentationConfig) -> Segmentation:
     """The object in a box (module doc): its largest region, holes filled."""
+    return _cut_box(image, box, cfg)[0]
+
+
+def _cut_box(image: LoadedImage, box: Box, cfg: SegmentationConfig
+             ) -> tuple[Segmentation, NDArray[np.bool_]]:
+    """:func:`segment_box`, and the same region with the holes the cut left in it (the
+    background seen through a handle), which the pose is fitted to."""
     raw = (_grabcut_box if cfg.box_method == "grabcut" else _border_box)(image.rgb, box, cfg)
-    return _checked(largest_filled(raw), "box", box, image, cfg)
+    seg = _checked(largest_filled(raw), "box", box, image, cfg)
+    return seg, seg.mask & raw
 
 
 def _checked(mask: NDArray[np.bool_], method: str, prompt: Prompt | None, image: LoadedImage,
@@ -397,18 +409,25 @@ def _separate(masks: list[NDArray[np.bool_]]) -> list[NDArray[np.bool_]]:
 
 
 def _with_others(image: LoadedImage, found: list[tuple[Segmentation, Prompt | None]],
-                 cfg: SegmentationConfig) -> list[Region]:
+                 cfg: SegmentationConfig, holed: Sequence[NDArray[np.bool_] | None] = ()) -> list[Region]:
+    """The regions of ``found``, overlapping claims settled (:func:`_separate`), each
+    knowing the others' pixels; ``holed``: per region, its cut-out with the holes kept
+    (None: none), the pose mask where it has any."""
     separated = _separate([s.mask for s, _ in found])
     union = np.zeros((image.height, image.width), dtype=bool)
     for mask in separated:
         union |= mask
     regions = []
-    for (seg, prompt), mask in zip(found, separated, strict=True):
+    for i, ((seg, prompt), mask) in enumerate(zip(found, separated, strict=True)):
         if mask is not seg.mask and np.count_nonzero(mask) != np.count_nonzero(seg.mask):
             kept = largest_filled(mask)
             seg = _checked(kept, seg.method, prompt, image, cfg)
         others = union & ~seg.mask
-        regions.append(Region(seg, prompt, None, others if others.any() else None))
+        with_holes = holed[i] if i < len(holed) else None
+        pose = None if with_holes is None else seg.mask & with_holes
+        if pose is not None and np.count_nonzero(pose) == np.count_nonzero(seg.mask):
+            pose = None
+        regions.append(Region(seg, prompt, None, others if others.any() else None, pose))
     return regions
 
 
@@ -443,6 +462,8 @@ def find_regions(
     if prompts.every:
         return _with_others(image, [(s, None) for s in segment_every(image, limit, cfg)], cfg)
     check_prompts(image, prompts, cfg)
-    found: list[tuple[Segmentation, Prompt | None]] = [(segment_box(image, b, cfg), b) for b in prompts.boxes]
+    cut = [_cut_box(image, b, cfg) for b in prompts.boxes]
+    found: list[tuple[Segmentation, Prompt | None]] = [
+        (seg, b) for (seg, _), b in zip(cut, prompts.boxes, strict=True)]
     found += [(segment_point(image, p, cfg), p) for p in prompts.points]
-    return _with_others(image, found, cfg)
+    return _with_others(image, found, cfg, [holed for _, holed in cut])
