@@ -8,7 +8,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
@@ -466,3 +466,44 @@ def test_a_small_object_is_enlarged_before_sift(pose_db):
     assert est.method == "sift" and rotation_angle(est.rotation, rot) <= 3.0
     plain = estimate_pose(query, neighbourhood(pose_db, "mug", 60, 30), PoseConfig(max_sift_upscale=1.0))
     assert plain.inliers < est.inliers
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(0.1, 0.99), min_size=1, max_size=8), st.integers(0, 3))
+def test_iou_reranking_fits_every_match_alike_and_only_the_best_again(quick_ious, full):
+    """With ``rerank``, every match gets the quick fit (outlines only, no SIFT), and only the
+    ``rerank_full`` best by the quick fits' IoU the full one, started from the quick pose."""
+    from types import SimpleNamespace
+
+    import viewdb.pose.matched as matched
+    from viewdb.config import PosingConfig
+    from viewdb.pose.estimate import PoseEstimate
+    from viewdb.search.plans import Candidate
+
+    names = [f"o{i}" for i in range(len(quick_ious))]
+    calls: list[tuple[str, bool, bool]] = []
+
+    def fake(catalogue, query, match, config, intrinsics, search=None, starts=(), curve=None,
+             posing=None, *, sift=True):
+        quick = search is matched.QUICK
+        calls.append((match.object, quick, sift))
+        iou = quick_ious[names.index(match.object)] + (0.0 if quick else 0.005)
+        return PoseEstimate(0.0, 0.0, 0.0, 1.0, np.eye(3), np.array([0.0, 0.0, 3.0]), "shape", 0, 0,
+                            "opencv", iou, refined="silhouette", iou=iou)
+
+    catalogue = SimpleNamespace(config=SimpleNamespace(features=SimpleNamespace(curve_samples=128)),
+                                object=lambda name: SimpleNamespace(centre=(0.0, 0.0, 0.0), scale=1.0))
+    matches = [Candidate(n, 0.1 * i, 0.0, 0.0, False) for i, n in enumerate(names)]
+    original = matched.pose_match
+    matched.pose_match = fake
+    try:
+        matched.pose_matches(catalogue, QueryView(np.zeros((8, 8, 3), np.uint8), np.ones((8, 8), bool)),
+                             matches, (10.0, 10.0, 4.0, 4.0), rerank=True,
+                             posing=PosingConfig(rerank_full=full))
+    finally:
+        matched.pose_match = original
+    quick = [(n, s) for n, q, s in calls if q]
+    again = [n for n, q, _ in calls if not q]
+    assert quick == [(n, False) for n in names]
+    best = sorted(names, key=lambda n: (-quick_ious[names.index(n)], names.index(n)))
+    assert again == best[:full]

@@ -774,8 +774,8 @@ class PosingConfig:
     shape_climb: int = 3
     #: "walk": the off-grid walk stops at this step (degrees).
     shape_refine_step: float = 2.0
-    #: IoU re-ranking: results fitted again with the full silhouette search after the
-    #: quick one (besides the plan's first).
+    #: IoU re-ranking: the best results by their quick fits, fitted again with the full
+    #: silhouette search.
     rerank_full: int = 1
     #: Whether, when the stored candidates give no SIFT pose, the SIFT features of the
     #: candidates the file does not store (pruned by skimming: e.g. the side opposite a

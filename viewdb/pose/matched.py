@@ -127,15 +127,16 @@ def pose_match(
     catalogue: CatalogueReader, query: QueryView, match: Candidate, config: PoseConfig,
     intrinsics: Intrinsics | None, search: SilhouetteConfig | None = None,
     starts: Sequence[Start] = (), curve: NDArray[np.float64] | None = None,
-    posing: PosingConfig = POSING,
+    posing: PosingConfig = POSING, *, sift: bool = True,
 ) -> PoseEstimate:
     """The pose of one match (module doc); ``curve``: the query's curve at the in-plane
-    turn that matched (adds the nearest views' poses as candidates)."""
+    turn that matched (adds the nearest views' poses as candidates). Without ``sift`` the
+    candidates are compared by their outlines alone (their SIFT features not read)."""
     candidates, pruned = [], []
     for p in _candidate_poses(catalogue, match, curve, posing):
         try:
             candidates.append(appearance_view(catalogue, match.object, p.azimuth, p.elevation, config,
-                                              mirrored=p.mirrored, features=p.stored))
+                                              mirrored=p.mirrored, features=p.stored and sift))
         except ViewDBError:
             continue  # e.g. no silhouette at that view
         if not p.stored:
@@ -340,11 +341,11 @@ def _refit_best(
     posing: PosingConfig,
 ) -> None:
     """Fit again, with the full silhouette search started from the quick pose, the best
-    :attr:`~viewdb.config.PosingConfig.rerank_full` quick fits and the plan's first match
-    (a quick fit can miss a thin part, e.g. a handle, and must not demote it alone)."""
+    :attr:`~viewdb.config.PosingConfig.rerank_full` quick fits: the matches are ranked by
+    their quick fits alone (every one fitted alike), the full fit only sharpens the pose
+    of the best."""
     ranked = sorted(range(len(matches)), key=lambda i: (-_iou(out[i][0]), i))
-    full = set(ranked[:posing.rerank_full]) | ({0} if matches else set())
-    for i in sorted(full, key=ranked.index):
+    for i in ranked[:posing.rerank_full]:
         estimate = out[i][0]
         if estimate is None or estimate.refined != "silhouette":
             continue
@@ -367,8 +368,9 @@ def pose_matches(
     """``(pose, None)`` or ``(None, why not)`` for each match (a server's answer to a
     ``pose`` request). ``curves``: per match, the query's curve at the turn that matched
     (adds its nearest views' poses), or None. ``rerank`` (with intrinsics): every match is
-    fitted quickly (:data:`viewdb.pose.silhouette.QUICK`), the best and the first again with
-    the full search, so the caller can rank them by the fits' IoU."""
+    fitted quickly (:data:`viewdb.pose.silhouette.QUICK`, started from its outline's pose
+    among its candidate views: a pose by SIFT would not be fitted, hence not ranked), the
+    best again with the full search, so the caller can rank them by the fits' IoU."""
     config = config or PoseConfig()
     samples = catalogue.config.features.curve_samples
     if curves is not None and len(curves) != len(matches):
@@ -381,7 +383,8 @@ def pose_matches(
     for i, c in enumerate(matches):
         try:
             out.append((pose_match(catalogue, query, c, config, intrinsics, QUICK if rerank else None,
-                                   curve=None if curves is None else curves[i], posing=posing), None))
+                                   curve=None if curves is None else curves[i], posing=posing,
+                                   sift=not rerank), None))
         except ViewDBError as exc:
             out.append((None, exc.message))
     if rerank:

@@ -41,8 +41,11 @@ from .tiers import TIERS, StoredTier, TierReader
 
 __all__ = ["SearchHit", "StoredCatalogue"]
 
-#: How many decoded meshes a catalogue keeps in memory.
-MESH_CACHE_SIZE = 8
+#: How many decoded meshes a catalogue keeps in memory: at least the k results a query
+#: re-ranks by silhouette fit (each fitted quickly, the best again), and as many as the
+#: pinhole renderer keeps triangles for (:data:`~viewdb.catalogue.pinhole.TRIANGLE_CACHE_MESHES`,
+#: by the mesh's identity: a mesh decoded again is decimated again).
+MESH_CACHE_SIZE = 32
 #: How many regenerated (pruned or off-grid) views a catalogue keeps in memory.
 VIEW_CACHE_SIZE = 256
 #: How many renders (about 0.5 MB each) a catalogue keeps: posing a result renders its
