@@ -75,13 +75,14 @@ def test_shift_search_equals_brute_force_over_the_window(seed, k, r, objects, gr
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(0, 5), st.integers(1, 5), st.integers(1, 6))
-def test_a_stack_of_unrelated_curves_equals_brute_force(seed, k, r, objects, block):
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(0, 5), st.integers(1, 5), st.integers(1, 6),
+       st.integers(1, 4))
+def test_a_stack_of_unrelated_curves_equals_brute_force(seed, k, r, objects, block, threads):
     rng = np.random.default_rng(seed)
     n = 16
     tier = random_tier(rng, objects, 20, n, int(rng.integers(1, 7)))
     stack = smooth_curves(rng, int(rng.integers(1, 7)), n)
-    result, _ = knn_stack(stack, tier, k, r, block=block)
+    result, _ = knn_stack(stack, tier, k, r, block=block, threads=threads)
     expected = naive_knn_over_curves(stack, tier.curves, tier.owner, tier.names, k, r)
     check_against_oracle(result, expected, stack, tier, r)
 
@@ -115,6 +116,44 @@ def test_bounded_and_unbounded_shift_searches_report_the_same_views(seed, k, r, 
     bounded, _ = knn(q, tier, k, r, shifts=window, block=block, upper=upper, known=known,
                      initial_radius=initial_radius)
     assert bounded == reference
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 6), st.integers(2, 9), st.integers(2, 5),
+       st.integers(1, 4), st.booleans(), st.floats(0.0, 1.0))
+def test_a_search_split_over_threads_reports_what_one_search_reports(seed, k, r, objects, threads, block,
+                                                                     bounded, slack):
+    """The objects dealt to threads sharing their bounds: the same objects, distances,
+    views, orientations and curves as one search, ties included (copies of views within
+    and across objects, symmetric views), bounded (a CS1 server) or not, and the brute
+    force's objects and distances."""
+    rng = np.random.default_rng(seed)
+    n = 24
+    tier = random_tier(rng, objects, 80, n, int(rng.integers(1, 9)))
+    for i in rng.integers(0, 80, 12):
+        tier.curves[rng.integers(0, 80)] = tier.curves[i]
+    tier = TierArrays(tier.names, tier.owner, tier.curves, group_views=tier.group_views)
+    stack = np.concatenate([smooth_curves(rng, int(rng.integers(0, 5)), n),
+                            tier.curves[rng.integers(0, 80, int(rng.integers(1, 4)))]])
+    one, _ = knn_stack(stack, tier, k, r, block=block, threads=1)
+    upper, known = math.inf, None
+    if bounded:
+        everything, _ = knn_stack(stack, tier, objects, r, block=block, threads=1)
+        known = {tier.names.index(nb.object): nb.distance * (1 + slack * rng.random())
+                 for nb in everything if rng.random() < 0.6}
+        upper = everything[k - 1].distance * (1 + slack) if len(everything) >= k else math.inf
+    split, stats = knn_stack(stack, tier, k, r, block=block, threads=threads, upper=upper, known=known)
+    assert split == one
+    check_against_oracle(split, naive_knn_over_curves(stack, tier.curves, tier.owner, tier.names, k, r),
+                         stack, tier, r)
+    assert stats.dtw >= len(split)
+
+
+def test_threads_must_be_positive():
+    rng = np.random.default_rng(0)
+    tier = random_tier(rng, 3, 20, 16, 4)
+    with pytest.raises(ValueError, match="threads"):
+        knn_stack(smooth_curves(rng, 2, 16), tier, 2, 2, threads=0)
 
 
 @settings(max_examples=30, deadline=None)

@@ -747,8 +747,18 @@ class SearchConfig:
     #: turns 30 degrees apart make wide wedges, so each is bounded on its own
     #: (``benchmarks/shift_search.py``'s ``stack12``).
     stack_block: int = 1
+    #: Threads one search is split over (:func:`viewdb.search.knn.knn_stack`; at most the
+    #: machine's CPUs): the same answer, found about 1.8 times sooner on 2 idle cores
+    #: (``benchmarks/parallel_search.py``). 1 keeps every search on the calling thread
+    #: (a server busy with other queries gains nothing from more).
+    threads: int = 2
+    #: Sources with fewer groups are searched on one thread: starting threads costs more
+    #: than they save on a small catalogue.
+    parallel_min_groups: int = 512
 
     def __post_init__(self) -> None:
+        if self.threads < 1:
+            raise ValueError(f"threads must be at least 1, got {self.threads}")
         if self.shift_block < 1:
             raise ValueError(f"shift_block must be at least 1, got {self.shift_block}")
         if self.stack_block < 1:

@@ -26,13 +26,30 @@ source is asked for the groups within the new radius. Every group with key ``<= 
 a candidate whenever something is taken, so entries come in exactly the order of a queue
 that held all groups from the start. :func:`brute_force_knn` computes the same answer by
 scanning everything and is the oracle the tests use.
+
+**Threads.** :func:`knn_stack` can split one search over threads
+(:class:`~viewdb.config.SearchConfig`'s ``threads``): the objects are dealt to the threads
+(by their numbers of views, so each thread has about as much to search), each thread
+runs the search above over its objects' groups only, and all share the per-object arrays
+(bounds and results: each thread writes only its own objects' entries). A thread's
+k-th distance is read from the shared bounds, so it is that of all threads' objects: any
+k objects with exact distances at most ``U`` prove the global k-th distance at most ``U``,
+whichever thread found them, and each thread reads it afresh as the others lower it
+(:mod:`.multirefine`). A read that misses another thread's latest write only prunes less.
+Each thread stops when its smallest key exceeds that k-th distance, so every object of its
+part within the final k-th distance is refined exactly, as in one search: the answer is the
+same, ties included (tested against the single search and brute force).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import threading
 import time
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -366,13 +383,19 @@ def knn_stack(
     known: Mapping[int, float] | None = None,
     initial_radius: float = INITIAL_RADIUS,
     block: int | None = None,
+    threads: int | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects to a stack of query curves ``(T, N)``: a view's
     distance is the smallest over the curves (and the view's mirror), found in one
     best-first search (:mod:`viewdb.search.shifts`, :mod:`viewdb.search.multirefine`);
     each result's ``shift`` is the row of the curve that matched. Exactly
-    :func:`brute_force_knn` of each curve, merged; ``upper``/``known`` as in :func:`knn`."""
-    stack = CurveQuery.of(curves, r, SearchConfig().shift_block if block is None else block)
+    :func:`brute_force_knn` of each curve, merged; ``upper``/``known`` as in :func:`knn`.
+
+    ``threads``: the search split over that many threads (module doc; at most one per
+    object); the answer is the same. Default: :class:`~viewdb.config.SearchConfig`'s, at
+    most the machine's CPUs, and one for a small source (:func:`search_threads`)."""
+    config = SearchConfig()
+    stack = CurveQuery.of(curves, r, config.shift_block if block is None else block)
     boxes = source.group_boxes()
     group_arrays = (source.group_start, source.group_count, source.group_owner, source.row_owner)
 
@@ -387,7 +410,52 @@ def knn_stack(
                 return pos, status
             search.grow()
 
-    return _Search(source, k, upper, known, 4).run(stack, step, initial_radius)
+    threads = search_threads(source, config) if threads is None else min(threads, source.n_objects)
+    if threads < 1:
+        raise ValueError(f"threads must be at least 1, got {threads}")
+    if threads == 1:
+        return _Search(source, k, upper, known, 4).run(stack, step, initial_radius)
+    return _parallel(source, k, upper, known, threads, stack, step, initial_radius)
+
+
+def search_threads(source: TierSource, config: SearchConfig) -> int:
+    """The threads a search of ``source`` uses by default: ``config.threads``, at most the
+    machine's CPUs and the source's objects, and one for a source of fewer than
+    ``config.parallel_min_groups`` groups (not worth the threads' start)."""
+    if source.n_groups < config.parallel_min_groups:
+        return 1
+    return max(1, min(config.threads, os.cpu_count() or 1, source.n_objects))
+
+
+def deal_objects(source: TierSource, parts: int) -> NDArray[np.int64]:
+    """The part (``0 .. parts - 1``) of each object: the objects dealt by their numbers of
+    views, largest first, each to the part with the fewest views so far."""
+    views = np.bincount(source.group_owner, weights=source.group_count, minlength=source.n_objects)
+    load = np.zeros(parts)
+    part = np.zeros(source.n_objects, dtype=np.int64)
+    for o in np.argsort(-views, kind="stable"):
+        part[o] = int(np.argmin(load))
+        load[part[o]] += views[o]
+    return part
+
+
+def _parallel(
+    source: TierSource, k: int, upper: float, known: Mapping[int, float] | None, threads: int,
+    query: Any, step: Any, initial_radius: float,
+) -> tuple[list[Neighbour], SearchStats]:
+    """One search split over ``threads`` threads, each over its objects' groups (module doc)."""
+    first = _Search(source, k, upper, known, 4)
+    searches = [first] + [_Search(source, k, upper, known, 4, shared=first) for _ in range(threads - 1)]
+    group_part = deal_objects(source, threads)[source.group_owner]
+    lock = threading.Lock()  # the source (an R-tree, a read connection) is one thread's at a time
+    with ThreadPoolExecutor(threads, thread_name_prefix="viewdb-search") as pool:
+        runs = [pool.submit(search.run, query, step, initial_radius, group_part != t, lock)
+                for t, search in enumerate(searches)]
+        stats = [run.result()[1] for run in runs]
+    total = SearchStats(seconds=max(s.seconds for s in stats))
+    for name in ("groups_visited", "points_visited", "lb_keogh", "dtw", "expansions"):
+        setattr(total, name, sum(getattr(s, name) for s in stats))
+    return first.result(), total
 
 
 class _Search:
@@ -396,15 +464,19 @@ class _Search:
     within a growing radius and hands them to a refinement ``step``."""
 
     def __init__(self, source: TierSource, k: int, upper: float, known: Mapping[int, float] | None,
-                 heap_per_view: int) -> None:
+                 heap_per_view: int, shared: _Search | None = None) -> None:
         self.source, self.k = source, k
-        self.bound = np.full(source.n_objects, math.inf)
-        for o, d in (known or {}).items():
-            self.bound[o] = min(self.bound[o], float(d))
-        self.exact = np.full(source.n_objects, math.inf)
-        self.exact_row = np.full(source.n_objects, -1, dtype=np.int64)
-        self.exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
-        self.exact_curve = np.zeros(source.n_objects, dtype=np.int64)
+        if shared is not None:  # another thread's part of the same search: one set of per-object arrays
+            self.bound, self.exact, self.exact_row = shared.bound, shared.exact, shared.exact_row
+            self.exact_mirrored, self.exact_curve = shared.exact_mirrored, shared.exact_curve
+        else:
+            self.bound = np.full(source.n_objects, math.inf)
+            for o, d in (known or {}).items():
+                self.bound[o] = min(self.bound[o], float(d))
+            self.exact = np.full(source.n_objects, math.inf)
+            self.exact_row = np.full(source.n_objects, -1, dtype=np.int64)
+            self.exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
+            self.exact_curve = np.zeros(source.n_objects, dtype=np.int64)
         self.cap = upper * (1.0 + WIDEN_REL) + WIDEN_ABS if math.isfinite(upper) else math.inf
         self.counters = np.zeros(4, dtype=np.int64)
         views = int(source.group_count.sum())
@@ -420,16 +492,22 @@ class _Search:
         bigger[1][:n] = codes[:n]
         self.heap = bigger
 
-    def run(self, qb: Any, step: Any, initial_radius: float) -> tuple[list[Neighbour], SearchStats]:
+    def run(
+        self, qb: Any, step: Any, initial_radius: float, skip: NDArray[np.bool_] | None = None,
+        lock: AbstractContextManager[Any] | None = None,
+    ) -> tuple[list[Neighbour], SearchStats]:
+        """The search; ``skip`` marks groups left to other threads, and ``lock`` guards
+        each use of the source."""
         start = time.perf_counter()
         source, stats = self.source, SearchStats()
-        seen = np.zeros(source.n_groups, dtype=np.bool_)
+        lock = lock if lock is not None else nullcontext()
+        seen = np.zeros(source.n_groups, dtype=np.bool_) if skip is None else skip.copy()
         order = np.zeros(0, dtype=np.int64)
         keys = np.zeros(0, dtype=np.float64)
         pos = ready = 0
         chunk = CHUNK
         radius = -math.inf
-        exhausted = source.n_groups == 0
+        exhausted = bool(seen.all())
         status = EXHAUSTED
         cap = self.cap
         while True:
@@ -444,7 +522,8 @@ class _Search:
                 radius = min(max(2.0 * radius, smallest if math.isfinite(smallest) else 0.0,
                                  initial_radius, cap if math.isfinite(cap) else -math.inf), cap)
                 stats.expansions += 1
-                found, found_keys = source.groups_within(qb, radius, seen)
+                with lock:
+                    found, found_keys = source.groups_within(qb, radius, seen)
                 seen[found] = True
                 keep = found_keys <= cap
                 order = np.concatenate([order[pos:], found[keep]])
@@ -455,23 +534,30 @@ class _Search:
             if ready < len(order) and (status == NEED or ready <= pos):
                 # chunks double while a search goes on (read rows stay loaded for the next)
                 end = min(len(order), max(ready, pos) + chunk)
-                rows = source.rows(order[ready:end])
+                with lock:
+                    rows = source.rows(order[ready:end])
                 ready, chunk = end, min(2 * chunk, MAX_CHUNK)
             else:
-                rows = source.rows(order[:0])
+                with lock:
+                    rows = source.rows(order[:0])
             pos, status = step(self, order, keys, pos, ready, math.inf if exhausted else radius, rows)
             if status == DONE:
                 break
         stats.groups_visited, stats.points_visited, stats.lb_keogh, stats.dtw = (
             int(x) for x in self.counters)
+        stats.seconds = time.perf_counter() - start
+        return self.result(), stats
+
+    def result(self) -> list[Neighbour]:
+        """The k objects of smallest exact distance found, each with its best view."""
+        source = self.source
         exact = self.exact
         hits = sorted((float(exact[o]), source.object_name(int(o)), int(o))
                       for o in np.flatnonzero(np.isfinite(exact)))[: self.k]
         result = [Neighbour(name, source.view_id(int(self.exact_row[o])), d,
                             bool(self.exact_mirrored[o]), int(self.exact_curve[o]))
                   for d, name, o in hits]
-        stats.seconds = time.perf_counter() - start
-        return result, stats
+        return result
 
 
 def objects_within(

@@ -57,6 +57,9 @@ __all__ = ["FULL", "refine_stack", "scan_stack"]
 
 #: :func:`refine_stack` status besides those of :mod:`.refine`: the heap may overflow.
 FULL = 4
+#: Exact distances computed between two readings of the shared k-th distance (a search
+#: split over threads, :mod:`viewdb.search.knn`: the other threads' objects lower it too).
+REFRESH = 32
 
 # entry kinds (the low 3 bits of a code; bit 3 is "mirrored", the rest the payload)
 _GB, _VB, _VBC, _VC, _GBC = 0, 1, 2, 3, 4
@@ -204,9 +207,12 @@ def _view_block(  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _refine_view(  # pragma: no cover - compiled
     Q, r, row, t, m, o, limit, curves, env_lo, env_hi, scratch,
-    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U,
+    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U, refresh,
 ):
     # a VC entry: the exact DTW (UCR cascade); the object's result and bound; returns U
+    # (read afresh from the shared bounds when ``refresh``: other threads lower it too)
+    if refresh:
+        U = min(U, kth_distance(bound, k, cap))
     load_row(curves, row, m == 1, scratch)
     dist = cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
     if dist > limit:
@@ -308,7 +314,7 @@ def _stack_kernel(  # pragma: no cover - compiled
         else:
             stats[3] += 1
             U = _refine_view(Q, r, row, b, m, o, limit, curves, env_lo, env_hi, scratch, bound, exact,
-                             exact_row, exact_mirrored, exact_curve, k, cap, U)
+                             exact_row, exact_mirrored, exact_curve, k, cap, U, stats[3] % REFRESH == 0)
     hsize[0] = size
     return i, status
 

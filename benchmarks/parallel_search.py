@@ -1,0 +1,89 @@
+"""One search on one thread against the same search split over threads, on the synthetic photos.
+
+    python benchmarks/parallel_search.py DB [--seeds 1-6] [--photos 10] [-k 5] [--threads 1,2]
+
+The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.photo_series`),
+segmented and turned as a query does (12 in-plane turns); each photo's stack of turned curves is
+then searched on the file's full tier (:func:`viewdb.search.knn.knn_stack`, k objects) once per
+thread count, one right after the other (the order alternating from photo to photo). Printed per
+thread count: the median and p95 wall time of a search, the CPU time it took (all threads),
+and the median per-photo ratio of wall times against the first count; then on how many photos
+every count gave the same answer (objects, distances, views, orientations, turns). Give the load
+average with the figures: threads only help on idle cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+import viewdb
+from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
+from viewdb.config import SearchConfig
+from viewdb.recognition.pipeline import segment_query
+from viewdb.search.knn import knn_stack
+
+
+def stacks(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
+    """Each photo's 12 turned query curves, ``(12, N)``, as the search receives them."""
+    names = [o.name for o in db.objects()]
+    samples = db.config.features.curve_samples
+    out = []
+    for seed in parse_seeds(seeds):
+        for spec in photo_series(names, seed, photos):
+            try:
+                shape = segment_query(decoded_photo(db.mesh(spec.object), spec), samples, 12)
+            except viewdb.ViewDBError:
+                continue
+            out.append(np.stack([c for _, c in shape.curves]))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("db")
+    parser.add_argument("--seeds", default="1-6")
+    parser.add_argument("--photos", type=int, default=10, help="photos per seed")
+    parser.add_argument("-k", type=int, default=5)
+    parser.add_argument("--threads", default="1,2", help="thread counts to compare, the first the baseline")
+    args = parser.parse_args()
+    counts = [int(t) for t in args.threads.split(",")]
+    with viewdb.open(args.db, read_only=True) as db:
+        queries = stacks(db, args.seeds, args.photos)
+        catalogue = db._catalogue
+        band = 6
+        block = SearchConfig().stack_block
+        with catalogue.tier_reader().snapshot() as reader:
+            source = reader.tier("full")
+            curves = [np.stack([catalogue.query_curve(c, args.k, "full") for c in q]) for q in queries]
+            print(f"{args.db}: {len(curves)} photos (seeds {args.seeds}), {source.n_groups} groups, "
+                  f"k={args.k}; {os.cpu_count()} CPUs; load {os.getloadavg()[0]:.1f}", flush=True)
+            for t in counts:  # compile and read every row once
+                knn_stack(curves[0], source, args.k, band, block=block, threads=t)
+            wall = {t: [] for t in counts}
+            cpu = {t: [] for t in counts}
+            same = 0
+            for i, q in enumerate(curves):
+                answers = {}
+                for t in counts if i % 2 == 0 else counts[::-1]:
+                    start, cpu_start = time.perf_counter(), time.process_time()
+                    found, _ = knn_stack(q, source, args.k, band, block=block, threads=t)
+                    wall[t].append((time.perf_counter() - start) * 1e3)
+                    cpu[t].append((time.process_time() - cpu_start) * 1e3)
+                    answers[t] = found
+                same += all(answers[t] == answers[counts[0]] for t in counts)
+    base = np.asarray(wall[counts[0]])
+    for t in counts:
+        ratio = statistics.median(base / np.asarray(wall[t]))
+        print(f"threads {t}: wall median {statistics.median(wall[t]):6.0f} ms  p95 "
+              f"{np.percentile(wall[t], 95):6.0f} ms  CPU median {statistics.median(cpu[t]):6.0f} ms  "
+              f"speed-up vs {counts[0]} thread(s): {ratio:.2f}x (median per photo)", flush=True)
+    print(f"the same answer on {same}/{len(curves)} photos; load {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
