@@ -32,10 +32,13 @@ scanning everything and is the oracle the tests use.
 (by their numbers of views, so each thread has about as much to search), each thread
 runs the search above over its objects' groups only, and all share the per-object arrays
 (bounds and results: each thread writes only its own objects' entries). A thread's
-k-th distance is read from the shared bounds, so it is that of all threads' objects: any
-k objects with exact distances at most ``U`` prove the global k-th distance at most ``U``,
-whichever thread found them, and each thread reads it afresh as the others lower it
-(:mod:`.multirefine`). A read that misses another thread's latest write only prunes less.
+k-th distance is computed from the shared bounds, so it is that of all threads' objects:
+any k objects with exact distances at most ``U`` prove the global k-th distance at most
+``U``, whichever thread found them. Each thread leaves the k-th distance it finds in a
+shared cell and reads the cell at every step (:mod:`.multirefine`), so each prunes by the
+smallest any has found. A read that misses another thread's latest write (or a write
+that overwrites a smaller value) only prunes less: every value written is a k-th
+distance some k objects prove.
 Each thread stops when its smallest key exceeds that k-th distance, so every object of its
 part within the final k-th distance is refined exactly, as in one search: the answer is the
 same, ties included (tested against the single search and brute force).
@@ -404,7 +407,7 @@ def knn_stack(
             pos, status = refine_stack(
                 stack, order, keys, pos, ready, stop_key, group_arrays, rows, boxes,
                 (search.bound, search.exact, search.exact_row, search.exact_mirrored,
-                 search.exact_curve, *search.heap), k, search.cap, search.counters,
+                 search.exact_curve, *search.heap, search.kth), k, search.cap, search.counters,
             )
             if status != FULL:
                 return pos, status
@@ -469,6 +472,7 @@ class _Search:
         if shared is not None:  # another thread's part of the same search: one set of per-object arrays
             self.bound, self.exact, self.exact_row = shared.bound, shared.exact, shared.exact_row
             self.exact_mirrored, self.exact_curve = shared.exact_mirrored, shared.exact_curve
+            self.kth = shared.kth
         else:
             self.bound = np.full(source.n_objects, math.inf)
             for o, d in (known or {}).items():
@@ -477,6 +481,8 @@ class _Search:
             self.exact_row = np.full(source.n_objects, -1, dtype=np.int64)
             self.exact_mirrored = np.zeros(source.n_objects, dtype=np.bool_)
             self.exact_curve = np.zeros(source.n_objects, dtype=np.int64)
+            #: The k-th distance as the threads sharing this search last found it (stack searches).
+            self.kth = np.full(1, math.inf)
         self.cap = upper * (1.0 + WIDEN_REL) + WIDEN_ABS if math.isfinite(upper) else math.inf
         self.counters = np.zeros(4, dtype=np.int64)
         views = int(source.group_count.sum())

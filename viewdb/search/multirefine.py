@@ -57,9 +57,6 @@ __all__ = ["FULL", "refine_stack", "scan_stack"]
 
 #: :func:`refine_stack` status besides those of :mod:`.refine`: the heap may overflow.
 FULL = 4
-#: Exact distances computed between two readings of the shared k-th distance (a search
-#: split over threads, :mod:`viewdb.search.knn`: the other threads' objects lower it too).
-REFRESH = 32
 
 # entry kinds (the low 3 bits of a code; bit 3 is "mirrored", the rest the payload)
 _GB, _VB, _VBC, _VC, _GBC = 0, 1, 2, 3, 4
@@ -207,12 +204,10 @@ def _view_block(  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _refine_view(  # pragma: no cover - compiled
     Q, r, row, t, m, o, limit, curves, env_lo, env_hi, scratch,
-    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U, refresh,
+    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, U, kth,
 ):
-    # a VC entry: the exact DTW (UCR cascade); the object's result and bound; returns U
-    # (read afresh from the shared bounds when ``refresh``: other threads lower it too)
-    if refresh:
-        U = min(U, kth_distance(bound, k, cap))
+    # a VC entry: the exact DTW (UCR cascade); the object's result and bound; returns U,
+    # also left in kth[0] for the threads sharing the search (knn.py)
     load_row(curves, row, m == 1, scratch)
     dist = cascade_env_kernel(Q[t], scratch, r, limit, env_lo[0, t], env_hi[0, t], True)
     if dist > limit:
@@ -226,7 +221,8 @@ def _refine_view(  # pragma: no cover - compiled
     if dist < bound[o]:
         bound[o] = dist
         if dist < U:
-            return kth_distance(bound, k, cap)
+            U = kth_distance(bound, k, cap)
+            kth[0] = min(kth[0], U)
     return U
 
 
@@ -250,17 +246,18 @@ def _stack_kernel(  # pragma: no cover - compiled
     order, keys, start_at, ready, stop_key,
     group_start, group_count, group_owner, row_owner, curves, coords, means,
     mbr_lo, mbr_hi, range_lo, range_hi,
-    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize,
+    bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize, kth,
 ):
     n_curves = Q.shape[0]
     n_blocks = block_start.shape[0]
     scratch = np.empty(Q.shape[1])
     room = _room(block_start, block_end, group_count)
-    U = kth_distance(bound, k, cap)
+    U = min(kth_distance(bound, k, cap), kth[0])
     size = hsize[0]
     i = start_at
     status = EXHAUSTED
     while True:
+        U = min(U, kth[0])  # the threads sharing the search lower it too (knn.py)
         if size + room > hkey.shape[0]:
             status = FULL
             break
@@ -314,7 +311,7 @@ def _stack_kernel(  # pragma: no cover - compiled
         else:
             stats[3] += 1
             U = _refine_view(Q, r, row, b, m, o, limit, curves, env_lo, env_hi, scratch, bound, exact,
-                             exact_row, exact_mirrored, exact_curve, k, cap, U, stats[3] % REFRESH == 0)
+                             exact_row, exact_mirrored, exact_curve, k, cap, U, kth)
     hsize[0] = size
     return i, status
 
@@ -329,7 +326,9 @@ def refine_stack(
     ``source_groups`` is ``(group_start, group_count, group_owner, row_owner)``, ``rows``
     the source's ``(curves, coords, means)``, ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
     curve_hi)`` and ``state`` ``(bound, exact, exact_row, exact_mirrored, exact_curve,
-    heap keys, heap codes, heap size)``, all updated in place. Inputs are trusted.
+    heap keys, heap codes, heap size, kth)``, all updated in place; ``kth[0]`` is an upper
+    bound of the k-th distance that the threads sharing one search (:mod:`.knn`) lower as
+    each finds it. Inputs are trusted.
     """
     q = query
     i, status = _stack_kernel(
