@@ -1,6 +1,6 @@
 """One search on one thread against the same search split over threads, on the synthetic photos.
 
-    python benchmarks/parallel_search.py DB [--seeds 1-6] [--photos 10] [-k 5] [--threads 1,2]
+    python benchmarks/parallel_search.py DB [--seeds 1-6] [--photos 10] [-k 5] [--threads 1,2] [--whole]
 
 The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.photo_series`),
 segmented and turned as a query does (12 in-plane turns); each photo's stack of turned curves is
@@ -8,8 +8,11 @@ then searched on the file's full tier (:func:`viewdb.search.knn.knn_stack`, k ob
 thread count, one right after the other (the order alternating from photo to photo). Printed per
 thread count: the median and p95 wall time of a search, the CPU time it took (all threads),
 and the median per-photo ratio of wall times against the first count; then on how many photos
-every count gave the same answer (objects, distances, views, orientations, turns). Give the load
-average with the figures: threads only help on idle cores.
+every count gave the same answer (objects, distances, views, orientations, turns). With
+``--whole`` each photo is also queried whole (``ViewDB.query``, k objects, no pose, ``server``
+plan) once per thread count (``VIEWDB_SEARCH_THREADS``), alternately, and the median of each
+stage (``timing_ms``) and of the whole query is given per count. Give the load average with the
+figures: threads only help on idle cores.
 """
 
 from __future__ import annotations
@@ -43,6 +46,36 @@ def stacks(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
     return out
 
 
+def photos_of(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
+    names = [o.name for o in db.objects()]
+    return [decoded_photo(db.mesh(spec.object), spec)
+            for seed in parse_seeds(seeds) for spec in photo_series(names, seed, photos)]
+
+
+def whole_queries(db: viewdb.ViewDB, photos: list[np.ndarray], counts: list[int], k: int) -> None:
+    """Each photo queried once per thread count, alternately; the stages' medians per count."""
+    stages: dict[int, dict[str, list[float]]] = {t: {} for t in counts}
+    for t in counts:  # warm
+        os.environ["VIEWDB_SEARCH_THREADS"] = str(t)
+        db.query(photos[0], k=k, pose=False)
+    for i, photo in enumerate(photos):
+        for t in counts if i % 2 == 0 else counts[::-1]:
+            os.environ["VIEWDB_SEARCH_THREADS"] = str(t)
+            try:
+                result = db.query(photo, k=k, pose=False)
+            except viewdb.ViewDBError:
+                continue
+            for stage, ms in result.timing_ms.items():
+                stages[t].setdefault(stage, []).append(ms)
+    os.environ.pop("VIEWDB_SEARCH_THREADS")
+    base = np.asarray(stages[counts[0]]["total"])
+    for t in counts:
+        split = ", ".join(f"{s} {statistics.median(v):.0f}" for s, v in stages[t].items() if s != "total")
+        ratio = statistics.median(base / np.asarray(stages[t]["total"]))
+        print(f"whole query, threads {t}: median {statistics.median(stages[t]['total']):.0f} ms "
+              f"({ratio:.2f}x vs {counts[0]}, median per photo); stage medians (ms): {split}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("db")
@@ -50,6 +83,7 @@ def main() -> None:
     parser.add_argument("--photos", type=int, default=10, help="photos per seed")
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--threads", default="1,2", help="thread counts to compare, the first the baseline")
+    parser.add_argument("--whole", action="store_true", help="also time whole queries per thread count")
     args = parser.parse_args()
     counts = [int(t) for t in args.threads.split(",")]
     with viewdb.open(args.db, read_only=True) as db:
@@ -82,7 +116,11 @@ def main() -> None:
         print(f"threads {t}: wall median {statistics.median(wall[t]):6.0f} ms  p95 "
               f"{np.percentile(wall[t], 95):6.0f} ms  CPU median {statistics.median(cpu[t]):6.0f} ms  "
               f"speed-up vs {counts[0]} thread(s): {ratio:.2f}x (median per photo)", flush=True)
-    print(f"the same answer on {same}/{len(curves)} photos; load {os.getloadavg()[0]:.1f}")
+    print(f"the same answer on {same}/{len(curves)} photos; load {os.getloadavg()[0]:.1f}", flush=True)
+    if args.whole:
+        with viewdb.open(args.db, read_only=True) as db:
+            whole_queries(db, photos_of(db, args.seeds, args.photos), counts, args.k)
+        print(f"load {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

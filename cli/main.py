@@ -54,6 +54,10 @@ def _main(
     debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks for errors.")] = False,
 ) -> None:
     _STATE["debug"] = debug
+    try:  # the environment's search threads, checked before any command searches
+        viewdb_config.search_threads_from_env()
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="VIEWDB_SEARCH_THREADS") from None
 
 
 class _ViewsPerSecond(ProgressColumn):

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 
 import viewdb
 from tests.conftest import ROOT, sample
+from viewdb.config import SearchConfig
 from viewdb_cli.main import app, main
 
 COMMANDS = sorted(typer.main.get_command(app).commands)
@@ -80,6 +81,20 @@ def test_usage_errors_exit_2(capsys):
     assert run(capsys, "ingest")[0] == 2
     assert run(capsys, "no-such-command")[0] == 2
     assert run(capsys, "render", "x", "--azimuth", "north", "--elevation", 0, "--out", "a.png")[0] == 2
+
+
+@pytest.mark.parametrize("value", ["two", "0", "-1"])
+def test_a_bad_search_threads_variable_is_a_usage_error(tmp_path, capsys, monkeypatch, value):
+    monkeypatch.setenv("VIEWDB_SEARCH_THREADS", value)
+    code, out, err = run(capsys, "info", "--db", tmp_path / "nope.db")
+    assert code == 2 and "VIEWDB_SEARCH_THREADS" in err and "Traceback" not in err
+
+
+def test_the_search_threads_variable_sets_the_default(monkeypatch):
+    monkeypatch.setenv("VIEWDB_SEARCH_THREADS", "3")
+    assert SearchConfig().threads == 3
+    monkeypatch.delenv("VIEWDB_SEARCH_THREADS")
+    assert SearchConfig().threads == 2
 
 
 def test_console_script_is_installed_and_reports_errors(tmp_path):

@@ -10,6 +10,7 @@ import hashlib
 import json
 import math
 import numbers
+import os
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -676,6 +677,20 @@ class ShardConfig:
             raise ValueError(f"timeout must be positive, got {self.timeout}")
 
 
+def search_threads_from_env(default: int = 2) -> int:
+    """``VIEWDB_SEARCH_THREADS`` as a thread count (``default`` when unset)."""
+    text = os.environ.get("VIEWDB_SEARCH_THREADS", "").strip()
+    if not text:
+        return default
+    try:
+        threads = int(text)
+    except ValueError:
+        threads = 0
+    if threads < 1:
+        raise ValueError(f"VIEWDB_SEARCH_THREADS must be a whole number of threads, at least 1, got {text!r}")
+    return threads
+
+
 #: The ways of searching a query's in-plane turns (:attr:`RecognitionConfig.turn_search`).
 TURN_SEARCHES = ("stack", "separate")
 
@@ -748,10 +763,11 @@ class SearchConfig:
     #: (``benchmarks/shift_search.py``'s ``stack12``).
     stack_block: int = 1
     #: Threads one search is split over (:func:`viewdb.search.knn.knn_stack`; at most the
-    #: machine's CPUs): the same answer, found about 1.8 times sooner on 2 idle cores
+    #: machine's CPUs): the same answer, found about 1.6 times sooner on 2 idle cores
     #: (``benchmarks/parallel_search.py``). 1 keeps every search on the calling thread
-    #: (a server busy with other queries gains nothing from more).
-    threads: int = 2
+    #: (a server busy with other queries gains nothing from more). Default: the
+    #: environment's ``VIEWDB_SEARCH_THREADS``, else 2.
+    threads: int = field(default_factory=lambda: search_threads_from_env())
     #: Sources with fewer groups are searched on one thread: starting threads costs more
     #: than they save on a small catalogue.
     parallel_min_groups: int = 512
