@@ -528,6 +528,11 @@ class SilhouetteConfig:
 
     #: Viewing directions rendered for the orthographic search (about 20° apart).
     directions: int = 100
+    #: Where the orthographic search's directions come from: ``"sphere"``, ``directions``
+    #: evenly spread ones; ``"candidates"``, the match's candidate views (its matched
+    #: view's same-shape poses and the object's nearest views by the query curve, which
+    #: the search has already ranked), when the fit has them (else the sphere's).
+    start_directions: str = "sphere"
     #: Hypotheses (direction + in-plane alignment) lifted and refined coarsely ...
     coarse_starts: int = 8
     #: ... and the best of them refined finely.
@@ -554,6 +559,8 @@ class SilhouetteConfig:
             raise ValueError("window sizes must be in [16, 1024]")
         if self.coarse_faces < 0:
             raise ValueError("coarse_faces must be at least 0")
+        if self.start_directions not in ("sphere", "candidates"):
+            raise ValueError(f"start_directions must be 'sphere' or 'candidates', got {self.start_directions!r}")
 
 
 def default_client_gap(gap: float) -> float:

@@ -147,7 +147,7 @@ def pose_match(
         if estimate.method == "shape":
             estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search,
                                        [(estimate.rotation, estimate.translation), *starts],
-                                       estimate.candidate, posing)
+                                       estimate.candidate, posing, candidates)
         return in_mesh_units(catalogue, match.object, estimate)
     if estimate.method == "shape":
         estimate = refine_shape(catalogue, match.object, query, candidates[estimate.candidate], estimate,
@@ -158,21 +158,26 @@ def pose_match(
 def pose_silhouette(
     catalogue: CatalogueReader, name: str, query: QueryView, config: PoseConfig,
     intrinsics: Intrinsics, search: SilhouetteConfig | None, starts: Sequence[Start],
-    candidate: int = 0, posing: PosingConfig = POSING,
+    candidate: int = 0, posing: PosingConfig = POSING, candidates: Sequence[CandidateView] = (),
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
     fits the query's best (:func:`viewdb.pose.silhouette.search_silhouette_pose`), started
-    from the grid views nearest evenly spread viewing directions (their silhouettes from
-    the stored appearance: :func:`grid_silhouette`) and from ``starts``; normalised units."""
+    from the grid views nearest evenly spread viewing directions, or those of
+    ``candidates`` when ``search.start_directions`` says so (their silhouettes from the
+    stored appearance: :func:`grid_silhouette`), and from ``starts``; normalised units."""
     mesh = catalogue.mesh(name)
     pinhole = get_pinhole_renderer()
     render = catalogue.config.render
     search = search or SilhouetteConfig()
+    if search.start_directions == "candidates" and candidates:
+        directions = list(dict.fromkeys((c.azimuth, c.elevation) for c in candidates))
+    else:
+        directions = grid_directions(catalogue.config.gap, search.directions)
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
         lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s),
         render.image_size, render.xmag, ignore=query.ignore,
-        directions=grid_directions(catalogue.config.gap, search.directions),
+        directions=directions,
         starts=starts, config=config, search=search,
         render_coarse=lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s, search.coarse_faces or None),
     )

@@ -61,9 +61,12 @@ __all__ = [
     "to_mesh_units",
 ]
 
-#: A quicker search, for checking many candidate objects (about 4x fewer renders, of a
-#: mesh decimated further).
-QUICK = SilhouetteConfig(directions=40, coarse_starts=3, fine_starts=0, coarse_size=80, coarse_faces=2048)
+#: A quicker search, for checking many candidate objects: started from the match's
+#: candidate views (at most :attr:`~viewdb.config.PosingConfig.max_candidates`, already
+#: ranked by the outline search, against 40 evenly spread directions without them), about
+#: 4x fewer renders, of a mesh decimated further.
+QUICK = SilhouetteConfig(directions=40, start_directions="candidates", coarse_starts=3, fine_starts=0,
+                         coarse_size=80, coarse_faces=2048)
 
 
 OrthoRender = Callable[[float, float], NDArray[np.bool_]]
