@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from tests.conftest import TIERED_DB_MODELS
-from viewdb.catalogue.coverage import MeshTriangles, silhouette
+from viewdb.catalogue.coverage import MeshTriangles, overlap, silhouette
 from viewdb.catalogue.pinhole import get_pinhole_renderer
 from viewdb.catalogue.render import get_renderer
 from viewdb.config import OverlayConfig, RenderConfig
@@ -144,6 +144,25 @@ def test_cpu_silhouette_equals_the_pinhole_render(db, name, h, v, turn, depth, t
     renderer = get_pinhole_renderer()
     truth, _ = renderer.render(mesh, r, t, k, size)
     assert_same_silhouette(truth, renderer.silhouette(mesh, r, t, k, size))
+
+
+@settings(max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, turn=angles, depth=st.floats(1.8, 6.0),
+       tx=st.floats(-0.5, 0.5), ty=st.floats(-0.5, 0.5), size=st.sampled_from([48, 80]),
+       seed=st.integers(0, 2**16))
+def test_overlap_counts_what_the_silhouette_covers(db, name, h, v, turn, depth, tx, ty, size, seed):
+    """The fused count a silhouette fit scores with equals the brute force over the
+    silhouette image: the weights summed over covered pixels, the valid covered pixels."""
+    rng = np.random.default_rng(seed)
+    k = (size * 1.2, size * 1.3, size * 0.47, size * 0.52)
+    triangles = get_pinhole_renderer().triangles(db.mesh(name))
+    r, t = GL_TO_CV @ view_rotation(h, v, turn), np.array([tx, ty, depth])
+    weights = rng.random((size, size))
+    valid = rng.random((size, size)) < 0.8
+    covered = silhouette(triangles, r, t, k, size)
+    total, count = overlap(triangles, r, t, k, weights, valid)
+    assert total == pytest.approx(float(weights[covered].sum()), rel=1e-12, abs=1e-12)
+    assert count == int((covered & valid).sum())
 
 
 def test_cpu_silhouette_leaves_out_triangles_behind_the_camera():

@@ -145,6 +145,11 @@ class PinholeRenderer:
         (:mod:`viewdb.catalogue.coverage`: no GL call, 10–20x quicker for a small window);
         with ``max_faces``, of the mesh decimated to about that many faces
         (:meth:`~viewdb.catalogue.coverage.MeshTriangles.simplified`)."""
+        return silhouette(self.triangles(mesh, max_faces), rotation, translation, intrinsics, size)
+
+    def triangles(self, mesh: NormalisedMesh, max_faces: int | None = None) -> MeshTriangles:
+        """The mesh's triangles as :meth:`silhouette` scan-converts them (decimated to about
+        ``max_faces`` faces if given), made once per mesh and level and kept."""
         with self._triangles_lock:  # a server's threads share this renderer
             levels = self._triangles.pop(id(mesh), (None, {}))[1]
             if not levels:
@@ -156,8 +161,7 @@ class PinholeRenderer:
             if max_faces not in levels:
                 full = levels[None]
                 levels[max_faces] = full.simplified(max_faces) if max_faces is not None else full
-            triangles = levels[max_faces]
-        return silhouette(triangles, rotation, translation, intrinsics, size)
+            return levels[max_faces]
 
 
 @dataclass

@@ -175,11 +175,11 @@ def pose_silhouette(
         directions = grid_directions(catalogue.config.gap, search.directions)
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
-        lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s),
+        pinhole.triangles(mesh),
         render.image_size, render.xmag, ignore=query.ignore,
         directions=directions,
         starts=starts, config=config, search=search,
-        render_coarse=lambda r, t, k, s: pinhole.silhouette(mesh, r, t, k, s, search.coarse_faces or None),
+        render_coarse=pinhole.triangles(mesh, search.coarse_faces or None),
     )
     h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
     width = query.mask.shape[1]

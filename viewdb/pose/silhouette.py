@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.coverage import MeshTriangles, overlap
 from ..catalogue.pinhole import Window
 from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
@@ -147,10 +148,12 @@ def to_mesh_units(
 
 
 class _Objective:
-    """1 − IoU of the rendered silhouette and the query's, in one window."""
+    """1 − IoU of the rendered silhouette and the query's, in one window; ``render`` a
+    :data:`PinholeRender`, or a mesh's triangles to scan-convert and count in one pass
+    (:func:`viewdb.catalogue.coverage.overlap`: no silhouette image made)."""
 
-    def __init__(self, render: PinholeRender, query: NDArray[np.bool_], ignore: NDArray[np.bool_] | None,
-                 window: Window, k: NDArray[np.float64]) -> None:
+    def __init__(self, render: PinholeRender | MeshTriangles, query: NDArray[np.bool_],
+                 ignore: NDArray[np.bool_] | None, window: Window, k: NDArray[np.float64]) -> None:
         self.render, self.window, self.k = render, window, k
         self.cam = window.intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
         self.query = np.clip(window.crop(query.astype(np.float32)), 0.0, 1.0)
@@ -159,6 +162,8 @@ class _Objective:
         else:
             self.valid = np.ones(self.query.shape, bool)
         self.q = np.where(self.valid, self.query, 0.0)
+        self.q_total = float(self.q.sum())
+        self.weights = np.ascontiguousarray(self.q, dtype=np.float64)
         self.evaluations = 0
 
     def pose(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]
@@ -174,6 +179,10 @@ class _Objective:
         if not translation[2] > 1e-6:
             return 0.0
         self.evaluations += 1
+        if isinstance(self.render, MeshTriangles):  # union: the query, plus what it leaves uncovered
+            inter, covered = overlap(self.render, rotation, translation, self.cam, self.weights, self.valid)
+            union = self.q_total - inter + covered
+            return inter / union if union > 0 else 0.0
         r = self.render(rotation, translation, self.cam, self.window.size)
         r = np.where(self.valid, r, False)
         inter = float(np.minimum(self.q, r).sum())
@@ -245,7 +254,7 @@ def search_silhouette_pose(
     query: NDArray[np.bool_],
     intrinsics: Intrinsics,
     render_ortho: OrthoRender,
-    render_pinhole: PinholeRender,
+    render_pinhole: PinholeRender | MeshTriangles,
     image_size: int,
     xmag: float = 1.0,
     *,
@@ -254,15 +263,17 @@ def search_silhouette_pose(
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
     config: PoseConfig | None = None,
     search: SilhouetteConfig | None = None,
-    render_coarse: PinholeRender | None = None,
+    render_coarse: PinholeRender | MeshTriangles | None = None,
 ) -> SilhouetteFit:
     """The pinhole pose of a mesh whose silhouette is ``query`` (module doc).
 
     ``render_ortho(h, v)`` renders the mesh's orthographic silhouette (``image_size``
     square, half-extent ``xmag``) in the viewdb convention; ``render_pinhole(R, t, K, S)``
     its silhouette at an OpenCV pose through intrinsics ``K = (fx, fy, cx, cy)`` in an
-    ``S × S`` image. ``starts`` adds pinhole poses to refine (e.g. from SIFT).
-    ``render_coarse`` (default ``render_pinhole``) serves the coarse refinement, e.g. a
+    ``S × S`` image, or the mesh's triangles
+    (:class:`~viewdb.catalogue.coverage.MeshTriangles`), whose silhouette is then
+    scan-converted and compared in one compiled pass. ``starts`` adds pinhole poses to
+    refine (e.g. from SIFT). ``render_coarse`` (default ``render_pinhole``) serves the coarse refinement, e.g. a
     decimated mesh's silhouette (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`).
 
     Raises
