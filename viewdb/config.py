@@ -560,7 +560,8 @@ class SilhouetteConfig:
         if self.coarse_faces < 0:
             raise ValueError("coarse_faces must be at least 0")
         if self.start_directions not in ("sphere", "candidates"):
-            raise ValueError(f"start_directions must be 'sphere' or 'candidates', got {self.start_directions!r}")
+            raise ValueError(
+                f"start_directions must be 'sphere' or 'candidates', got {self.start_directions!r}")
 
 
 def default_client_gap(gap: float) -> float:

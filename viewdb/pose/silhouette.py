@@ -273,8 +273,9 @@ def search_silhouette_pose(
     ``S × S`` image, or the mesh's triangles
     (:class:`~viewdb.catalogue.coverage.MeshTriangles`), whose silhouette is then
     scan-converted and compared in one compiled pass. ``starts`` adds pinhole poses to
-    refine (e.g. from SIFT). ``render_coarse`` (default ``render_pinhole``) serves the coarse refinement, e.g. a
-    decimated mesh's silhouette (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`).
+    refine (e.g. from SIFT). ``render_coarse`` (default ``render_pinhole``) serves the
+    coarse refinement, e.g. a decimated mesh's silhouette
+    (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`).
 
     Raises
     ------
