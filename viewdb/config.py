@@ -529,9 +529,11 @@ class SilhouetteConfig:
     #: Viewing directions rendered for the orthographic search (about 20° apart).
     directions: int = 100
     #: Where the orthographic search's directions come from: ``"sphere"``, ``directions``
-    #: evenly spread ones; ``"candidates"``, the match's candidate views (its matched
-    #: view's same-shape poses and the object's nearest views by the query curve, which
-    #: the search has already ranked), when the fit has them (else the sphere's).
+    #: evenly spread ones; ``"candidates"``, a match's candidate poses (its matched view's
+    #: same-shape poses and the object's nearest views by the query curve, which the
+    #: search has already ranked), aligned by their stored silhouettes in place of both
+    #: the sphere's and the outline pose over the candidates
+    #: (:func:`viewdb.pose.matched.pose_match` without SIFT; else the sphere's).
     start_directions: str = "sphere"
     #: Hypotheses (direction + in-plane alignment) lifted and refined coarsely ...
     coarse_starts: int = 8

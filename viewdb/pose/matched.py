@@ -131,9 +131,19 @@ def pose_match(
 ) -> PoseEstimate:
     """The pose of one match (module doc); ``curve``: the query's curve at the in-plane
     turn that matched (adds the nearest views' poses as candidates). Without ``sift`` the
-    candidates are compared by their outlines alone (their SIFT features not read)."""
+    candidates are compared by their outlines alone (their SIFT features not read); with
+    intrinsics and a ``search`` started from the candidates
+    (:attr:`~viewdb.config.SilhouetteConfig.start_directions`), the silhouette fit aligns
+    their stored silhouettes itself (no outline pose, no render of a view the file does
+    not store)."""
+    poses = _candidate_poses(catalogue, match, curve, posing)
+    if intrinsics is not None and not sift and search is not None and search.start_directions == "candidates":
+        directions = list(dict.fromkeys((p.azimuth % 360.0, p.elevation % 360.0) for p in poses))
+        estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search, starts,
+                                   posing=posing, directions=directions)
+        return in_mesh_units(catalogue, match.object, estimate)
     candidates, pruned = [], []
-    for p in _candidate_poses(catalogue, match, curve, posing):
+    for p in poses:
         try:
             candidates.append(appearance_view(catalogue, match.object, p.azimuth, p.elevation, config,
                                               mirrored=p.mirrored, features=p.stored and sift))
@@ -147,7 +157,7 @@ def pose_match(
         if estimate.method == "shape":
             estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search,
                                        [(estimate.rotation, estimate.translation), *starts],
-                                       estimate.candidate, posing, candidates)
+                                       estimate.candidate, posing)
         return in_mesh_units(catalogue, match.object, estimate)
     if estimate.method == "shape":
         estimate = refine_shape(catalogue, match.object, query, candidates[estimate.candidate], estimate,
@@ -158,20 +168,19 @@ def pose_match(
 def pose_silhouette(
     catalogue: CatalogueReader, name: str, query: QueryView, config: PoseConfig,
     intrinsics: Intrinsics, search: SilhouetteConfig | None, starts: Sequence[Start],
-    candidate: int = 0, posing: PosingConfig = POSING, candidates: Sequence[CandidateView] = (),
+    candidate: int = 0, posing: PosingConfig = POSING,
+    directions: Sequence[tuple[float, float]] | None = None,
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
     fits the query's best (:func:`viewdb.pose.silhouette.search_silhouette_pose`), started
-    from the grid views nearest evenly spread viewing directions, or those of
-    ``candidates`` when ``search.start_directions`` says so (their silhouettes from the
-    stored appearance: :func:`grid_silhouette`), and from ``starts``; normalised units."""
+    from the grid views ``directions`` (default: those nearest evenly spread viewing
+    directions; their silhouettes from the stored appearance: :func:`grid_silhouette`)
+    and from ``starts``; normalised units."""
     mesh = catalogue.mesh(name)
     pinhole = get_pinhole_renderer()
     render = catalogue.config.render
     search = search or SilhouetteConfig()
-    if search.start_directions == "candidates" and candidates:
-        directions = list(dict.fromkeys((c.azimuth, c.elevation) for c in candidates))
-    else:
+    if directions is None:
         directions = grid_directions(catalogue.config.gap, search.directions)
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
@@ -373,8 +382,8 @@ def pose_matches(
     """``(pose, None)`` or ``(None, why not)`` for each match (a server's answer to a
     ``pose`` request). ``curves``: per match, the query's curve at the turn that matched
     (adds its nearest views' poses), or None. ``rerank`` (with intrinsics): every match is
-    fitted quickly (:data:`viewdb.pose.silhouette.QUICK`, started from its outline's pose
-    among its candidate views: a pose by SIFT would not be fitted, hence not ranked), the
+    fitted quickly (:data:`viewdb.pose.silhouette.QUICK`, started from the alignments of its
+    candidate views' outlines: a pose by SIFT would not be fitted, hence not ranked), the
     best again with the full search, so the caller can rank them by the fits' IoU."""
     config = config or PoseConfig()
     samples = catalogue.config.features.curve_samples

@@ -62,11 +62,12 @@ __all__ = [
     "to_mesh_units",
 ]
 
-#: A quicker search, for checking many candidate objects: started from the match's
-#: candidate views (at most :attr:`~viewdb.config.PosingConfig.max_candidates`, already
-#: ranked by the outline search, against 40 evenly spread directions without them), about
-#: 4x fewer renders, of a mesh decimated further.
-QUICK = SilhouetteConfig(directions=40, start_directions="candidates", coarse_starts=3, fine_starts=0,
+#: A quicker search, for checking many candidate objects: started from the best 5
+#: alignments of the match's candidate poses' silhouettes (at most
+#: :attr:`~viewdb.config.PosingConfig.max_candidates` views, already ranked by the outline
+#: search; else 40 evenly spread directions), no fine step, about 4x fewer renders, of a
+#: mesh decimated further.
+QUICK = SilhouetteConfig(directions=40, start_directions="candidates", coarse_starts=5, fine_starts=0,
                          coarse_size=80, coarse_faces=2048)
 
 
