@@ -507,3 +507,48 @@ def test_iou_reranking_fits_every_match_alike_and_only_the_best_again(quick_ious
     assert quick == [(n, False) for n in names]
     best = sorted(names, key=lambda n: (-quick_ious[names.index(n)], names.index(n)))
     assert again == best[:full]
+
+
+def test_quick_fit_starts_from_the_candidate_poses_without_an_outline_pose(monkeypatch):
+    """A re-ranking's quick fit (no SIFT, search started from the candidates) aligns the
+    candidate poses' own silhouettes: their grid views are the search's directions, each
+    once, and no outline pose (nor a candidate view's appearance) is made first."""
+    from types import SimpleNamespace
+
+    import viewdb.pose.matched as matched
+    from viewdb.catalogue.reading import CandidatePose
+    from viewdb.config import SilhouetteConfig
+    from viewdb.pose.estimate import PoseEstimate
+    from viewdb.search.plans import Candidate
+
+    same = [CandidatePose(30.0, 40.0, False, True), CandidatePose(210.0, 140.0, True, False)]
+    near = {(50.0, 40.0): [CandidatePose(50.0, 40.0, False, True), CandidatePose(30.0, 40.0, False, True)]}
+    catalogue = SimpleNamespace(
+        candidate_poses=lambda name, h, v: list(same) if (h, v) == (30.0, 40.0) else list(near[(h, v)]),
+        nearest_views=lambda name, curve, n: [(50.0, 40.0, 0.1)],
+        object=lambda name: SimpleNamespace(centre=(0.0, 0.0, 0.0), scale=1.0))
+    seen = {}
+
+    def fit(catalogue, name, query, config, intrinsics, search, starts, candidate=0, posing=None,
+            directions=None):
+        seen["directions"] = directions
+        return PoseEstimate(0.0, 0.0, 0.0, 1.0, np.eye(3), np.array([0.0, 0.0, 3.0]), "shape", 0, 0,
+                            "opencv", 0.9, refined="silhouette", iou=0.9)
+
+    def no_outline_pose(*args, **kwargs):
+        raise AssertionError("the quick fit made an outline pose")
+
+    monkeypatch.setattr(matched, "pose_silhouette", fit)
+    monkeypatch.setattr(matched, "appearance_view", no_outline_pose)
+    monkeypatch.setattr(matched, "_sift_first", no_outline_pose)
+    query = QueryView(np.zeros((8, 8, 3), np.uint8), np.ones((8, 8), bool))
+    match = Candidate("o", 0.1, 30.0, 40.0, False)
+    found = matched.pose_match(catalogue, query, match, PoseConfig(), (10.0, 10.0, 4.0, 4.0), matched.QUICK,
+                               curve=np.zeros(8), sift=False)
+    assert found.iou == 0.9
+    assert seen["directions"] == [(30.0, 40.0), (210.0, 140.0), (50.0, 40.0)]
+    with pytest.raises(AssertionError, match="outline pose"):  # the full search still makes one
+        matched.pose_match(catalogue, query, match, PoseConfig(), (10.0, 10.0, 4.0, 4.0), SilhouetteConfig(),
+                           curve=np.zeros(8), sift=False)
+    with pytest.raises(ValueError, match="start_directions"):
+        SilhouetteConfig(start_directions="grid")
