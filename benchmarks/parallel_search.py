@@ -1,6 +1,7 @@
 """One search on one thread against the same search split over threads, on the synthetic photos.
 
-    python benchmarks/parallel_search.py DB [--seeds 1-6] [--photos 10] [-k 5] [--threads 1,2] [--whole]
+    python benchmarks/parallel_search.py DB [--seeds 1-6] [--photos 10] [-k 5] [--threads 1,2]
+                                            [--whole [--roll DEG]]
 
 The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.photo_series`),
 segmented and turned as a query does (12 in-plane turns); each photo's stack of turned curves is
@@ -10,9 +11,9 @@ thread count: the median and p95 wall time of a search, the CPU time it took (al
 and the median per-photo ratio of wall times against the first count; then on how many photos
 every count gave the same answer (objects, distances, views, orientations, turns). With
 ``--whole`` each photo is also queried whole (``ViewDB.query``, k objects, no pose, ``server``
-plan) once per thread count (``VIEWDB_SEARCH_THREADS``), alternately, and the median of each
-stage (``timing_ms``) and of the whole query is given per count. Give the load average with the
-figures: threads only help on idle cores.
+plan; ``--roll``: with that gravity hint) once per thread count (``VIEWDB_SEARCH_THREADS``),
+alternately, and the median of each stage (``timing_ms``) and of the whole query is given per
+count. Give the load average with the figures: threads only help on idle cores.
 """
 
 from __future__ import annotations
@@ -52,17 +53,18 @@ def photos_of(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
             for seed in parse_seeds(seeds) for spec in photo_series(names, seed, photos)]
 
 
-def whole_queries(db: viewdb.ViewDB, photos: list[np.ndarray], counts: list[int], k: int) -> None:
+def whole_queries(db: viewdb.ViewDB, photos: list[np.ndarray], counts: list[int], k: int,
+                  roll: float | None) -> None:
     """Each photo queried once per thread count, alternately; the stages' medians per count."""
     stages: dict[int, dict[str, list[float]]] = {t: {} for t in counts}
     for t in counts:  # warm
         os.environ["VIEWDB_SEARCH_THREADS"] = str(t)
-        db.query(photos[0], k=k, pose=False)
+        db.query(photos[0], k=k, pose=False, roll=roll)
     for i, photo in enumerate(photos):
         for t in counts if i % 2 == 0 else counts[::-1]:
             os.environ["VIEWDB_SEARCH_THREADS"] = str(t)
             try:
-                result = db.query(photo, k=k, pose=False)
+                result = db.query(photo, k=k, pose=False, roll=roll)
             except viewdb.ViewDBError:
                 continue
             for stage, ms in result.timing_ms.items():
@@ -84,6 +86,7 @@ def main() -> None:
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--threads", default="1,2", help="thread counts to compare, the first the baseline")
     parser.add_argument("--whole", action="store_true", help="also time whole queries per thread count")
+    parser.add_argument("--roll", type=float, default=None, help="the whole queries' gravity hint (degrees)")
     args = parser.parse_args()
     counts = [int(t) for t in args.threads.split(",")]
     with viewdb.open(args.db, read_only=True) as db:
@@ -119,7 +122,7 @@ def main() -> None:
     print(f"the same answer on {same}/{len(curves)} photos; load {os.getloadavg()[0]:.1f}", flush=True)
     if args.whole:
         with viewdb.open(args.db, read_only=True) as db:
-            whole_queries(db, photos_of(db, args.seeds, args.photos), counts, args.k)
+            whole_queries(db, photos_of(db, args.seeds, args.photos), counts, args.k, args.roll)
         print(f"load {os.getloadavg()[0]:.1f}")
 
 
