@@ -413,10 +413,10 @@ def knn_stack(
                 return pos, status
             search.grow()
 
-    threads = search_threads(source, config) if threads is None else min(threads, source.n_objects)
-    if threads < 1:
+    if threads is not None and threads < 1:
         raise ValueError(f"threads must be at least 1, got {threads}")
-    if threads == 1:
+    threads = search_threads(source, config) if threads is None else min(threads, source.n_objects)
+    if threads <= 1:
         return _Search(source, k, upper, known, 4).run(stack, step, initial_radius)
     return _parallel(source, k, upper, known, threads, stack, step, initial_radius)
 
@@ -432,13 +432,12 @@ def search_threads(source: TierSource, config: SearchConfig) -> int:
 
 def deal_objects(source: TierSource, parts: int) -> NDArray[np.int64]:
     """The part (``0 .. parts - 1``) of each object: the objects dealt by their numbers of
-    views, largest first, each to the part with the fewest views so far."""
+    views, largest first, to the parts in turn and back (0, 1, …, p − 1, p − 1, …, 0, …),
+    so each part has about as many views to search."""
     views = np.bincount(source.group_owner, weights=source.group_count, minlength=source.n_objects)
-    load = np.zeros(parts)
+    turn = np.r_[np.arange(parts), np.arange(parts)[::-1]]
     part = np.zeros(source.n_objects, dtype=np.int64)
-    for o in np.argsort(-views, kind="stable"):
-        part[o] = int(np.argmin(load))
-        load[part[o]] += views[o]
+    part[np.argsort(-views, kind="stable")] = turn[np.arange(source.n_objects) % len(turn)]
     return part
 
 
