@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from ..search.jit import njit
 from ..typed import Intrinsics
 
-__all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "silhouette"]
+__all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "silhouette", "snapped"]
 
 #: Projected corners are put on a grid of 1/SUBPIXELS pixel first, as a GPU's rasteriser
 #: does (8 bits of sub-pixel precision): an edge a hair past a pixel centre then leaves
@@ -138,7 +138,7 @@ def cover(
     """The pixels of an image of ``shape`` covered by triangles already projected:
     ``points`` (n, 2) pixel positions ``(x, y)`` of the vertices (NaN: behind the camera,
     its triangles left out), ``faces`` (m, 3) vertex indices."""
-    p = np.floor(np.asarray(points, dtype=np.float64).reshape(-1, 2) * SUBPIXELS + 0.5) / SUBPIXELS
+    p = snapped(np.asarray(points, dtype=np.float64).reshape(-1, 2))
     out = np.zeros((int(shape[0]), int(shape[1])), dtype=np.bool_)
     _fill(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]),
           np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3), out)
@@ -157,6 +157,13 @@ def _project(vertices, r, t, camera, near, px, py):  # pragma: no cover - compil
         else:
             px[i] = np.nan
             py[i] = np.nan
+
+
+def snapped(points: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Projected positions put on the grid of 1/:data:`SUBPIXELS` pixel a GPU puts
+    corners on (what :func:`silhouette`'s projection does to each; NaN stays NaN)."""
+    p = np.asarray(points, dtype=np.float64)
+    return _snap(p.ravel()).reshape(p.shape)  # one compiled signature, whatever the shape
 
 
 @njit(cache=True, nogil=True)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.coverage import SUBPIXELS
+from ..catalogue.coverage import snapped
 from ..search.jit import njit
 
 __all__ = ["face_ids"]
@@ -33,7 +33,7 @@ def face_ids(tri: NDArray[np.float64], planes: NDArray[np.float64], faces: NDArr
     h, w = shape
     ids = np.full(h * w, -1, dtype=np.int32)
     if len(tri):
-        tri = np.floor(np.asarray(tri, dtype=np.float64) * SUBPIXELS + 0.5) / SUBPIXELS  # a GPU's grid
+        tri = snapped(tri)  # a GPU's grid
         y0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)), 0, h).astype(np.int64)
         y1 = np.clip(np.ceil(tri[:, :, 1].max(axis=1)) - 1, -1, h - 1).astype(np.int64)
         _scan(np.ascontiguousarray(tri, dtype=np.float64), np.ascontiguousarray(planes, dtype=np.float64),
