@@ -32,25 +32,22 @@ from viewdb.recognition.pipeline import segment_query
 from viewdb.search.knn import knn_stack
 
 
-def stacks(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
-    """Each photo's 12 turned query curves, ``(12, N)``, as the search receives them."""
-    names = [o.name for o in db.objects()]
-    samples = db.config.features.curve_samples
-    out = []
-    for seed in parse_seeds(seeds):
-        for spec in photo_series(names, seed, photos):
-            try:
-                shape = segment_query(decoded_photo(db.mesh(spec.object), spec), samples, 12)
-            except viewdb.ViewDBError:
-                continue
-            out.append(np.stack([c for _, c in shape.curves]))
-    return out
-
-
 def photos_of(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
     names = [o.name for o in db.objects()]
     return [decoded_photo(db.mesh(spec.object), spec)
             for seed in parse_seeds(seeds) for spec in photo_series(names, seed, photos)]
+
+
+def stacks(db: viewdb.ViewDB, photos: list[np.ndarray]) -> list[np.ndarray]:
+    """Each photo's 12 turned query curves, ``(12, N)``, as the search receives them."""
+    samples = db.config.features.curve_samples
+    out = []
+    for photo in photos:
+        try:
+            out.append(np.stack([c for _, c in segment_query(photo, samples, 12).curves]))
+        except viewdb.ViewDBError:
+            continue
+    return out
 
 
 def whole_queries(db: viewdb.ViewDB, photos: list[np.ndarray], counts: list[int], k: int,
@@ -90,7 +87,8 @@ def main() -> None:
     args = parser.parse_args()
     counts = [int(t) for t in args.threads.split(",")]
     with viewdb.open(args.db, read_only=True) as db:
-        queries = stacks(db, args.seeds, args.photos)
+        photos = photos_of(db, args.seeds, args.photos)
+        queries = stacks(db, photos)
         catalogue = db._catalogue
         band = 6
         block = SearchConfig().stack_block
@@ -121,8 +119,8 @@ def main() -> None:
               f"speed-up vs {counts[0]} thread(s): {ratio:.2f}x (median per photo)", flush=True)
     print(f"the same answer on {same}/{len(curves)} photos; load {os.getloadavg()[0]:.1f}", flush=True)
     if args.whole:
-        with viewdb.open(args.db, read_only=True) as db:
-            whole_queries(db, photos_of(db, args.seeds, args.photos), counts, args.k, args.roll)
+        with viewdb.open(args.db, read_only=True) as db:  # afresh: empty caches
+            whole_queries(db, photos, counts, args.k, args.roll)
         print(f"load {os.getloadavg()[0]:.1f}")
 
 
