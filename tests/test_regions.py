@@ -146,6 +146,33 @@ def test_overlapping_claims_go_to_the_smaller_object():
     assert np.array_equal(out[1], b) and np.array_equal(out[0], a & ~b)
 
 
+def _two_red_objects():
+    """A dark red slab beside a block whose left quarter is the same red and the rest
+    blue, on a grey table; their boxes, and the block's true mask."""
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[:180, :240]
+    photo = np.clip(rng.normal((120, 120, 118), 4, (180, 240, 3)), 0, 255).astype(np.uint8)
+    red = np.clip(rng.normal((110, 20, 25), 4, (180, 240, 3)), 0, 255).astype(np.uint8)
+    slab = (xx >= 20) & (xx < 114) & (yy >= 20) & (yy < 160)
+    block = (xx >= 120) & (xx < 200) & (yy >= 50) & (yy < 130)
+    reds = slab | (block & (xx < 140))
+    photo[reds] = red[reds]
+    photo[block & (xx >= 140)] = (30, 40, 170)
+    return load_image(photo), [[16, 16, 116, 164], [118, 46, 204, 134]], block
+
+
+def test_another_prompted_object_is_not_learnt_as_background():
+    """The slab reaches into the crop around the block's box: learnt as background, its
+    red takes the block's red quarter with it; painted over, the block is cut whole."""
+    image, boxes, block = _two_red_objects()
+    _, kept = find_regions(image, Prompts.of(boxes=boxes))
+    _, lost = find_regions(image, Prompts.of(boxes=boxes), config=SegmentationConfig(box_others_unknown=False))
+    assert iou(kept.mask, block) > 0.95
+    assert iou(lost.mask, block) < 0.8
+    alone, = find_regions(image, Prompts.of(boxes=boxes[1:]))
+    assert iou(alone.mask, block) < 0.8  # a box alone cannot know what lies beside it
+
+
 def test_a_box_cut_out_keeps_its_holes_for_the_pose():
     """A ring on a plain background: the region (its curve) is the ring filled, the pose
     is fitted to the ring with the background seen through it; a disc has no pose mask."""

@@ -356,8 +356,8 @@ def _refit_best(
 ) -> None:
     """Fit again, with the full silhouette search started from the quick pose, the best
     :attr:`~viewdb.config.PosingConfig.rerank_full` quick fits: the matches are ranked by
-    their quick fits alone (every one fitted alike), the full fit only sharpens the pose
-    of the best."""
+    their quick fits (every one fitted alike), and those best few again among themselves
+    by their full fits, which also sharpen their poses."""
     ranked = sorted(range(len(matches)), key=lambda i: (-_iou(out[i][0]), i))
     for i in ranked[:posing.rerank_full]:
         estimate = out[i][0]

@@ -42,7 +42,7 @@ from .tiers import TIERS, StoredTier, TierReader
 __all__ = ["SearchHit", "StoredCatalogue"]
 
 #: How many decoded meshes a catalogue keeps in memory: at least the k results a query
-#: re-ranks by silhouette fit (each fitted quickly, the best again), and as many as the
+#: re-ranks by silhouette fit (each fitted quickly, the best two again), and as many as the
 #: pinhole renderer keeps triangles for (:data:`~viewdb.catalogue.pinhole.TRIANGLE_CACHE_MESHES`,
 #: by the mesh's identity: a mesh decoded again is decimated again).
 MESH_CACHE_SIZE = 32
