@@ -176,6 +176,64 @@ def test_cpu_silhouette_leaves_out_triangles_behind_the_camera():
         MeshTriangles(triangles.vertices, [[0, 1, 6]])
 
 
+def _closed_mesh(kind: str, seed: int) -> trimesh.Trimesh:
+    """A closed mesh of ``kind``, squashed and sheared at random: one shell, one with two
+    faces back to back (a fin, as decimation leaves), or two shells, the inner one
+    inside out."""
+    rng = np.random.default_rng(seed)
+    shape = {"box": lambda: trimesh.creation.box((1.0, 0.6, 0.4)),
+             "sphere": lambda: trimesh.creation.icosphere(subdivisions=2),
+             "cylinder": lambda: trimesh.creation.cylinder(0.4, 1.2, sections=24),
+             "torus": lambda: trimesh.creation.torus(0.6, 0.2, major_sections=24, minor_sections=12)}
+    mesh = shape[kind]()
+    mesh.apply_transform(np.block([[np.eye(3) + rng.uniform(-0.4, 0.4, (3, 3)), np.zeros((3, 1))],
+                                   [np.zeros((1, 3)), np.ones((1, 1))]]))
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    fin = faces[rng.integers(len(faces))]
+    extra = {"shell": [], "fin": [fin, fin[::-1]]}
+    if seed % 3 == 2:  # a second shell inside, wound the other way
+        inner = faces[:, ::-1] + len(vertices)
+        vertices = np.vstack([vertices, vertices * 0.5])
+        faces = np.vstack([faces, inner])
+    more = extra["fin"] if seed % 3 == 1 else extra["shell"]
+    return trimesh.Trimesh(vertices, np.vstack([faces, *more]) if more else faces, process=False)
+
+
+@settings(max_examples=40, deadline=None)
+@given(kind=st.sampled_from(["box", "sphere", "cylinder", "torus"]), seed=st.integers(0, 2**16),
+       h=angles, v=angles, turn=angles, depth=st.floats(1.6, 5.0), tx=st.floats(-0.4, 0.4),
+       ty=st.floats(-0.4, 0.4), size=st.sampled_from([31, 80]))
+def test_a_closed_mesh_s_front_faces_cover_its_silhouette(kind, seed, h, v, turn, depth, tx, ty, size):
+    """A closed mesh is scan-converted from one winding of its faces alone; the silhouette
+    and the overlap count are those of every face, pixel for pixel."""
+    mesh = _closed_mesh(kind, seed)
+    culled = MeshTriangles(mesh.vertices, mesh.faces)
+    whole = MeshTriangles(mesh.vertices, mesh.faces)
+    whole._front = 0
+    assert culled.front == -1
+    r, t = GL_TO_CV @ view_rotation(h, v, turn), np.array([tx, ty, depth])
+    k = (size * 1.1, size * 1.2, size * 0.5, size * 0.45)
+    assert np.array_equal(silhouette(culled, r, t, k, size), silhouette(whole, r, t, k, size))
+    weights = np.random.default_rng(seed).random((size, size))
+    valid = weights < 0.7
+    (total, count), (every_total, every_count) = (overlap(culled, r, t, k, weights, valid),
+                                                  overlap(whole, r, t, k, weights, valid))
+    assert count == every_count and total == pytest.approx(every_total, rel=1e-12)  # summed in another order
+
+
+def test_an_open_mesh_is_scan_converted_whole():
+    """A box without its lid, or with a face run twice the same way, is not closed: its
+    back faces may be all there is of it."""
+    box = trimesh.creation.box()
+    assert MeshTriangles(box.vertices, box.faces).front == -1
+    assert MeshTriangles(box.vertices, box.faces[2:]).front == 0
+    assert MeshTriangles(box.vertices, np.vstack([box.faces, box.faces[:1]])).front == 0
+    bowl = MeshTriangles(box.vertices, box.faces[2:])
+    r, t, k = GL_TO_CV @ view_rotation(0, 80, 0), np.array([0.0, 0.0, 3.0]), (40.0, 40.0, 20.0, 20.0)
+    inside = MeshTriangles(bowl.vertices, bowl.faces[:, ::-1])  # the other winding: the inside seen
+    assert silhouette(bowl, r, t, k, 41).sum() == silhouette(inside, r, t, k, 41).sum() > 100
+
+
 def decimated_share(db, name: str) -> float:
     """The share of faces :meth:`MeshTriangles.simplified` keeps of the mesh made 16 times
     denser and asked for a quarter of that; asserts its silhouette stays the full mesh's

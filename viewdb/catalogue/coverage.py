@@ -6,7 +6,9 @@ the per-call overhead of a render and a read-back (3–4 ms for a 16,000-face sc
 for a box); a silhouette needs neither depth nor shading, so here it is scan-converted
 directly: project the vertices (one matrix product), then mark the pixels whose centres
 lie inside each triangle's projection, with no depth test (every covered pixel is
-silhouette, whichever triangle is in front).
+silhouette, whichever triangle is in front). A closed mesh's faces of one winding alone
+cover its silhouette (:attr:`MeshTriangles.front`), so the others are skipped: about half
+the faces, 1.5–1.9x quicker fills on the YCB-Video scans, the same pixels.
 
 Conventions are those of :class:`~viewdb.catalogue.pinhole.PinholeRenderer`: the pose is
 model-to-camera in the OpenCV frame, intrinsics ``(fx, fy, cx, cy)`` with pixel centres on
@@ -33,6 +35,9 @@ from ..typed import Intrinsics
 
 __all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "silhouette", "snapped"]
 
+_NO_WEIGHTS = np.zeros((0, 0))
+_NO_VALID = np.zeros((0, 0), np.bool_)
+
 #: Projected corners are put on a grid of 1/SUBPIXELS pixel first, as a GPU's rasteriser
 #: does (8 bits of sub-pixel precision): an edge a hair past a pixel centre then leaves
 #: it out as OpenGL does, instead of filling a whole column along a straight edge.
@@ -42,13 +47,23 @@ SUBPIXELS = 256.0
 class MeshTriangles:
     """A mesh's vertices and faces as contiguous arrays, ready for :func:`silhouette`."""
 
-    __slots__ = ("faces", "vertices")
+    __slots__ = ("_front", "faces", "vertices")
 
     def __init__(self, vertices: NDArray[np.floating], faces: NDArray[np.integer]) -> None:
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
         if len(self.faces) and (self.faces.min() < 0 or self.faces.max() >= len(self.vertices)):
             raise ValueError("a face names a vertex the mesh does not have")
+        self._front: int | None = None
+
+    @property
+    def front(self) -> int:
+        """When the mesh is closed, the sign (−1) of the doubled area, in pixel coordinates
+        (x right, y down), of the faces that alone cover its silhouette; 0 when it is not
+        (no face may then be left out). Found once (:func:`_front_sign`)."""
+        if self._front is None:
+            self._front = _front_sign(self.vertices, self.faces)
+        return self._front
 
     def simplified(self, max_faces: int, min_iou: float = 0.985) -> MeshTriangles:
         """At most about ``max_faces`` triangles with nearly the same silhouette: the
@@ -62,11 +77,7 @@ class MeshTriangles:
             return self
         import fast_simplification
 
-        _, first, welded = np.unique(np.round(self.vertices, 9), axis=0, return_index=True,
-                                     return_inverse=True)
-        faces = welded.reshape(-1)[self.faces]
-        a, b, c = faces.T
-        faces = faces[(a != b) & (b != c) & (a != c)]
+        faces, first = _welded(self.vertices, self.faces)
         try:
             vertices, faces = fast_simplification.simplify(
                 self.vertices[first].astype(np.float32), faces.astype(np.int32),
@@ -75,6 +86,36 @@ class MeshTriangles:
             return self
         small = MeshTriangles(vertices, faces)
         return small if len(small.faces) and _same_silhouettes(self, small, min_iou) else self
+
+
+def _welded(vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray]:
+    """``faces`` over the vertices welded by position (a mesh split at texture seams shares
+    positions, not vertices), the faces that lost a corner dropped; and the index of the
+    first vertex at each distinct position (the welded vertices)."""
+    _, first, welded = np.unique(np.round(vertices, 9), axis=0, return_index=True, return_inverse=True)
+    out = welded.reshape(-1)[faces]
+    a, b, c = out.T
+    return out[(a != b) & (b != c) & (a != c)], first
+
+
+def _front_sign(vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> int:
+    """:attr:`MeshTriangles.front`: −1 when the mesh is closed (a cycle: with its vertices
+    welded, every edge is run as often one way as the other by its faces), else 0.
+
+    A ray from the camera into a closed mesh enters it as often as it leaves it, so it
+    meets faces that wind clockwise on the image as well as counter-clockwise ones (with
+    outward normals: front faces and back faces; two faces back to back, as decimation
+    leaves, are one of each): either kind alone covers the silhouette. The sign kept is
+    the front faces' for outward normals (a face towards the camera winds clockwise on an
+    image whose y axis points down: negative doubled area)."""
+    if not len(faces):
+        return 0
+    welded, first = _welded(vertices, faces)
+    n = len(first)
+    edges = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
+    forward = np.sort(edges[:, 0] * n + edges[:, 1])
+    backward = np.sort(edges[:, 1] * n + edges[:, 0])
+    return -1 if len(forward) and np.array_equal(forward, backward) else 0
 
 
 def _same_silhouettes(a: MeshTriangles, b: MeshTriangles, min_iou: float) -> bool:
@@ -111,7 +152,7 @@ def silhouette(
              np.ascontiguousarray(translation, dtype=np.float64).reshape(3),
              np.array([float(x) for x in intrinsics], dtype=np.float64), float(near), px, py)
     out = np.zeros((h, w), dtype=np.bool_)
-    _fill(px, py, triangles.faces, out)
+    _fill_overlap(px, py, triangles.faces, out, _NO_WEIGHTS, _NO_VALID, triangles.front)
     return out
 
 
@@ -129,7 +170,7 @@ def overlap(
              np.ascontiguousarray(translation, dtype=np.float64).reshape(3),
              np.array([float(x) for x in intrinsics], dtype=np.float64), float(near), px, py)
     seen = np.zeros(weights.shape, dtype=np.bool_)
-    return _fill_overlap(px, py, triangles.faces, seen, weights, valid)
+    return _fill_overlap(px, py, triangles.faces, seen, weights, valid, triangles.front)
 
 
 def cover(
@@ -186,13 +227,15 @@ def _crossing(ax, ay, bx, by, y, left, right):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _fill(px, py, faces, out):  # pragma: no cover - compiled
     """Mark the pixels whose centres lie in each triangle of corners already snapped."""
-    _fill_overlap(px, py, faces, out, np.zeros((0, 0)), np.zeros((0, 0), np.bool_))
+    _fill_overlap(px, py, faces, out, np.zeros((0, 0)), np.zeros((0, 0), np.bool_), 0)
 
 
 @njit(cache=True, nogil=True)
-def _fill_overlap(px, py, faces, out, weights, valid):  # pragma: no cover - compiled
+def _fill_overlap(px, py, faces, out, weights, valid, front):  # pragma: no cover - compiled
     """:func:`_fill`, and with ``weights`` (else empty) the sum of ``weights`` over the
-    newly marked pixels and the count of those ``valid``."""
+    newly marked pixels and the count of those ``valid``. ``front`` (±1, 0: none): the
+    sign of a front face's doubled area; the faces of the other sign are left out (a
+    closed mesh's front faces cover its silhouette: :attr:`MeshTriangles.front`)."""
     h, w = out.shape
     counting = weights.shape[0] > 0
     total = 0.0
@@ -200,6 +243,8 @@ def _fill_overlap(px, py, faces, out, weights, valid):  # pragma: no cover - com
     for f in range(faces.shape[0]):
         i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
         x0, y0, x1, y1, x2, y2 = px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]
+        if front != 0 and ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)) * front < 0.0:
+            continue  # a back face of a closed mesh: front faces cover whatever it covers
         ymin = min(y0, min(y1, y2))
         ymax = max(y0, max(y1, y2))
         if not (ymax >= 0.0 and ymin <= h):  # off the image, or a corner behind the camera (NaN)
