@@ -221,6 +221,32 @@ def test_a_closed_mesh_s_front_faces_cover_its_silhouette(kind, seed, h, v, turn
     assert count == every_count and total == pytest.approx(every_total, rel=1e-12)  # summed in another order
 
 
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, seed=st.integers(0, 2**16), size=st.sampled_from([48, 80]),
+       step=st.floats(0.0, 0.6))
+def test_a_fit_s_compiled_evaluation_is_the_pose_then_its_iou(db, name, h, v, seed, size, step):
+    """What a silhouette fit's pattern search evaluates at every step, made and counted in
+    one compiled call, equals the pose made in Python and its IoU counted (and a pose
+    behind the camera scores 0 without counting as an evaluation)."""
+    from viewdb.catalogue.pinhole import Window
+    from viewdb.pose.silhouette import _base, _Objective
+
+    rng = np.random.default_rng(seed)
+    k = np.array([[size * 1.3, 0.0, size * 0.55], [0.0, size * 1.2, size * 0.45], [0.0, 0.0, 1.0]])
+    query = rng.random((size, size)) < 0.4
+    ignore = rng.random((size, size)) < 0.1
+    window = Window(rng.uniform(-3, 3), rng.uniform(-3, 3), size * rng.uniform(0.8, 1.2), size)
+    objective = _Objective(get_pinhole_renderer().triangles(db.mesh(name)), query, ignore, window, k)
+    base = _base(GL_TO_CV @ view_rotation(h, v, 30.0), np.array([0.1, -0.2, rng.uniform(2.0, 4.0)]), k)
+    p = rng.normal(0.0, 1.0, 6) * np.array([step, step, step, 5.0, 5.0, step])
+    fused = objective.iou_at(p, base)
+    assert fused == pytest.approx(objective.iou(*objective.pose(p, base)), abs=1e-9)
+    assert objective.evaluations == 2
+    behind = p.copy()
+    behind[5] = -800.0  # depth × e^−800: not in front of the camera
+    assert objective.iou_at(behind, base) == 0.0 and objective.evaluations == 2
+
+
 def test_an_open_mesh_is_scan_converted_whole():
     """A box without its lid, or with a face run twice the same way, is not closed: its
     back faces may be all there is of it."""

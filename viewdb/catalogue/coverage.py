@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from ..search.jit import njit
 from ..typed import Intrinsics
 
-__all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "silhouette", "snapped"]
+__all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "overlap_kernel", "silhouette", "snapped"]
 
 _NO_WEIGHTS = np.zeros((0, 0))
 _NO_VALID = np.zeros((0, 0), np.bool_)
@@ -164,13 +164,23 @@ def overlap(
     image, without making it: the sum of ``weights`` over the covered pixels and the
     number of covered pixels where ``valid``. A silhouette fit's IoU against a mask, in
     one compiled pass (the scan conversion counts each pixel the first time it covers it)."""
-    n = len(triangles.vertices)
+    return overlap_kernel(triangles.vertices, triangles.faces, triangles.front,
+                          np.ascontiguousarray(rotation, dtype=np.float64).reshape(3, 3),
+                          np.ascontiguousarray(translation, dtype=np.float64).reshape(3),
+                          np.array([float(x) for x in intrinsics], dtype=np.float64), float(near),
+                          weights, valid)
+
+
+@njit(cache=True, nogil=True)
+def overlap_kernel(vertices, faces, front, r, t, camera, near, weights, valid):  # pragma: no cover - compiled
+    """:func:`overlap` on the arrays of a :class:`MeshTriangles` (``front``: its
+    :attr:`~MeshTriangles.front`), the camera ``(fx, fy, cx, cy)`` as an array: callable
+    from other compiled code (:mod:`viewdb.pose.silhouette`'s pose search)."""
+    n = vertices.shape[0]
     px, py = np.empty(n), np.empty(n)
-    _project(triangles.vertices, np.ascontiguousarray(rotation, dtype=np.float64).reshape(3, 3),
-             np.ascontiguousarray(translation, dtype=np.float64).reshape(3),
-             np.array([float(x) for x in intrinsics], dtype=np.float64), float(near), px, py)
+    _project(vertices, r, t, camera, near, px, py)
     seen = np.zeros(weights.shape, dtype=np.bool_)
-    return _fill_overlap(px, py, triangles.faces, seen, weights, valid, triangles.front)
+    return _fill_overlap(px, py, faces, seen, weights, valid, front)
 
 
 def cover(

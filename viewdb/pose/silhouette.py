@@ -43,10 +43,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.coverage import MeshTriangles, overlap
+from ..catalogue.coverage import MeshTriangles, overlap, overlap_kernel
 from ..catalogue.pinhole import Window
 from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
+from ..search.jit import njit
 from ..typed import Intrinsics
 from .frames import GL_TO_CV, rodrigues, view_rotation
 from .shape_pose import align_shape, outline_of
@@ -166,6 +167,7 @@ class _Objective:
         self.q_total = float(self.q.sum())
         self.weights = np.ascontiguousarray(self.q, dtype=np.float64)
         self.evaluations = 0
+        self._camera: NDArray[np.float64] | None = None
 
     def pose(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -175,6 +177,23 @@ class _Objective:
         k = self.k
         translation = z * np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
         return rotation, translation
+
+    def iou_at(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]) -> float:
+        """:meth:`iou` of :meth:`pose` ``(p, base)``; for a mesh's triangles, the pose made
+        and its silhouette counted in one compiled call (:func:`_iou_at`)."""
+        if not isinstance(self.render, MeshTriangles):
+            return self.iou(*self.pose(p, base))
+        if self._camera is None:
+            self._camera = np.array([float(x) for x in self.cam], dtype=np.float64)
+        r_rel, u0, w0, z0 = base
+        triangles = self.render
+        value = _iou_at(p, r_rel, u0, w0, z0, float(self.window.factor), self.k, triangles.vertices,
+                        triangles.faces, triangles.front, self._camera, self.weights, self.valid,
+                        self.q_total)
+        if value < 0.0:  # behind the camera: not an evaluation
+            return 0.0
+        self.evaluations += 1
+        return value
 
     def iou(self, rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> float:
         if not translation[2] > 1e-6:
@@ -189,6 +208,55 @@ class _Objective:
         inter = float(np.minimum(self.q, r).sum())
         union = float(np.maximum(self.q, r).sum())
         return inter / union if union > 0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _iou_at(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid,
+            q_total):  # pragma: no cover - compiled
+    """:meth:`_Objective.pose` then :meth:`_Objective.iou` for a mesh's triangles, compiled
+    (the same formulas: :func:`ray_rotation`, :func:`~viewdb.pose.frames.rodrigues`); −1
+    for a pose whose origin is not in front of the camera."""
+    u = u0 + p[3] / factor
+    w = w0 + p[4] / factor
+    z = z0 * math.exp(p[5])
+    dx, dy = (u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1]
+    if not z > 1e-6:
+        return -1.0
+    ray = np.eye(3)
+    norm = math.sqrt(dx * dx + dy * dy + 1.0)
+    ux, uy, c = dx / norm, dy / norm, 1.0 / norm
+    s2 = ux * ux + uy * uy
+    if not s2 < 1e-24:
+        a = (1.0 - c) / s2
+        ray[0, 0], ray[0, 1], ray[0, 2] = 1.0 - a * ux * ux, -a * ux * uy, ux
+        ray[1, 0], ray[1, 1], ray[1, 2] = -a * ux * uy, 1.0 - a * uy * uy, uy
+        ray[2, 0], ray[2, 1], ray[2, 2] = -ux, -uy, c
+    skew = np.zeros((3, 3))
+    skew[0, 1], skew[0, 2], skew[1, 0] = -p[2], p[1], p[2]
+    skew[1, 2], skew[2, 0], skew[2, 1] = -p[0], -p[1], p[0]
+    square = _product(skew, skew)
+    theta = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    if theta < 1e-8:
+        first, second = 1.0, 0.5
+    else:
+        first, second = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta**2
+    turn = np.eye(3) + first * skew + second * square
+    rotation = _product(_product(ray, turn), r_rel)
+    translation = np.array([z * dx, z * dy, z])
+    inter, covered = overlap_kernel(vertices, faces, front, rotation, translation, camera, 1e-3,
+                                    weights, valid)
+    union = q_total - inter + covered
+    return inter / union if union > 0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _product(a, b):  # pragma: no cover - compiled
+    """The 3×3 matrix product ``a @ b``."""
+    out = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+    return out
 
 
 def _base(rotation: NDArray[np.float64], translation: NDArray[np.float64], k: NDArray[np.float64]
@@ -208,7 +276,7 @@ def _pattern_search(
     taken again along the same direction; steps halve when no direction improves."""
     base = _base(rotation, translation, objective.k)
     p = np.zeros(6)
-    best = objective.iou(*objective.pose(p, base))
+    best = objective.iou_at(p, base)
     steps = np.array([start_steps[0]] * 3 + [start_steps[1]] * 2 + [start_steps[2]])
     floor = np.array([min_steps[0]] * 3 + [min_steps[1]] * 2 + [min_steps[2]])
     start = objective.evaluations
@@ -220,13 +288,13 @@ def _pattern_search(
             for sign in (1.0, -1.0):
                 trial = p.copy()
                 trial[i] += sign * steps[i]
-                value = objective.iou(*objective.pose(trial, base))
+                value = objective.iou_at(trial, base)
                 if value > best + 1e-6:
                     p, best, improved = trial, value, True
                     while objective.evaluations - start < max_evaluations:  # keep going that way
                         trial = p.copy()
                         trial[i] += sign * steps[i]
-                        value = objective.iou(*objective.pose(trial, base))
+                        value = objective.iou_at(trial, base)
                         if not value > best + 1e-6:
                             break
                         p, best = trial, value
