@@ -173,6 +173,45 @@ def test_another_prompted_object_is_not_learnt_as_background():
     assert iou(alone.mask, block) < 0.8  # a box alone cannot know what lies beside it
 
 
+def test_a_box_inside_another_learns_the_outer_object_as_background():
+    """A red disc on a blue book, each prompted: the book's box holds the disc's whole, so
+    the book around the disc stays its background (not painted over): the disc is cut
+    as without the painting, and well."""
+    rng = np.random.default_rng(2)
+    yy, xx = np.mgrid[:200, :260]
+    photo = np.clip(rng.normal((120, 120, 118), 4, (200, 260, 3)), 0, 255).astype(np.uint8)
+    book = (xx >= 30) & (xx < 230) & (yy >= 30) & (yy < 170)
+    disc = np.hypot(xx - 130, yy - 100) <= 25
+    photo[book] = (40, 60, 150)
+    photo[disc] = (170, 30, 30)
+    image = load_image(photo)
+    boxes = [[28, 28, 232, 172], [104, 74, 157, 127]]  # the disc's box tight around it
+    _, inner = find_regions(image, Prompts.of(boxes=boxes))
+    _, plain = find_regions(image, Prompts.of(boxes=boxes), config=SegmentationConfig(box_others_unknown=False))
+    assert np.array_equal(inner.mask, plain.mask)
+    assert iou(inner.mask, disc) > 0.95
+
+
+def test_which_pixels_of_other_boxes_are_painted_over():
+    """The background pixels of the crop inside another prompt's box, except a box that
+    holds this one whole, and none when they would leave under a tenth of it."""
+    from viewdb.recognition.regions import _others_outside
+
+    shape, crop = (100, 100), (10, 10, 60, 60)
+    init = np.full((50, 50), cv2.GC_BGD, np.uint8)
+    init[10:40, 10:40] = cv2.GC_PR_FGD  # this box: pixels 20..50 of the photo
+    box = Box(20, 20, 50, 50)
+    beside = _others_outside([Box(45, 0, 100, 30)], box, shape, crop, init)
+    expected = np.zeros((50, 50), np.uint8)
+    expected[0:20, 35:50] = 1  # photo rows 10..30, columns 45..60, less this box
+    expected[init != cv2.GC_BGD] = 0
+    assert np.array_equal(beside, expected)
+    assert _others_outside([Box(0, 0, 100, 100)], box, shape, crop, init) is None  # holds it
+    around = [Box(0, 0, 100, 21), Box(0, 49, 100, 100), Box(0, 0, 21, 100), Box(49, 0, 100, 40)]
+    assert _others_outside(around, box, shape, crop, init) is None  # under a tenth left
+    assert _others_outside([], box, shape, crop, init) is None
+
+
 def test_a_box_cut_out_keeps_its_holes_for_the_pose():
     """A ring on a plain background: the region (its curve) is the ring filled, the pose
     is fitted to the ring with the background seen through it; a disc has no pose mask."""

@@ -14,7 +14,9 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   iterations. When several objects are prompted, the other prompts' boxes, where they
   reach into the crop outside this box, are painted over from their surroundings
   (``box_others_unknown``): the object behind or beside is not background to be learnt
-  (a red foam brick in front of a red mug kept its shaded face only so). The
+  (a red foam brick in front of a red mug kept its shaded face only so). A box that
+  holds this one whole (a book under a mug) is not painted over, nor any when that
+  would leave less than a tenth of the crop's background. The
   alternative ``box_method="border"`` cuts the crop's object out with the colour model
   of its border (:func:`~viewdb.recognition.segmentation.segment`'s way), then keeps
   what lies in the box. ``python benchmarks/prompts.py`` measures both on the YCB-Video
@@ -269,7 +271,9 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     if seed is not None:
         radius = max(2, round(cfg.point_seed * min(x2 - x1, y2 - y1)))
         cv2.circle(init, (seed[0] - cx1, seed[1] - cy1), radius, cv2.GC_FGD, -1)
-    unknown = _others_outside(others, (h, w), (cx1, cy1, cx2, cy2), init) if cfg.box_others_unknown else None
+    unknown = None
+    if cfg.box_others_unknown:
+        unknown = _others_outside(others, box, (h, w), (cx1, cy1, cx2, cy2), init)
     scale = min(1.0, cfg.box_work_side / max(crop.shape[:2]))
     if scale < 1.0:
         size = (max(1, round(crop.shape[1] * scale)), max(1, round(crop.shape[0] * scale)))
@@ -299,19 +303,28 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     return out & inside
 
 
-def _others_outside(others: Sequence[Box], shape: tuple[int, int], crop: tuple[int, int, int, int],
-                    init: NDArray[np.uint8]) -> NDArray[np.uint8] | None:
+def _others_outside(others: Sequence[Box], box: Box, shape: tuple[int, int],
+                    crop: tuple[int, int, int, int], init: NDArray[np.uint8]) -> NDArray[np.uint8] | None:
     """The crop's background pixels (``init``) that lie in one of the ``others`` boxes,
-    as an inpainting mask (1: unknown); None when there are none."""
+    as an inpainting mask (1: unknown); None when there are none, or when they would
+    leave less than a tenth of the background to paint from and learn. A box that
+    holds ``box`` whole is left out: the object it prompts is what this one stands on
+    or in front of, its colours this one's background."""
     if not others:
         return None
     cx1, cy1, cx2, cy2 = crop
+    x1, y1, x2, y2 = _box_pixels(box, shape)
     unknown = np.zeros(init.shape, dtype=np.uint8)
     for other in others:
         ox1, oy1, ox2, oy2 = _box_pixels(other, shape)
+        if ox1 <= x1 and oy1 <= y1 and ox2 >= x2 and oy2 >= y2:
+            continue
         unknown[max(0, oy1 - cy1):max(0, oy2 - cy1), max(0, ox1 - cx1):max(0, ox2 - cx1)] = 1
-    unknown[init != cv2.GC_BGD] = 0
-    return unknown if unknown.any() else None
+    background = init == cv2.GC_BGD
+    unknown[~background] = 0
+    if not unknown.any() or np.count_nonzero(unknown) > 0.9 * np.count_nonzero(background):
+        return None
+    return unknown
 
 
 def _border_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig) -> NDArray[np.bool_]:
