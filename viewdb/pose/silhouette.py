@@ -49,7 +49,7 @@ from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
 from ..search.jit import njit
 from ..typed import Intrinsics
-from .frames import GL_TO_CV, rodrigues, view_rotation
+from .frames import GL_TO_CV, view_rotation
 from .shape_pose import align_shape, outline_of
 from .views import CandidateView
 
@@ -103,23 +103,24 @@ def fibonacci_directions(n: int) -> list[tuple[float, float]]:
     return out
 
 
-def ray_rotation(u: float, w: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+@njit(cache=True, nogil=True)
+def ray_rotation(u, w, k):  # pragma: no cover - compiled
     """The smallest rotation turning the optical axis (0, 0, 1) onto the ray through pixel
-    ``(u, w)`` of a camera with matrix ``k``: about the axis ``z × d = (−d_y, d_x, 0)``
-    by the angle between them (Rodrigues' formula written out: a fit calls this for
-    every pose it tries)."""
+    ``(u, w)`` of a camera with matrix ``k`` (a float array): about the axis ``z × d =
+    (−d_y, d_x, 0)`` by the angle between them (Rodrigues' formula written out, compiled:
+    a fit calls this for every pose it tries)."""
     dx, dy = (u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1]
     norm = math.sqrt(dx * dx + dy * dy + 1.0)
     dx, dy, c = dx / norm, dy / norm, 1.0 / norm  # the unit ray; c = cos of the angle
     s2 = dx * dx + dy * dy  # sin² of the angle
+    out = np.eye(3)
     if s2 < 1e-24:
-        return np.eye(3)
+        return out
     a = (1.0 - c) / s2  # (1 − cos) / sin², times the unnormalised axis (−dy, dx, 0) twice
-    return np.array([
-        [1.0 - a * dx * dx, -a * dx * dy, dx],
-        [-a * dx * dy, 1.0 - a * dy * dy, dy],
-        [-dx, -dy, c],
-    ])
+    out[0, 0], out[0, 1], out[0, 2] = 1.0 - a * dx * dx, -a * dx * dy, dx
+    out[1, 0], out[1, 1], out[1, 2] = -a * dx * dy, 1.0 - a * dy * dy, dy
+    out[2, 0], out[2, 1], out[2, 2] = -dx, -dy, c
+    return out
 
 
 def lift_alignment(
@@ -167,29 +168,23 @@ class _Objective:
         self.q_total = float(self.q.sum())
         self.weights = np.ascontiguousarray(self.q, dtype=np.float64)
         self.evaluations = 0
-        self._camera: NDArray[np.float64] | None = None
+        self.factor = float(window.factor)
+        self.camera = np.array([float(x) for x in self.cam], dtype=np.float64)
 
     def pose(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         r_rel, u0, w0, z0 = base
-        u, w, z = u0 + p[3] / self.window.factor, w0 + p[4] / self.window.factor, z0 * math.exp(p[5])
-        rotation = ray_rotation(u, w, self.k) @ rodrigues(p[:3]) @ r_rel
-        k = self.k
-        translation = z * np.array([(u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1], 1.0])
-        return rotation, translation
+        return _pose_of(p, r_rel, u0, w0, z0, self.factor, self.k)
 
     def iou_at(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]) -> float:
         """:meth:`iou` of :meth:`pose` ``(p, base)``; for a mesh's triangles, the pose made
         and its silhouette counted in one compiled call (:func:`_iou_at`)."""
         if not isinstance(self.render, MeshTriangles):
             return self.iou(*self.pose(p, base))
-        if self._camera is None:
-            self._camera = np.array([float(x) for x in self.cam], dtype=np.float64)
         r_rel, u0, w0, z0 = base
         triangles = self.render
-        value = _iou_at(p, r_rel, u0, w0, z0, float(self.window.factor), self.k, triangles.vertices,
-                        triangles.faces, triangles.front, self._camera, self.weights, self.valid,
-                        self.q_total)
+        value = _iou_at(p, r_rel, u0, w0, z0, self.factor, self.k, triangles.vertices, triangles.faces,
+                        triangles.front, self.camera, self.weights, self.valid, self.q_total)
         if value < 0.0:  # behind the camera: not an evaluation
             return 0.0
         self.evaluations += 1
@@ -211,52 +206,39 @@ class _Objective:
 
 
 @njit(cache=True, nogil=True)
-def _iou_at(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid,
-            q_total):  # pragma: no cover - compiled
-    """:meth:`_Objective.pose` then :meth:`_Objective.iou` for a mesh's triangles, compiled
-    (the same formulas: :func:`ray_rotation`, :func:`~viewdb.pose.frames.rodrigues`); −1
-    for a pose whose origin is not in front of the camera."""
+def _pose_of(p, r_rel, u0, w0, z0, factor, k):  # pragma: no cover - compiled
+    """The pose ``(rotation, translation)`` at a pattern search's point ``p`` (rotation
+    vector relative to the origin's ray, pixel offset in window pixels, log depth) from
+    its ``base`` split ``(r_rel, u0, w0, z0)`` (:func:`_base`)."""
     u = u0 + p[3] / factor
     w = w0 + p[4] / factor
     z = z0 * math.exp(p[5])
-    dx, dy = (u - k[0, 2]) / k[0, 0], (w - k[1, 2]) / k[1, 1]
-    if not z > 1e-6:
-        return -1.0
-    ray = np.eye(3)
-    norm = math.sqrt(dx * dx + dy * dy + 1.0)
-    ux, uy, c = dx / norm, dy / norm, 1.0 / norm
-    s2 = ux * ux + uy * uy
-    if not s2 < 1e-24:
-        a = (1.0 - c) / s2
-        ray[0, 0], ray[0, 1], ray[0, 2] = 1.0 - a * ux * ux, -a * ux * uy, ux
-        ray[1, 0], ray[1, 1], ray[1, 2] = -a * ux * uy, 1.0 - a * uy * uy, uy
-        ray[2, 0], ray[2, 1], ray[2, 2] = -ux, -uy, c
     skew = np.zeros((3, 3))
     skew[0, 1], skew[0, 2], skew[1, 0] = -p[2], p[1], p[2]
     skew[1, 2], skew[2, 0], skew[2, 1] = -p[0], -p[1], p[0]
-    square = _product(skew, skew)
     theta = math.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
     if theta < 1e-8:
         first, second = 1.0, 0.5
     else:
         first, second = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta**2
-    turn = np.eye(3) + first * skew + second * square
-    rotation = _product(_product(ray, turn), r_rel)
-    translation = np.array([z * dx, z * dy, z])
+    turn = np.eye(3) + first * skew + second * (skew @ skew)  # Rodrigues' formula
+    rotation = ray_rotation(u, w, k) @ turn @ r_rel
+    translation = np.array([z * ((u - k[0, 2]) / k[0, 0]), z * ((w - k[1, 2]) / k[1, 1]), z])
+    return rotation, translation
+
+
+@njit(cache=True, nogil=True)
+def _iou_at(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid,
+            q_total):  # pragma: no cover - compiled
+    """:meth:`_Objective.pose` then :meth:`_Objective.iou` for a mesh's triangles, in one
+    compiled call; −1 for a pose whose origin is not in front of the camera."""
+    rotation, translation = _pose_of(p, r_rel, u0, w0, z0, factor, k)
+    if not translation[2] > 1e-6:
+        return -1.0
     inter, covered = overlap_kernel(vertices, faces, front, rotation, translation, camera, 1e-3,
                                     weights, valid)
     union = q_total - inter + covered
     return inter / union if union > 0 else 0.0
-
-
-@njit(cache=True, nogil=True)
-def _product(a, b):  # pragma: no cover - compiled
-    """The 3×3 matrix product ``a @ b``."""
-    out = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
-    return out
 
 
 def _base(rotation: NDArray[np.float64], translation: NDArray[np.float64], k: NDArray[np.float64]
