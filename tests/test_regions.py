@@ -200,7 +200,7 @@ def test_which_pixels_of_other_boxes_are_painted_over():
     shape, crop = (100, 100), (10, 10, 60, 60)
     init = np.full((50, 50), cv2.GC_BGD, np.uint8)
     init[10:40, 10:40] = cv2.GC_PR_FGD  # this box: pixels 20..50 of the photo
-    box = Box(20, 20, 50, 50)
+    box = (20, 20, 50, 50)  # this box's pixels
     beside = _others_outside([Box(45, 0, 100, 30)], box, shape, crop, init)
     expected = np.zeros((50, 50), np.uint8)
     expected[0:20, 35:50] = 1  # photo rows 10..30, columns 45..60, less this box

@@ -273,7 +273,7 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
         cv2.circle(init, (seed[0] - cx1, seed[1] - cy1), radius, cv2.GC_FGD, -1)
     unknown = None
     if cfg.box_others_unknown:
-        unknown = _others_outside(others, box, (h, w), (cx1, cy1, cx2, cy2), init)
+        unknown = _others_outside(others, (x1, y1, x2, y2), (h, w), (cx1, cy1, cx2, cy2), init)
     scale = min(1.0, cfg.box_work_side / max(crop.shape[:2]))
     if scale < 1.0:
         size = (max(1, round(crop.shape[1] * scale)), max(1, round(crop.shape[0] * scale)))
@@ -303,17 +303,17 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     return out & inside
 
 
-def _others_outside(others: Sequence[Box], box: Box, shape: tuple[int, int],
+def _others_outside(others: Sequence[Box], box: tuple[int, int, int, int], shape: tuple[int, int],
                     crop: tuple[int, int, int, int], init: NDArray[np.uint8]) -> NDArray[np.uint8] | None:
     """The crop's background pixels (``init``) that lie in one of the ``others`` boxes,
     as an inpainting mask (1: unknown); None when there are none, or when they would
     leave less than a tenth of the background to paint from and learn. A box that
-    holds ``box`` whole is left out: the object it prompts is what this one stands on
-    or in front of, its colours this one's background."""
+    holds ``box`` (its pixels, :func:`_box_pixels`) whole is left out: the object it
+    prompts is what this one stands on or in front of, its colours this one's background."""
     if not others:
         return None
     cx1, cy1, cx2, cy2 = crop
-    x1, y1, x2, y2 = _box_pixels(box, shape)
+    x1, y1, x2, y2 = box
     unknown = np.zeros(init.shape, dtype=np.uint8)
     for other in others:
         ox1, oy1, ox2, oy2 = _box_pixels(other, shape)
