@@ -26,16 +26,10 @@ import time
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
+from viewdb.bench.photos import seed_photos
 from viewdb.config import SearchConfig
 from viewdb.recognition.pipeline import segment_query
 from viewdb.search.knn import knn_stack
-
-
-def photos_of(db: viewdb.ViewDB, seeds: str, photos: int) -> list[np.ndarray]:
-    names = [o.name for o in db.objects()]
-    return [decoded_photo(db.mesh(spec.object), spec)
-            for seed in parse_seeds(seeds) for spec in photo_series(names, seed, photos)]
 
 
 def stacks(db: viewdb.ViewDB, photos: list[np.ndarray]) -> list[np.ndarray]:
@@ -87,7 +81,7 @@ def main() -> None:
     args = parser.parse_args()
     counts = [int(t) for t in args.threads.split(",")]
     with viewdb.open(args.db, read_only=True) as db:
-        photos = photos_of(db, args.seeds, args.photos)
+        photos = [photo for _, photo in seed_photos(db, args.seeds, args.photos)]
         queries = stacks(db, photos)
         catalogue = db._catalogue
         band = 6

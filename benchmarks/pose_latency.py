@@ -43,7 +43,7 @@ import viewdb
 import viewdb.pose.estimate as estimate_module
 import viewdb.pose.matched as matched_module
 import viewdb.pose.sift_pose as sift_module
-from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
+from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series, seed_photos
 from viewdb.config import PosingConfig
 from viewdb.pose.estimate import PoseConfig
 from viewdb.pose.matched import pose_matches
@@ -81,8 +81,7 @@ def view_error(pose, spec) -> float:
 
 def photos_of(db, args) -> list[tuple[str, object, np.ndarray]]:
     names = [o.name for o in db.objects()]
-    out = [("latency", spec, decoded_photo(db.mesh(spec.object), spec))
-           for seed in parse_seeds(args.seeds) for spec in photo_series(names, seed, args.photos)]
+    out = [("latency", spec, photo) for spec, photo in seed_photos(db, args.seeds, args.photos)]
     eligible: dict[str, bool] = {}
     for seed in parse_seeds(args.textured_seeds):
         for spec in photo_series(names, seed, args.textured_photos):

@@ -42,7 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 import viewdb
-from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series
+from viewdb.bench.photos import seed_photos
 from viewdb.config import RecognitionConfig
 from viewdb.recognition.client_tier import ClientTier
 from viewdb.recognition.pipeline import segment_query
@@ -167,12 +167,8 @@ def main() -> None:
     if unknown:
         raise SystemExit(f"unknown --configs {unknown}; known: {', '.join(CONFIGS)}")
     with viewdb.open(args.db, read_only=True) as db:
-        names = [o.name for o in db.objects()]
-        photos = []
-        for seed in parse_seeds(args.seeds):
-            for spec in photo_series(names, seed, args.photos):
-                photos.append((spec.object, decoded_photo(db.mesh(spec.object), spec)))
-        print(f"{args.db}: {len(names)} objects; {len(photos)} photos (seeds {args.seeds}); "
+        photos = [(spec.object, photo) for spec, photo in seed_photos(db, args.seeds, args.photos)]
+        print(f"{args.db}: {len(db.objects())} objects; {len(photos)} photos (seeds {args.seeds}); "
               f"plan {args.plan}, k={args.k}; load {os.getloadavg()[0]:.1f}", flush=True)
     runs = {}
     for config in configs:

@@ -110,6 +110,15 @@ def photo_series(names: Sequence[str], seed: int, count: int, image_size: int = 
     return [draw_photo_spec(rng, names[rng.integers(len(names))], image_size) for _ in range(count)]
 
 
+def seed_photos(db: Any, seeds: str, count: int) -> list[tuple[PhotoSpec, NDArray[np.uint8]]]:
+    """Each photo of :func:`photo_series` for every seed ``seeds`` names (:func:`parse_seeds`),
+    ``count`` per seed, of the objects of ``db`` (a :class:`~viewdb.ViewDB`): its spec and
+    the photo as a query decodes it (:func:`decoded_photo`)."""
+    names = [o.name for o in db.objects()]
+    return [(spec, decoded_photo(db.mesh(spec.object), spec))
+            for seed in parse_seeds(seeds) for spec in photo_series(names, seed, count)]
+
+
 def render_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
     """The photo ``spec`` describes, as RGB uint8 (before JPEG; see :func:`encode_jpeg`)."""
     pyrender = pyrender_module()
