@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 import viewdb
@@ -245,6 +245,72 @@ def test_a_fit_s_compiled_evaluation_is_the_pose_then_its_iou(db, name, h, v, se
     behind = p.copy()
     behind[5] = -800.0  # depth × e^−800: not in front of the camera
     assert objective.iou_at(behind, base) == 0.0 and objective.evaluations == 2
+
+
+def compass_reference(objective, rotation, translation, min_steps, start_steps, max_evaluations):
+    """The compass search of a silhouette fit written out in Python, one evaluation at a
+    time (:meth:`_Objective.iou_at`): each coordinate a step either way, a step that
+    improves taken again, steps halved when none does."""
+    from viewdb.pose.silhouette import _base
+
+    base = _base(rotation, translation, objective.k)
+    p, best = np.zeros(6), objective.iou_at(np.zeros(6), base)
+    steps = np.array([start_steps[0]] * 3 + [start_steps[1]] * 2 + [start_steps[2]])
+    floor = np.array([min_steps[0]] * 3 + [min_steps[1]] * 2 + [min_steps[2]])
+    while objective.evaluations < max_evaluations:
+        improved = False
+        for i in range(6):
+            if steps[i] < floor[i]:
+                continue
+            for sign in (1.0, -1.0):
+                trial = p.copy()
+                trial[i] += sign * steps[i]
+                if (value := objective.iou_at(trial, base)) > best + 1e-6:
+                    p, best, improved = trial, value, True
+                    while objective.evaluations < max_evaluations:
+                        trial = p.copy()
+                        trial[i] += sign * steps[i]
+                        if not (value := objective.iou_at(trial, base)) > best + 1e-6:
+                            break
+                        p, best = trial, value
+                    break
+        if not improved:
+            steps = steps / 2.0
+            if np.all(steps < floor):
+                break
+    return (*objective.pose(p, base), best, objective.evaluations)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=names, h=angles, v=angles, seed=st.integers(0, 2**16), budget=st.integers(1, 300))
+def test_a_fit_s_compiled_search_is_the_compass_search(db, name, h, v, seed, budget):
+    """A silhouette fit's refinement, one compiled call without the GIL, takes the steps the
+    compass search written out in Python takes: the same pose, IoU and evaluations, and
+    refinements spread over threads give the same poses in the same order."""
+    from viewdb.catalogue.pinhole import Window
+    from viewdb.pose.silhouette import _Objective, _search_all
+
+    rng = np.random.default_rng(seed)
+    k = np.array([[70.0, 0.0, 32.0], [0.0, 66.0, 30.0], [0.0, 0.0, 1.0]])
+    triangles = get_pinhole_renderer().triangles(db.mesh(name))
+    truth = GL_TO_CV @ view_rotation(h, v, 40.0), np.array([0.05, -0.1, 3.0])
+    query = silhouette(triangles, *truth, tuple(k[[0, 1, 0, 1], [0, 1, 2, 2]]), 64)
+    assume(query.any())
+    ignore = rng.random(query.shape) < 0.05
+    window = Window.around(query, 48)
+    steps = (0.12, 3.0, 0.06), (0.02, 0.75, 0.01)
+    starts = [(GL_TO_CV @ view_rotation(h + rng.normal(0, 15), v + rng.normal(0, 15), 40.0),
+               truth[1] * rng.uniform(0.9, 1.1, 3)) for _ in range(3)]
+    expected = [compass_reference(_Objective(triangles, query, ignore, window, k), r, t, steps[1], steps[0],
+                                  budget) for r, t in starts]
+    for threads in (1, 2):
+        objective = _Objective(triangles, query, ignore, window, k)
+        found = _search_all(objective, starts, steps[1], steps[0], budget, threads)
+        assert objective.evaluations == sum(e[3] for e in expected)
+        for (r, t, iou), (r_ref, t_ref, iou_ref, _) in zip(found, expected, strict=True):
+            assert iou == iou_ref
+            np.testing.assert_array_equal(r, r_ref)
+            np.testing.assert_array_equal(t, t_ref)
 
 
 def test_an_open_mesh_is_scan_converted_whole():

@@ -188,7 +188,7 @@ def pose_silhouette(
         render.image_size, render.xmag, ignore=query.ignore,
         directions=directions,
         starts=starts, config=config, search=search,
-        render_coarse=pinhole.triangles(mesh, search.coarse_faces or None),
+        coarse_triangles=pinhole.triangles(mesh, search.coarse_faces or None),
     )
     h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
     width = query.mask.shape[1]

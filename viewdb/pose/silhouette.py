@@ -37,7 +37,10 @@ Poses are model-to-camera in the OpenCV frame, in normalised model units (see
 from __future__ import annotations
 
 import math
+import os
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,7 +76,6 @@ QUICK = SilhouetteConfig(directions=40, start_directions="candidates", coarse_st
 
 
 OrthoRender = Callable[[float, float], NDArray[np.bool_]]
-PinholeRender = Callable[[NDArray[np.float64], NDArray[np.float64], Intrinsics, int], NDArray[np.bool_]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,22 +153,21 @@ def to_mesh_units(
 
 
 class _Objective:
-    """1 − IoU of the rendered silhouette and the query's, in one window; ``render`` a
-    :data:`PinholeRender`, or a mesh's triangles to scan-convert and count in one pass
-    (:func:`viewdb.catalogue.coverage.overlap`: no silhouette image made)."""
+    """1 − IoU of a mesh's silhouette (its triangles, scan-converted and compared in one
+    compiled pass: :func:`viewdb.catalogue.coverage.overlap`, no silhouette image made)
+    and the query's, in one window."""
 
-    def __init__(self, render: PinholeRender | MeshTriangles, query: NDArray[np.bool_],
+    def __init__(self, triangles: MeshTriangles, query: NDArray[np.bool_],
                  ignore: NDArray[np.bool_] | None, window: Window, k: NDArray[np.float64]) -> None:
-        self.render, self.window, self.k = render, window, k
+        self.triangles, self.window, self.k = triangles, window, k
         self.cam = window.intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
-        self.query = np.clip(window.crop(query.astype(np.float32)), 0.0, 1.0)
+        q = np.clip(window.crop(query.astype(np.float32)), 0.0, 1.0)
         if ignore is not None and ignore.any():
             self.valid = window.crop(ignore.astype(np.float32)) < 0.5
         else:
-            self.valid = np.ones(self.query.shape, bool)
-        self.q = np.where(self.valid, self.query, 0.0)
-        self.q_total = float(self.q.sum())
-        self.weights = np.ascontiguousarray(self.q, dtype=np.float64)
+            self.valid = np.ones(q.shape, bool)
+        self.weights = np.ascontiguousarray(np.where(self.valid, q, 0.0), dtype=np.float64)
+        self.q_total = float(self.weights.sum())
         self.evaluations = 0
         self.factor = float(window.factor)
         self.camera = np.array([float(x) for x in self.cam], dtype=np.float64)
@@ -177,14 +178,12 @@ class _Objective:
         return _pose_of(p, r_rel, u0, w0, z0, self.factor, self.k)
 
     def iou_at(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]) -> float:
-        """:meth:`iou` of :meth:`pose` ``(p, base)``; for a mesh's triangles, the pose made
-        and its silhouette counted in one compiled call (:func:`_iou_at`)."""
-        if not isinstance(self.render, MeshTriangles):
-            return self.iou(*self.pose(p, base))
+        """:meth:`iou` of :meth:`pose` ``(p, base)``, the pose made and its silhouette
+        counted in one compiled call (:func:`_iou_at`)."""
         r_rel, u0, w0, z0 = base
-        triangles = self.render
-        value = _iou_at(p, r_rel, u0, w0, z0, self.factor, self.k, triangles.vertices, triangles.faces,
-                        triangles.front, self.camera, self.weights, self.valid, self.q_total)
+        t = self.triangles
+        value = _iou_at(p, r_rel, u0, w0, z0, self.factor, self.k, t.vertices, t.faces, t.front,
+                        self.camera, self.weights, self.valid, self.q_total)
         if value < 0.0:  # behind the camera: not an evaluation
             return 0.0
         self.evaluations += 1
@@ -194,15 +193,27 @@ class _Objective:
         if not translation[2] > 1e-6:
             return 0.0
         self.evaluations += 1
-        if isinstance(self.render, MeshTriangles):  # union: the query, plus what it leaves uncovered
-            inter, covered = overlap(self.render, rotation, translation, self.cam, self.weights, self.valid)
-            union = self.q_total - inter + covered
-            return inter / union if union > 0 else 0.0
-        r = self.render(rotation, translation, self.cam, self.window.size)
-        r = np.where(self.valid, r, False)
-        inter = float(np.minimum(self.q, r).sum())
-        union = float(np.maximum(self.q, r).sum())
+        inter, covered = overlap(self.triangles, rotation, translation, self.cam, self.weights, self.valid)
+        union = self.q_total - inter + covered  # the query, plus what it leaves uncovered
         return inter / union if union > 0 else 0.0
+
+    def search(self, rotation: NDArray[np.float64], translation: NDArray[np.float64],
+               min_steps: Sequence[float], start_steps: Sequence[float], max_evaluations: int,
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
+        """:func:`_compass` from the pose ``(rotation, translation)``: the pose it ends at,
+        its IoU and the evaluations it took (not added to :attr:`evaluations`: a search may
+        run on another thread). Compiled whole and without the GIL, so the searches of
+        several starts run on as many cores (:func:`_search_all`)."""
+        base = _base(rotation, translation, self.k)
+        r_rel, u0, w0, z0 = base
+        steps = np.array([start_steps[0]] * 3 + [start_steps[1]] * 2 + [start_steps[2]], dtype=np.float64)
+        floor = np.array([min_steps[0]] * 3 + [min_steps[1]] * 2 + [min_steps[2]], dtype=np.float64)
+        t = self.triangles
+        p, best, evaluations = _compass(r_rel, u0, w0, z0, self.factor, self.k, t.vertices, t.faces,
+                                        t.front, self.camera, self.weights, self.valid, self.q_total,
+                                        steps, floor, int(max_evaluations))
+        rotation, translation = self.pose(p, base)
+        return rotation, translation, best, evaluations
 
 
 @njit(cache=True, nogil=True)
@@ -250,19 +261,27 @@ def _base(rotation: NDArray[np.float64], translation: NDArray[np.float64], k: ND
     return ray_rotation(u, w, k).T @ rotation, u, w, float(t[2])
 
 
-def _pattern_search(
-    objective: _Objective, rotation: NDArray[np.float64], translation: NDArray[np.float64],
-    min_steps: Sequence[float], start_steps: Sequence[float], max_evaluations: int,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Compass search over (ω, pixel, log depth) maximising the IoU; a step that improves is
-    taken again along the same direction; steps halve when no direction improves."""
-    base = _base(rotation, translation, objective.k)
+@njit(cache=True, nogil=True)
+def _evaluate(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid,
+              q_total):  # pragma: no cover - compiled
+    """``(IoU, 1)`` at ``p``, or ``(0, 0)`` behind the camera (not an evaluation)."""
+    value = _iou_at(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid,
+                    q_total)
+    return (0.0, 0) if value < 0.0 else (value, 1)
+
+
+@njit(cache=True, nogil=True)
+def _compass(r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera, weights, valid, q_total,
+             steps, floor, max_evaluations):  # pragma: no cover - compiled
+    """Compass search over ``p`` = (ω, pixel, log depth) from 0, maximising the IoU
+    (:func:`_iou_at`): each coordinate is tried a step either way; a step that improves is
+    taken again along the same direction; steps halve when none improves, until all are
+    below ``floor`` or ``max_evaluations`` are spent. Returns ``(p, IoU, evaluations)``."""
     p = np.zeros(6)
-    best = objective.iou_at(p, base)
-    steps = np.array([start_steps[0]] * 3 + [start_steps[1]] * 2 + [start_steps[2]])
-    floor = np.array([min_steps[0]] * 3 + [min_steps[1]] * 2 + [min_steps[2]])
-    start = objective.evaluations
-    while objective.evaluations - start < max_evaluations:
+    best, evaluations = _evaluate(p, r_rel, u0, w0, z0, factor, k, vertices, faces, front, camera,
+                                  weights, valid, q_total)
+    steps = steps.copy()
+    while evaluations < max_evaluations:
         improved = False
         for i in range(6):
             if steps[i] < floor[i]:
@@ -270,13 +289,17 @@ def _pattern_search(
             for sign in (1.0, -1.0):
                 trial = p.copy()
                 trial[i] += sign * steps[i]
-                value = objective.iou_at(trial, base)
+                value, n = _evaluate(trial, r_rel, u0, w0, z0, factor, k, vertices, faces, front,
+                                     camera, weights, valid, q_total)
+                evaluations += n
                 if value > best + 1e-6:
                     p, best, improved = trial, value, True
-                    while objective.evaluations - start < max_evaluations:  # keep going that way
+                    while evaluations < max_evaluations:  # keep going that way
                         trial = p.copy()
                         trial[i] += sign * steps[i]
-                        value = objective.iou_at(trial, base)
+                        value, n = _evaluate(trial, r_rel, u0, w0, z0, factor, k, vertices, faces,
+                                             front, camera, weights, valid, q_total)
+                        evaluations += n
                         if not value > best + 1e-6:
                             break
                         p, best = trial, value
@@ -287,8 +310,39 @@ def _pattern_search(
             steps = steps / 2.0
             if np.all(steps < floor):
                 break
-    rotation, translation = objective.pose(p, base)
-    return rotation, translation, best
+    return p, best, evaluations
+
+
+def _search_all(
+    objective: _Objective, starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    min_steps: Sequence[float], start_steps: Sequence[float], max_evaluations: int, threads: int,
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64], float]]:
+    """:meth:`_Objective.search` from each start, in order, on up to ``threads`` threads
+    (the searches are independent and compiled without the GIL); their evaluations are
+    added to the objective's."""
+    def one(start: tuple[NDArray[np.float64], NDArray[np.float64]]):
+        return objective.search(start[0], start[1], min_steps, start_steps, max_evaluations)
+
+    threads = min(threads, os.cpu_count() or 1, len(starts))
+    if threads > 1:
+        found = list(_pool(threads).map(one, starts))
+    else:
+        found = [one(start) for start in starts]
+    objective.evaluations += sum(n for *_, n in found)
+    return [(r, t, iou) for r, t, iou, _ in found]
+
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """This process's pool of ``threads`` threads for :func:`_search_all` (made once; a
+    search runs nothing but compiled code on it, so two queries may share it)."""
+    with _POOLS_LOCK:
+        if threads not in _POOLS:
+            _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="viewdb-fit")
+        return _POOLS[threads]
 
 
 @dataclass(frozen=True)
@@ -305,7 +359,7 @@ def search_silhouette_pose(
     query: NDArray[np.bool_],
     intrinsics: Intrinsics,
     render_ortho: OrthoRender,
-    render_pinhole: PinholeRender | MeshTriangles,
+    triangles: MeshTriangles,
     image_size: int,
     xmag: float = 1.0,
     *,
@@ -314,19 +368,19 @@ def search_silhouette_pose(
     starts: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]] = (),
     config: PoseConfig | None = None,
     search: SilhouetteConfig | None = None,
-    render_coarse: PinholeRender | MeshTriangles | None = None,
+    coarse_triangles: MeshTriangles | None = None,
 ) -> SilhouetteFit:
     """The pinhole pose of a mesh whose silhouette is ``query`` (module doc).
 
     ``render_ortho(h, v)`` renders the mesh's orthographic silhouette (``image_size``
-    square, half-extent ``xmag``) in the viewdb convention; ``render_pinhole(R, t, K, S)``
-    its silhouette at an OpenCV pose through intrinsics ``K = (fx, fy, cx, cy)`` in an
-    ``S × S`` image, or the mesh's triangles
-    (:class:`~viewdb.catalogue.coverage.MeshTriangles`), whose silhouette is then
-    scan-converted and compared in one compiled pass. ``starts`` adds pinhole poses to
-    refine (e.g. from SIFT). ``render_coarse`` (default ``render_pinhole``) serves the
-    coarse refinement, e.g. a decimated mesh's silhouette
-    (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`).
+    square, half-extent ``xmag``) in the viewdb convention; ``triangles`` are the mesh's
+    (:class:`~viewdb.catalogue.coverage.MeshTriangles`), whose silhouette through the
+    intrinsics is scan-converted and compared in one compiled pass. ``starts`` adds
+    pinhole poses to refine (e.g. from SIFT). ``coarse_triangles`` (default
+    ``triangles``) serve the coarse refinement, e.g. a decimated mesh's
+    (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`). The starts are refined on up
+    to :attr:`~viewdb.config.SilhouetteConfig.threads` threads; the answer does not depend
+    on how many.
 
     Raises
     ------
@@ -364,21 +418,21 @@ def search_silhouette_pose(
               for s in found[:search.coarse_starts]]
     chosen += [(np.asarray(r, np.float64), np.asarray(t, np.float64), (math.nan,) * 3) for r, t in starts]
     window = Window.around(mask, search.coarse_size)
-    coarse = _Objective(render_coarse or render_pinhole, mask, ignore, window, k)
-    refined = []
-    for rot, t, origin in chosen:
-        r2, t2, iou = _pattern_search(coarse, rot, t, search.coarse_min_steps, search.start_steps,
-                                      search.max_evaluations)
-        refined.append((iou, r2, t2, origin))
+    coarse = _Objective(coarse_triangles or triangles, mask, ignore, window, k)
+    found_coarse = _search_all(coarse, [(rot, t) for rot, t, _ in chosen], search.coarse_min_steps,
+                               search.start_steps, search.max_evaluations, search.threads)
+    refined = [(iou, r2, t2, origin)
+               for (r2, t2, iou), (_, _, origin) in zip(found_coarse, chosen, strict=True)]
     refined.sort(key=lambda x: -x[0])
     if search.fine_starts == 0:
         iou, rot, t, origin = refined[0]
         return SilhouetteFit(rot, t, iou, origin, coarse.evaluations + len(found))
-    fine = _Objective(render_pinhole, mask, ignore, Window.around(mask, search.fine_size), k)
+    fine = _Objective(triangles, mask, ignore, Window.around(mask, search.fine_size), k)
     best: SilhouetteFit | None = None
-    for _, rot, t, origin in refined[:search.fine_starts]:
-        r2, t2, iou = _pattern_search(fine, rot, t, search.fine_min_steps, search.coarse_min_steps,
-                                      search.max_evaluations)
+    starts_fine = [(rot, t) for _, rot, t, _ in refined[:search.fine_starts]]
+    found_fine = _search_all(fine, starts_fine, search.fine_min_steps, search.coarse_min_steps,
+                             search.max_evaluations, search.threads)
+    for (r2, t2, iou), (*_, origin) in zip(found_fine, refined[:search.fine_starts], strict=True):
         if best is None or iou > best.iou:
             best = SilhouetteFit(r2, t2, iou, origin, 0)
     assert best is not None
