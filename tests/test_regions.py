@@ -212,6 +212,45 @@ def test_which_pixels_of_other_boxes_are_painted_over():
     assert _others_outside([], box, shape, crop, init) is None
 
 
+def _printed_white_box():
+    """A box on a white table, its grey side and its white printed front: the front's
+    white is the table's, only its print tells them apart; its box and true mask."""
+    rng = np.random.default_rng(4)
+    yy, xx = np.mgrid[:200, :280]
+    photo = np.clip(rng.normal(228, 3, (200, 280, 3)), 0, 255).astype(np.uint8)
+    side = (xx >= 50) & (xx < 100) & (yy >= 50) & (yy < 150)
+    front = (xx >= 100) & (xx < 230) & (yy >= 50) & (yy < 150)
+    photo[side] = np.clip(rng.normal(110, 3, (200, 280, 3)), 0, 255).astype(np.uint8)[side]
+    for y in range(58, 146, 7):  # lines of print across the front
+        x = 106
+        while x < 222:
+            word = int(rng.integers(4, 14))
+            cv2.line(photo, (x, y), (min(x + word, 223), y), (40, 40, 40), 2)
+            x += word + int(rng.integers(3, 8))
+    return load_image(photo), [48, 48, 232, 152], side | front
+
+
+def test_a_box_whose_colours_fail_is_cut_on_texture():
+    """Colour alone keeps the grey side and loses the white front to the table, far from
+    the box's right side; a tight box then cuts again on texture, which keeps the front."""
+    from viewdb.recognition.regions import box_gap
+
+    image, box, truth = _printed_white_box()
+    by_colour, = find_regions(image, Prompts.of(boxes=[box]), config=SegmentationConfig(box_texture_gap=1.0))
+    cut, = find_regions(image, Prompts.of(boxes=[box]))
+    assert iou(by_colour.mask, truth) < 0.6 and box_gap(by_colour.mask, tuple(box)) > 0.3
+    assert iou(cut.mask, truth) > 0.9
+
+
+def test_box_gap_is_the_widest_side_gap():
+    from viewdb.recognition.regions import box_gap
+
+    mask = np.zeros((50, 60), bool)
+    mask[12:40, 10:41] = True
+    assert box_gap(mask, (10, 10, 50, 40)) == pytest.approx(max(9 / 40, 2 / 30))
+    assert box_gap(mask, (10, 12, 41, 40)) == 0.0
+
+
 def test_a_box_cut_out_keeps_its_holes_for_the_pose():
     """A ring on a plain background: the region (its curve) is the ring filled, the pose
     is fitted to the ring with the background seen through it; a disc has no pose mask."""
