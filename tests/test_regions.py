@@ -4,6 +4,7 @@ answer's ``objects``, and the overlay; through the library, the CLI and its JSON
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -163,14 +164,20 @@ def _two_red_objects():
 
 def test_another_prompted_object_is_not_learnt_as_background():
     """The slab reaches into the crop around the block's box: learnt as background, its
-    red takes the block's red quarter with it; painted over, the block is cut whole."""
+    red takes the block's red quarter with it; painted over, the block is cut whole (by
+    colour alone: the cut on texture, which would also find it, is left out here)."""
     image, boxes, block = _two_red_objects()
-    _, kept = find_regions(image, Prompts.of(boxes=boxes))
-    _, lost = find_regions(image, Prompts.of(boxes=boxes), config=SegmentationConfig(box_others_unknown=False))
+    colour = SegmentationConfig(box_texture_gap=1.0)
+    _, kept = find_regions(image, Prompts.of(boxes=boxes), config=colour)
+    _, lost = find_regions(image, Prompts.of(boxes=boxes), config=replace(colour, box_others_unknown=False))
     assert iou(kept.mask, block) > 0.95
     assert iou(lost.mask, block) < 0.8
-    alone, = find_regions(image, Prompts.of(boxes=boxes[1:]))
+    alone, = find_regions(image, Prompts.of(boxes=boxes[1:]), config=colour)
     assert iou(alone.mask, block) < 0.8  # a box alone cannot know what lies beside it
+    # the colour cut of the block alone stops a quarter short of its box's left side: a
+    # box is tight, so it is cut again on texture, which keeps the red quarter
+    alone, = find_regions(image, Prompts.of(boxes=boxes[1:]))
+    assert iou(alone.mask, block) > 0.95
 
 
 def test_a_box_inside_another_learns_the_outer_object_as_background():

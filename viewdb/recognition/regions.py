@@ -21,7 +21,11 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   of its border (:func:`~viewdb.recognition.segmentation.segment`'s way), then keeps
   what lies in the box. ``python benchmarks/prompts.py`` measures both on the YCB-Video
   frames against their label maps: GrabCut from the box, mean IoU 0.93; the border
-  model fails in clutter (the crop's border crosses other objects). The region's curve
+  model fails in clutter (the crop's border crosses other objects). A box is taken to be
+  drawn tight around its object: when the colour cut leaves more than
+  ``box_texture_gap`` of the box's width or height between the object and a side, the
+  box is cut again on :func:`texture_image` (a white printed face on a white table), and
+  that cut is kept if it reaches the sides more nearly. The region's curve
   is that of the cut-out with its holes filled; its pose is fitted to the cut-out with
   the holes the cut left in it (:attr:`Region.pose_mask`: the background seen through
   a handle, which the mesh's silhouette shows too).
