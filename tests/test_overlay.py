@@ -313,6 +313,27 @@ def test_a_fit_s_compiled_search_is_the_compass_search(db, name, h, v, seed, bud
             np.testing.assert_array_equal(t, t_ref)
 
 
+@pytest.mark.parametrize("name", ["car", "mug"])
+def test_a_fit_is_the_same_on_one_thread_and_on_two(db, name):
+    """A silhouette fit aligns its views' outlines and refines its starts on threads: the
+    same pose and IoU as on one."""
+    from viewdb.config import PoseConfig
+    from viewdb.pose.matched import pose_silhouette
+    from viewdb.pose.silhouette import QUICK
+    from viewdb.recognition.pipeline import segment_photo
+
+    k = (300.0, 300.0, 160.0, 120.0)
+    truth = GL_TO_CV @ view_rotation(47.0, 21.0, 15.0), np.array([0.1, -0.05, 4.0])
+    mask = silhouette(get_pinhole_renderer().triangles(db.mesh(name)), *truth, k, 320)[:240]
+    _, _, query = segment_photo(np.dstack([mask * 200] * 3).astype(np.uint8), mask=mask)
+    fits = [pose_silhouette(db._catalogue, name, query, PoseConfig(), k, replace(search, threads=threads), ())
+            for search in (QUICK, replace(QUICK, fine_starts=1)) for threads in (1, 2)]
+    for one, two in (fits[:2], fits[2:]):
+        assert one.iou == two.iou > 0.9
+        np.testing.assert_array_equal(one.rotation, two.rotation)
+        np.testing.assert_array_equal(one.translation, two.translation)
+
+
 def test_an_open_mesh_is_scan_converted_whole():
     """A box without its lid, or with a face run twice the same way, is not closed: its
     back faces may be all there is of it."""

@@ -570,10 +570,10 @@ class SilhouetteConfig:
     start_steps: tuple[float, float, float] = (0.12, 3.0, 0.06)
     coarse_min_steps: tuple[float, float, float] = (0.02, 0.75, 0.01)
     fine_min_steps: tuple[float, float, float] = (0.004, 0.2, 0.002)
-    #: Threads the refinements of a fit's starts are spread over (each refinement is one
-    #: compiled call without the GIL; at most the machine's CPUs): the same pose whatever
-    #: the count. Default: the environment's ``VIEWDB_SEARCH_THREADS``, else 2, as for
-    #: :attr:`SearchConfig.threads`.
+    #: Threads a fit's outline alignments and the refinements of its starts are spread
+    #: over (each refinement is one compiled call without the GIL; at most the machine's
+    #: CPUs): the same pose whatever the count. Default: the environment's
+    #: ``VIEWDB_SEARCH_THREADS``, else 2, as for :attr:`SearchConfig.threads`.
     threads: int = field(default_factory=lambda: search_threads_from_env())
 
     def __post_init__(self) -> None:

@@ -42,6 +42,7 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -323,13 +324,22 @@ def _search_all(
     def one(start: tuple[NDArray[np.float64], NDArray[np.float64]]):
         return objective.search(start[0], start[1], min_steps, start_steps, max_evaluations)
 
-    threads = min(threads, os.cpu_count() or 1, len(starts))
-    if threads > 1:
-        found = list(_pool(threads).map(one, starts))
-    else:
-        found = [one(start) for start in starts]
+    found = _map(one, starts, threads)
     objective.evaluations += sum(n for *_, n in found)
     return [(r, t, iou) for r, t, iou, _ in found]
+
+
+_T = TypeVar("_T")
+_R = TypeVar("_R")
+
+
+def _map(function: Callable[[_T], _R], items: Sequence[_T], threads: int) -> list[_R]:
+    """``[function(item) for item in items]``, in order, on up to ``threads`` threads (at
+    most the machine's CPUs)."""
+    threads = min(threads, os.cpu_count() or 1, len(items))
+    if threads > 1:
+        return list(_pool(threads).map(function, items))
+    return [function(item) for item in items]
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -378,9 +388,9 @@ def search_silhouette_pose(
     intrinsics is scan-converted and compared in one compiled pass. ``starts`` adds
     pinhole poses to refine (e.g. from SIFT). ``coarse_triangles`` (default
     ``triangles``) serve the coarse refinement, e.g. a decimated mesh's
-    (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`). The starts are refined on up
-    to :attr:`~viewdb.config.SilhouetteConfig.threads` threads; the answer does not depend
-    on how many.
+    (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`). The views' outlines are aligned
+    and the starts refined on up to :attr:`~viewdb.config.SilhouetteConfig.threads`
+    threads; the answer does not depend on how many.
 
     Raises
     ------
@@ -398,19 +408,25 @@ def search_silhouette_pose(
         outline = outline_of(mask, config.contour_samples)
     except FeatureError as exc:
         raise PoseError(f"the query silhouette has no usable contour: {exc}") from exc
-    found: list[_Start] = []
     empty = np.zeros((0, 5), np.float32)
-    for h, v in directions if directions is not None else fibonacci_directions(search.directions):
-        view = render_ortho(h, v)
+
+    def aligned(view: tuple[float, float, NDArray[np.bool_]]) -> list[_Start]:
+        h, v, silhouette = view
         try:
-            view_outline = outline_of(view, config.contour_samples)
+            view_outline = outline_of(silhouette, config.contour_samples)
         except FeatureError:
-            continue
+            return []
         cand = CandidateView(h, v, False, empty, np.zeros((0, 128), np.uint8), np.zeros((0, 3), np.float32),
-                             view, image_size, xmag)
-        for res in align_shape(outline, view_outline, cand, config)[:2]:
-            rot, t = lift_alignment(h, v, res.angle, res.lam, res.origin_px, image_size, xmag, k)
-            found.append(_Start(res.cost, h, v, res.angle, rot, t))
+                             silhouette, image_size, xmag)
+        return [_Start(res.cost, h, v, res.angle,
+                       *lift_alignment(h, v, res.angle, res.lam, res.origin_px, image_size, xmag, k))
+                for res in align_shape(outline, view_outline, cand, config)[:2]]
+
+    # the silhouettes read here (a catalogue is one thread's), aligned on the threads (the
+    # distance maps and the chamfer scans release the GIL)
+    views = [(h, v, render_ortho(h, v))
+             for h, v in (directions if directions is not None else fibonacci_directions(search.directions))]
+    found = [start for starts_of_view in _map(aligned, views, search.threads) for start in starts_of_view]
     if not found and not starts:
         raise PoseError("no viewing direction gives a silhouette to align the query with")
     found.sort(key=lambda s: s.cost)
