@@ -334,6 +334,23 @@ def test_a_fit_is_the_same_on_one_thread_and_on_two(db, name):
         np.testing.assert_array_equal(one.translation, two.translation)
 
 
+def test_a_forked_child_fits_on_threads_of_its_own():
+    """The fits' thread pool is made once per process: a child forked after the parent
+    used it (whose threads it does not have) makes its own instead of waiting forever."""
+    import os
+    import signal
+
+    from viewdb.pose.silhouette import _map
+
+    assert _map(abs, [-1, -2, -3], 2) == [1, 2, 3]
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child
+        signal.alarm(20)  # a hang ends the child with SIGALRM
+        os._exit(0 if _map(abs, [-4, -5], 2) == [4, 5] else 1)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+
+
 def test_an_open_mesh_is_scan_converted_whole():
     """A box without its lid, or with a face run twice the same way, is not closed: its
     back faces may be all there is of it."""

@@ -346,6 +346,16 @@ _POOLS: dict[int, ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
 
 
+def _forget_pools() -> None:
+    """In a forked child: none of the parent's threads (nor its lock's holder) is there."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pools)
+
+
 def _pool(threads: int) -> ThreadPoolExecutor:
     """This process's pool of ``threads`` threads for :func:`_search_all` (made once; a
     search runs nothing but compiled code on it, so two queries may share it)."""
