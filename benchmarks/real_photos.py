@@ -1,8 +1,8 @@
 """Real photographs queried with box prompts: the YCB-Video objects, the ViSP tea box and
 cube and the phone box, against the whole catalogue.
 
-    python benchmarks/real_photos.py [--db FILE | --gap 10 [--subset N] [--jobs 2]] [--out DIR]
-                                     [-k 5] [--plan server] [--objects A,B] [--no-extras]
+    python benchmarks/real_photos.py [--db FILE | --gap 10 [--perspective-gap 20] [--subset N] [--jobs 2]]
+                                     [--out DIR] [-k 5] [--plan server] [--objects A,B] [--no-extras]
                                      [--overlays docs/results/real]
 
 The catalogue (``--db``, e.g. a copy of the 212-model 10° file with the real meshes
@@ -163,7 +163,8 @@ def pose_errors(sym: Symmetry, r_est: np.ndarray, t_est: np.ndarray, r_gt: np.nd
 
 
 # ---------------------------------------------------------------------- the run
-def build(db_path: Path, gap: float, subset: int | None, extras: bool, jobs: int) -> float:
+def build(db_path: Path, gap: float, subset: int | None, extras: bool, jobs: int,
+          perspective_gap: float | None = None) -> float:
     paths = [YCB / "meshes"]
     if extras:
         paths += [REAL / case / entry["mesh"] for case, entry in _boxes().items()]
@@ -171,7 +172,7 @@ def build(db_path: Path, gap: float, subset: int | None, extras: bool, jobs: int
     models = viewdb.describe_paths([MODELS])
     paths += models[:subset] if subset is not None else models
     start = time.perf_counter()
-    with viewdb.open(db_path, gap=gap) as db:
+    with viewdb.open(db_path, gap=gap, perspective_gap=perspective_gap) as db:
         report = db.ingest(paths, jobs=jobs)
         for o in report.failed:
             print(f"warning: {o.path}: {o.error}", file=sys.stderr)
@@ -349,6 +350,8 @@ def main() -> None:
     parser.add_argument("--objects", default=None, help="comma-separated YCB objects (default: all)")
     parser.add_argument("--no-extras", action="store_true", help="skip the ViSP and phone-box cases")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--perspective-gap", type=float, default=None,
+                        help="the built catalogue's perspective grid gap (default the file default, 20)")
     parser.add_argument("--no-rerank", action="store_true",
                         help="no re-ranking by silhouette fit; only the best result is posed")
     args = parser.parse_args()
@@ -359,8 +362,9 @@ def main() -> None:
     db_path = args.db
     build_s = 0.0
     if db_path is None:
-        db_path = args.out / f"catalogue_g{args.gap:g}{'' if args.subset is None else f'_s{args.subset}'}.db"
-        build_s = build(db_path, args.gap, args.subset, not args.no_extras, args.jobs)
+        db_path = args.out / (f"catalogue_g{args.gap:g}{'' if args.subset is None else f'_s{args.subset}'}"
+                              f"{'' if args.perspective_gap is None else f'_p{args.perspective_gap:g}'}.db")
+        build_s = build(db_path, args.gap, args.subset, not args.no_extras, args.jobs, args.perspective_gap)
         print(f"catalogue {db_path} ready in {build_s:.0f} s", flush=True)
     objects = args.objects.split(",") if args.objects else None
     with viewdb.open(db_path, create=False) as db:

@@ -177,6 +177,14 @@ def ingest(
         typer.Option(help="Perspective views' camera distances in bounding radii, e.g. 3,4,6, "
                           "or 'none' (new db; default 3,4,6)."),
     ] = None,
+    perspective_gap: Annotated[
+        float | None,
+        typer.Option("--perspective-gap",
+                     help="Perspective views' grid gap in degrees, rounded up to a multiple of --gap "
+                          "(new db; default 20). 10 finds boxes photographed from a few sizes away, "
+                          "for about twice the ingest time (docs/results/real-photos.md).",
+                     callback=_number(*GAP_RANGE)),
+    ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,
     ray: Annotated[str | None, typer.Option(
         "--ray", help="Describe the objects as Ray tasks across a cluster instead of --jobs "
@@ -207,7 +215,8 @@ def ingest(
         raise typer.BadParameter("--shard-count needs --shards", param_hint="--shard-count")
     files = viewdb.describe_paths(paths)
     distances = None if perspective is None else _parse_distances(perspective)
-    settings = {"gap": gap, "image_size": image_size, "client_gap": client_gap, "perspective": distances}
+    settings = {"gap": gap, "image_size": image_size, "client_gap": client_gap, "perspective": distances,
+                "perspective_gap": perspective_gap}
     if shards is not None:
         from viewdb.shards.writing import open_shards
 

@@ -308,3 +308,31 @@ def test_the_cli_sets_the_perspective_distances_of_a_new_file_and_refuses_anothe
         assert main(["ingest", str(sample("cone")), "--db", str(tmp_path / "bad.db"),
                      "--perspective", bad]) == code
         assert not (tmp_path / "bad.db").exists()
+
+
+def test_the_perspective_grid_gap_is_chosen_for_a_new_file_and_kept(tmp_path, capsys):
+    """``--perspective-gap`` sets a new file's perspective grid (rounded up to a multiple of
+    ``--gap``): a finer one stores more perspective views; another gap for an existing
+    file is refused before anything is written; a gap that does not divide 360 is
+    refused as ``--gap``'s is."""
+    counts = {}
+    for pgap in (60, 120):
+        path = tmp_path / f"p{pgap}.db"
+        assert main(["ingest", str(sample("cone")), "--db", str(path), "--gap", "60",
+                     "--image-size", "64", "--perspective", "4", "--perspective-gap", str(pgap)]) == 0
+        with viewdb.open(path, create=False, perspective_gap=pgap) as db:
+            assert db.config.perspective_gap == pgap
+            counts[pgap] = db.object("cone").perspective_views
+    assert counts[60] > counts[120] > 0
+    with viewdb.open(tmp_path / "p60.db", create=False, perspective_gap=40) as db:  # rounds to 60
+        assert db.config.perspective_gap == 60
+    capsys.readouterr()
+    assert main(["ingest", str(sample("pyramid")), "--db", str(tmp_path / "p60.db"),
+                 "--perspective-gap", "120"]) == 1
+    assert "was built with --perspective-gap 60, not 120" in capsys.readouterr().err
+    with viewdb.open(tmp_path / "p60.db", create=False) as db:
+        assert [o.name for o in db.objects()] == ["cone"]
+    capsys.readouterr()
+    assert main(["ingest", str(sample("cone")), "--db", str(tmp_path / "bad.db"), "--perspective-gap", "7"]) == 1
+    assert "perspective gap must divide 360 evenly, got 7" in capsys.readouterr().err  # as --gap 7
+    assert not (tmp_path / "bad.db").exists()

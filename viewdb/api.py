@@ -478,6 +478,7 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     image_size: int | None = None,
     client_gap: float | None = None,
     perspective: Sequence[float] | None = None,
+    perspective_gap: float | None = None,
     config: BuildConfig | None = None,
     read_only: bool = False,
 ) -> ViewDB:
@@ -487,7 +488,8 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
     :class:`~viewdb.config.BuildConfig`), with ``gap``, ``image_size`` and ``client_gap``
     (the sparse tier's grid; default the smallest multiple of ``gap`` of at least 30°) and
     ``perspective`` (the perspective views' camera distances in bounding radii; empty for
-    none; :class:`~viewdb.config.PerspectiveConfig`) overriding it. An existing file keeps
+    none) and ``perspective_gap`` (their grid's gap in degrees, rounded up to a multiple
+    of ``gap``; :class:`~viewdb.config.PerspectiveConfig`) overriding it. An existing file keeps
     the configuration it was built with; asking for a different one raises
     :class:`~viewdb.errors.ViewDBError`.
 
@@ -506,6 +508,8 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         if perspective is not None:
             wanted = replace(wanted, perspective=replace(wanted.perspective,
                                                          distances=perspective))
+        if perspective_gap is not None:
+            wanted = replace(wanted, perspective=replace(wanted.perspective, gap=float(perspective_gap)))
         wanted = wanted.resolved()
     except ValueError as exc:
         raise ViewDBError(str(exc), path) from exc
@@ -528,29 +532,48 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
             store.set_build_config(wanted)
             stored = wanted
         else:
-            if gap is not None and float(gap) != stored.gap:
-                raise ViewDBError(
-                    f"was built with --gap {stored.gap:g}, not {gap:g}; "
-                    "use a new database file for another grid", path,
-                )
-            if image_size is not None and image_size != stored.render.image_size:
-                raise ViewDBError(
-                    f"was built with --image-size {stored.render.image_size}, not {image_size}",
-                    path,
-                )
-            if client_gap is not None and float(client_gap) != stored.client_gap:
-                raise ViewDBError(
-                    f"was built with --client-gap {stored.client_gap:g}, not {client_gap:g}", path
-                )
-            if perspective is not None and wanted.perspective.distances != stored.perspective.distances:
-                raise ViewDBError(
-                    f"was built with --perspective {_distances(stored.perspective.distances)}, "
-                    f"not {_distances(wanted.perspective.distances)}", path,
-                )
+            _refuse_other_settings(stored, wanted, path, gap=gap, image_size=image_size,
+                                   client_gap=client_gap, perspective=perspective,
+                                   perspective_gap=perspective_gap)
         return ViewDB(store, stored)
     except BaseException:
         store.close()
         raise
+
+
+def _refuse_other_settings(
+    stored: BuildConfig, wanted: BuildConfig, path: str | Path, *, gap: float | None,
+    image_size: int | None, client_gap: float | None, perspective: Sequence[float] | None,
+    perspective_gap: float | None,
+) -> None:
+    """:class:`~viewdb.errors.ViewDBError` when a setting asked for is not the one an
+    existing file was built with."""
+    if gap is not None and float(gap) != stored.gap:
+        raise ViewDBError(
+            f"was built with --gap {stored.gap:g}, not {gap:g}; "
+            "use a new database file for another grid", path,
+        )
+    if image_size is not None and image_size != stored.render.image_size:
+        raise ViewDBError(
+            f"was built with --image-size {stored.render.image_size}, not {image_size}",
+            path,
+        )
+    if client_gap is not None and float(client_gap) != stored.client_gap:
+        raise ViewDBError(
+            f"was built with --client-gap {stored.client_gap:g}, not {client_gap:g}", path
+        )
+    if perspective is not None and wanted.perspective.distances != stored.perspective.distances:
+        raise ViewDBError(
+            f"was built with --perspective {_distances(stored.perspective.distances)}, "
+            f"not {_distances(wanted.perspective.distances)}", path,
+        )
+    if perspective_gap is not None:  # as the file's own grid would round it
+        asked = replace(stored, perspective=replace(stored.perspective, gap=wanted.perspective.gap))
+        if asked.perspective_gap != stored.perspective_gap:
+            raise ViewDBError(
+                f"was built with --perspective-gap {stored.perspective_gap:g}, "
+                f"not {asked.perspective_gap:g}", path,
+            )
 
 
 def _distances(distances: Sequence[float]) -> str:
