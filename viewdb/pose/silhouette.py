@@ -357,8 +357,9 @@ os.register_at_fork(after_in_child=_forget_pools)
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
-    """This process's pool of ``threads`` threads for :func:`_search_all` (made once; a
-    search runs nothing but compiled code on it, so two queries may share it)."""
+    """This process's pool of ``threads`` threads for :func:`_map` (made once; what a fit
+    hands it reads nothing shared, no catalogue, so two queries may share it; nothing run
+    on it maps again, so it cannot wait on itself)."""
     with _POOLS_LOCK:
         if threads not in _POOLS:
             _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="viewdb-fit")
