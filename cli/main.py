@@ -181,8 +181,8 @@ def ingest(
         float | None,
         typer.Option("--perspective-gap",
                      help="Perspective views' grid gap in degrees, rounded up to a multiple of --gap "
-                          "(new db; default 20). 10 finds boxes photographed from a few sizes away, "
-                          "for about twice the ingest time (docs/results/real-photos.md).",
+                          "(new db; default 20). A finer grid follows close-up outlines more closely, "
+                          "for more ingest time and file (docs/results/real-photos.md).",
                      callback=_number(*GAP_RANGE)),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,
