@@ -180,14 +180,13 @@ class _Objective:
 
     def iou_at(self, p: NDArray[np.float64], base: tuple[NDArray[np.float64], float, float, float]) -> float:
         """:meth:`iou` of :meth:`pose` ``(p, base)``, the pose made and its silhouette
-        counted in one compiled call (:func:`_iou_at`)."""
+        counted in one compiled call (:func:`_evaluate`, as the compiled search makes each
+        step: a pose behind the camera scores 0 and is not an evaluation)."""
         r_rel, u0, w0, z0 = base
         t = self.triangles
-        value = _iou_at(p, r_rel, u0, w0, z0, self.factor, self.k, t.vertices, t.faces, t.front,
-                        self.camera, self.weights, self.valid, self.q_total)
-        if value < 0.0:  # behind the camera: not an evaluation
-            return 0.0
-        self.evaluations += 1
+        value, evaluated = _evaluate(p, r_rel, u0, w0, z0, self.factor, self.k, t.vertices, t.faces,
+                                     t.front, self.camera, self.weights, self.valid, self.q_total)
+        self.evaluations += evaluated
         return value
 
     def iou(self, rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> float:
