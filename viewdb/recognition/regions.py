@@ -395,20 +395,32 @@ def _cut_box(image: LoadedImage, box: Box, cfg: SegmentationConfig, others: Sequ
     """:func:`segment_box`, and the same region with the holes the cut left in it (the
     background seen through a handle), which the pose is fitted to."""
     if cfg.box_method == "grabcut":
-        raw = _grabcut_box(image.rgb, box, cfg, others=others)
+        raw, whole = _tight_cut(image, box, cfg, others)
     else:
         raw = _border_box(image.rgb, box, cfg)
-    whole = largest_filled(raw)
-    if cfg.box_method == "grabcut" and cfg.box_texture_gap < 1.0:
-        pixels = _box_pixels(box, image.rgb.shape[:2])
-        gap = box_gap(whole, pixels) if whole.any() else 1.0
-        if gap > cfg.box_texture_gap:  # not tight: the colours failed; cut on texture
-            raw_texture = _grabcut_box(image.rgb, box, cfg, others=others, texture=True)
-            whole_texture = largest_filled(raw_texture)
-            if whole_texture.any() and box_gap(whole_texture, pixels) < gap:
-                raw, whole = raw_texture, whole_texture
+        whole = largest_filled(raw)
     seg = _checked(whole, "box", box, image, cfg)
     return seg, seg.mask & raw
+
+
+def _tight_cut(image: LoadedImage, box: Box, cfg: SegmentationConfig, others: Sequence[Box]
+               ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """GrabCut's cut of a box and its largest region filled: on colour, or on texture when
+    the colour cut stops more than ``box_texture_gap`` short of a side of the box and the
+    texture cut comes nearer (module doc)."""
+    raw = _grabcut_box(image.rgb, box, cfg, others=others)
+    whole = largest_filled(raw)
+    if cfg.box_texture_gap >= 1.0:
+        return raw, whole
+    pixels = _box_pixels(box, image.rgb.shape[:2])
+    gap = box_gap(whole, pixels) if whole.any() else 1.0
+    if gap <= cfg.box_texture_gap:
+        return raw, whole
+    raw_texture = _grabcut_box(image.rgb, box, cfg, others=others, texture=True)
+    whole_texture = largest_filled(raw_texture)
+    if whole_texture.any() and box_gap(whole_texture, pixels) < gap:
+        return raw_texture, whole_texture
+    return raw, whole
 
 
 def _checked(mask: NDArray[np.bool_], method: str, prompt: Prompt | None, image: LoadedImage,
