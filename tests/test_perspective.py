@@ -12,10 +12,11 @@ import pytest
 
 import viewdb
 from tests.conftest import ROOT, sample
-from viewdb.camera import camera_pose, grid_views
+from viewdb.camera import GL_TO_CV, camera_pose, grid_views
 from viewdb.catalogue.describe import describe_perspective, perspective_grid
 from viewdb.catalogue.features import distance_curve
 from viewdb.catalogue.mesh import load_mesh
+from viewdb.catalogue.pinhole import get_pinhole_renderer
 from viewdb.catalogue.render import get_renderer
 from viewdb.config import BuildConfig, IndexConfig, PerspectiveConfig, RenderConfig
 from viewdb.errors import FeatureError, QueryError
@@ -111,6 +112,13 @@ def test_perspective_silhouettes_follow_the_pinhole_camera_of_the_convention(nam
     grown = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     assert (mask & ~reference).sum() <= 0.01 * mask.sum()
     assert (reference & ~grown).sum() <= 0.01 * reference.sum()
+    # and OpenGL, through the same camera, covers the same pixels (the mask is scan-converted
+    # on the CPU)
+    focal = (size / 2) / math.tan(math.asin(1.0 / distance) * 1.05)
+    rotation = GL_TO_CV @ camera_pose(azimuth, elevation, distance)[:3, :3].T
+    gl, _ = get_pinhole_renderer().render(mesh, rotation, np.array([0.0, 0.0, distance]),
+                                          (focal, focal, (size - 1) / 2, (size - 1) / 2), size)
+    assert gl.sum() > 100 and (gl ^ mask).sum() <= 2
     # and the orthographic renders of the same renderer are untouched by the pinhole camera
     ortho = renderer.render(mesh, azimuth, elevation, shaded=False).mask
     again = get_renderer(RenderConfig(image_size=size)).render(mesh, azimuth, elevation, shaded=False).mask

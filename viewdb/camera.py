@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "GL_TO_CV",
     "camera_direction",
     "camera_pose",
     "grid_views",
@@ -34,6 +35,9 @@ __all__ = [
     "rotation_x",
     "rotation_y",
 ]
+
+#: The OpenGL-style viewdb camera frame to the OpenCV camera frame and back (flip y and z).
+GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 
 
 def normalise_angle(angle: float) -> float:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..camera import GL_TO_CV
 from ..errors import RenderError
 from ..interrupts import interrupts_held
 from ..typed import Intrinsics
@@ -33,9 +34,6 @@ __all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
 #: Meshes whose triangles :meth:`PinholeRenderer.silhouette` keeps (a query re-ranking its
 #: results fits each of up to k meshes, some twice; the objects of one photo share them).
 TRIANGLE_CACHE_MESHES = 32
-
-#: OpenCV camera frame → OpenGL camera frame (flip y and z).
-CV_TO_GL = np.diag([1.0, -1.0, -1.0])
 
 
 @dataclass(frozen=True)
@@ -131,8 +129,8 @@ class PinholeRenderer:
             self._scene.remove_node(self._camera_node)
         self._camera_node = self._scene.add(camera, pose=np.eye(4))
         pose = np.eye(4)
-        pose[:3, :3] = CV_TO_GL @ np.asarray(rotation, dtype=np.float64)
-        pose[:3, 3] = CV_TO_GL @ t
+        pose[:3, :3] = GL_TO_CV @ np.asarray(rotation, dtype=np.float64)
+        pose[:3, 3] = GL_TO_CV @ t
         self._scene.set_pose(self._mesh_node, pose)
         depth = render_depth(self._scene, size, mesh.name)
         return depth > 0, depth

@@ -15,16 +15,18 @@ and being a function of geometry and albedo alone it is identical across machine
 from __future__ import annotations
 
 import atexit
+import math
 import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import camera_pose
+from ..camera import GL_TO_CV, camera_pose
 from ..config import RenderConfig
 from ..errors import RenderError
 from ..interrupts import interrupts_held
+from .coverage import MeshTriangles, silhouette
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 
@@ -125,7 +127,8 @@ class Renderer:
         self._mesh: NormalisedMesh | None = None
         self._scene = None
         self._camera_node = None
-        self._pinhole_node = None
+        #: The mesh whose triangles :meth:`perspective_mask` scan-converts, and them.
+        self._triangles: tuple[NormalisedMesh, MeshTriangles] | None = None
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -142,10 +145,6 @@ class Renderer:
             xmag=cfg.xmag, ymag=cfg.xmag, znear=cfg.znear, zfar=cfg.zfar
         )
         self._camera_node = scene.add(camera, pose=np.eye(4))
-        self._pinhole_node = scene.add(
-            pyrender.PerspectiveCamera(yfov=1.0, aspectRatio=1.0, znear=0.05, zfar=100.0),
-            pose=np.eye(4),
-        )
         scene.main_camera_node = self._camera_node
         self._scene = scene
         self._mesh = mesh
@@ -156,20 +155,19 @@ class Renderer:
         """The silhouette of ``mesh`` seen from ``(azimuth, elevation)`` through a pinhole
         camera ``distance`` bounding radii from the centre, on the view's axis, upright as
         the orthographic view is; the field of view just holds the bounding sphere (5 %
-        margin). Depth only."""
+        margin). Scan-converted on the CPU (:mod:`viewdb.catalogue.coverage`: the pixels
+        OpenGL covers, with no GL call; 10–30x quicker than a depth render)."""
         if not distance > 1.0:
             raise ValueError(f"distance must be greater than 1 (bounding radii), got {distance}")
-        self._use_mesh(mesh)
-        assert self._scene is not None and self._pinhole_node is not None
-        camera = self._pinhole_node.camera
-        camera.yfov = 2.0 * float(np.arcsin(1.0 / distance)) * 1.05
-        camera.znear, camera.zfar = max(0.05, distance - 1.5), distance + 1.5
-        self._scene.set_pose(self._pinhole_node, camera_pose(azimuth, elevation, distance))
-        self._scene.main_camera_node = self._pinhole_node
-        try:
-            return render_depth(self._scene, self.config.image_size, mesh.name) > 0
-        finally:
-            self._scene.main_camera_node = self._camera_node
+        if self._triangles is None or self._triangles[0] is not mesh:
+            geometry = mesh.geometry
+            self._triangles = (mesh, MeshTriangles(geometry.vertices, geometry.faces))
+        size = self.config.image_size
+        rotation = GL_TO_CV @ camera_pose(azimuth, elevation, distance)[:3, :3].T
+        focal = (size / 2.0) / math.tan(math.asin(1.0 / distance) * 1.05)
+        centre = (size - 1) / 2.0  # pixel centres on integers
+        return silhouette(self._triangles[1], rotation, np.array([0.0, 0.0, distance]),
+                          (focal, focal, centre, centre), size)
 
     def render(
         self, mesh: NormalisedMesh, azimuth: float, elevation: float, *, shaded: bool = True

@@ -45,7 +45,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
+from ..camera import GL_TO_CV, normalise_angle, pixel_rays_to_camera, rotation_x, rotation_y
 from ..errors import PoseError, QueryError
 from .intrinsics import check_intrinsics
 
@@ -68,8 +68,6 @@ __all__ = [
 
 #: The views' camera distance (:class:`viewdb.config.RenderConfig.camera_distance`).
 CAMERA_DISTANCE = 3.0
-#: The OpenGL-style viewdb camera frame to the OpenCV camera frame (and back).
-GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 
 
 def rotation_z(degrees: float) -> NDArray[np.float64]:
