@@ -26,6 +26,7 @@ from ..camera import GL_TO_CV, camera_pose
 from ..config import RenderConfig
 from ..errors import RenderError
 from ..interrupts import interrupts_held
+from .coverage import MeshTriangles, silhouette
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
 
@@ -126,6 +127,8 @@ class Renderer:
         self._mesh: NormalisedMesh | None = None
         self._scene = None
         self._camera_node = None
+        #: The mesh whose triangles :meth:`perspective_mask` scan-converts, and them.
+        self._triangles: tuple[NormalisedMesh, MeshTriangles] | None = None
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -152,18 +155,19 @@ class Renderer:
         """The silhouette of ``mesh`` seen from ``(azimuth, elevation)`` through a pinhole
         camera ``distance`` bounding radii from the centre, on the view's axis, upright as
         the orthographic view is; the field of view just holds the bounding sphere (5 %
-        margin). Scan-converted on the CPU (:meth:`~viewdb.catalogue.pinhole.PinholeRenderer.silhouette`:
-        the pixels OpenGL covers, with no GL call; 10–30x quicker than a depth render)."""
+        margin). Scan-converted on the CPU (:mod:`viewdb.catalogue.coverage`: the pixels
+        OpenGL covers, with no GL call; 10–30x quicker than a depth render)."""
         if not distance > 1.0:
             raise ValueError(f"distance must be greater than 1 (bounding radii), got {distance}")
-        from .pinhole import get_pinhole_renderer  # built on this module; it keeps the triangles
-
+        if self._triangles is None or self._triangles[0] is not mesh:
+            geometry = mesh.geometry
+            self._triangles = (mesh, MeshTriangles(geometry.vertices, geometry.faces))
         size = self.config.image_size
         rotation = GL_TO_CV @ camera_pose(azimuth, elevation, distance)[:3, :3].T
         focal = (size / 2.0) / math.tan(math.asin(1.0 / distance) * 1.05)
         centre = (size - 1) / 2.0  # pixel centres on integers
-        return get_pinhole_renderer().silhouette(mesh, rotation, np.array([0.0, 0.0, distance]),
-                                                 (focal, focal, centre, centre), size)
+        return silhouette(self._triangles[1], rotation, np.array([0.0, 0.0, distance]),
+                          (focal, focal, centre, centre), size)
 
     def render(
         self, mesh: NormalisedMesh, azimuth: float, elevation: float, *, shaded: bool = True
