@@ -11,6 +11,7 @@ from viewdb.camera import (
     pixel_rays_to_camera,
     rotation_x,
     rotation_y,
+    sphere_views,
 )
 
 angles = st.floats(0, 360, exclude_max=True, allow_nan=False)
@@ -64,6 +65,39 @@ def test_grid_has_360_over_gap_squared_views(gap):
 def test_grid_rejects_gaps_that_do_not_divide_360():
     with pytest.raises(ValueError):
         grid_views(7)
+    with pytest.raises(ValueError):
+        sphere_views(7)
+
+
+def _directions(views):
+    return np.array([camera_direction(h, v) for h, v in views])
+
+
+@pytest.mark.parametrize("gap", [5, 10, 15, 20, 30, 45, 90])
+def test_sphere_views_are_grid_views_each_direction_once_and_upright(gap):
+    views = sphere_views(gap)
+    assert len(set(views)) == len(views) and set(views) <= set(grid_views(gap))
+    assert all(v <= 90 or v >= 270 for _, v in views)  # |elevation| <= 90: an upright camera
+    directions = _directions(views)
+    off_pole = np.abs(directions[:, 1]) < 1 - 1e-9  # at a pole every azimuth is one position
+    cos = directions[off_pole] @ directions[off_pole].T
+    np.fill_diagonal(cos, -1)
+    assert cos.max() < 1 - 1e-9
+
+
+@given(st.floats(-1, 1), st.floats(0, 2 * np.pi), st.sampled_from([5, 10, 20, 30]))
+def test_sphere_views_cover_every_direction_almost_as_closely_as_the_square_grid(y, phi, gap):
+    r = np.sqrt(1 - y * y)
+    direction = np.array([r * np.sin(phi), y, r * np.cos(phi)])
+    nearest = {name: np.degrees(np.arccos(np.clip((_directions(f(gap)) @ direction).max(), -1, 1)))
+               for name, f in (("sphere", sphere_views), ("square", grid_views))}
+    assert nearest["square"] <= 0.71 * gap
+    assert nearest["sphere"] <= 0.8 * gap
+
+
+@pytest.mark.parametrize("gap", [5, 10, 20])
+def test_sphere_views_are_far_fewer_than_the_square_grid(gap):
+    assert len(sphere_views(gap)) < 0.4 * len(grid_views(gap))
 
 
 def test_normalise_angle():

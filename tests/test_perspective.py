@@ -12,7 +12,7 @@ import pytest
 
 import viewdb
 from tests.conftest import ROOT, sample
-from viewdb.camera import GL_TO_CV, camera_pose, grid_views
+from viewdb.camera import GL_TO_CV, camera_pose, grid_views, sphere_views
 from viewdb.catalogue.describe import describe_perspective, perspective_grid
 from viewdb.catalogue.features import distance_curve
 from viewdb.catalogue.mesh import load_mesh
@@ -28,6 +28,10 @@ SAMPLES = 128
 
 def rms(a, b) -> float:
     return float(np.sqrt(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2)))
+
+
+def euclid(a, b) -> float:
+    return float(np.linalg.norm(np.asarray(a, np.float64) - np.asarray(b, np.float64)))
 
 
 # ---------------------------------------------------------------- configuration
@@ -63,7 +67,7 @@ def test_the_perspective_grid_is_the_coarsest_server_grid_multiple_needed(gap, w
     smaller = [m * gap for m in range(1, round(ratio)) if m * gap >= wanted and 360 % (m * gap) == 0]
     assert not smaller
     views = perspective_grid(config)
-    assert len(views) == len(grid_views(g)) * len(config.perspective.distances)
+    assert len(views) == len(sphere_views(g)) * len(config.perspective.distances)
     server = set(grid_views(gap))
     assert all((h, v) in server for h, v, _ in views)
 
@@ -74,6 +78,17 @@ def test_a_configuration_from_before_revision_0004_reads_with_the_default_perspe
     assert BuildConfig.from_dict(data).perspective == PerspectiveConfig()
     off = BuildConfig(perspective=PerspectiveConfig(distances=()))
     assert BuildConfig.from_dict(off.to_dict()).perspective.enabled is False
+
+
+def test_a_configuration_from_before_the_sphere_layout_keeps_its_square_grid():
+    data = BuildConfig(gap=30).to_dict()
+    assert data["perspective"].pop("grid") == "sphere"
+    old = BuildConfig.from_dict(data)
+    assert old.perspective.grid == "square"
+    assert len(perspective_grid(old)) == len(grid_views(old.perspective_gap)) * 3
+    assert BuildConfig.from_dict(old.to_dict()) == old  # and keeps it when saved again
+    with pytest.raises(ValueError, match="perspective grid"):
+        PerspectiveConfig(grid="cube")
 
 
 # ---------------------------------------------------------------- rendering
@@ -142,14 +157,17 @@ def test_pinhole_distance_inside_the_bounding_sphere_is_refused():
 
 
 # ---------------------------------------------------------------- skimming
+@pytest.mark.parametrize("tolerance", [None, 0.01])
 @pytest.mark.parametrize("name", ["cone", "car"])
-def test_perspective_skimming_leaves_out_only_views_within_sigma_of_a_kept_one(name):
+def test_perspective_skimming_leaves_out_only_views_within_the_tolerance_of_a_kept_one(name, tolerance):
     config = BuildConfig(gap=60, render=RenderConfig(image_size=96),
-                         perspective=PerspectiveConfig(distances=(3.0, 5.0)))
+                         perspective=PerspectiveConfig(distances=(3.0, 5.0), grid="square",
+                                                       tolerance=tolerance))
     mesh = load_mesh(sample(name), name)
     kept = describe_perspective(mesh, config)
     renderer = get_renderer(config.render)
-    sigma = config.skim.sigma
+    # None: the older files' rule, an RMS difference under the skimming sigma
+    limit = config.skim.sigma * math.sqrt(SAMPLES) if tolerance is None else tolerance
     by_distance: dict[float, list] = {}
     for v in kept:
         by_distance.setdefault(v.distance, []).append(v)
@@ -162,11 +180,11 @@ def test_perspective_skimming_leaves_out_only_views_within_sigma_of_a_kept_one(n
         if mine:
             assert np.allclose(mine[0].curve, curve, atol=1e-6)
         else:  # left out: some kept view at that distance has the same shape
-            assert min(rms(k.curve, curve) for k in by_distance[d]) < sigma
+            assert min(euclid(k.curve, curve) for k in by_distance[d]) < limit
     for d, views in by_distance.items():  # kept views are pairwise distinct shapes
         for i, a in enumerate(views):
             for b in views[:i]:
-                assert rms(a.curve, b.curve) >= sigma, (d, a.azimuth, a.elevation, b.azimuth, b.elevation)
+                assert euclid(a.curve, b.curve) >= limit, (d, a.azimuth, a.elevation, b.azimuth, b.elevation)
     grid = len(perspective_grid(config))
     if name == "cone":  # axisymmetric: its views around the axis repeat
         assert len(kept) < grid / 2

@@ -22,6 +22,8 @@ A grid of gap ``g`` holds the ``(360/g)²`` views with ``h, v ∈ {0, g, 2g, …
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -30,6 +32,7 @@ __all__ = [
     "camera_direction",
     "camera_pose",
     "grid_views",
+    "sphere_views",
     "normalise_angle",
     "pixel_rays_to_camera",
     "rotation_x",
@@ -88,6 +91,44 @@ def grid_views(gap: float) -> list[tuple[float, float]]:
         raise ValueError(f"gap must divide 360 evenly, got {gap}")
     angles = [i * gap for i in range(round(steps))]
     return [(h, v) for h in angles for v in angles]
+
+
+#: :func:`sphere_views`: the widest azimuth step near the poles, in grid gaps. Near a pole a
+#: step of azimuth mostly turns the picture in its plane, which a gravity hint's narrow
+#: window of turns must still reach.
+POLAR_STRETCH = 3
+
+
+def sphere_views(gap: float) -> list[tuple[float, float]]:
+    """One ``(azimuth, elevation)`` of the grid of ``gap`` degrees per viewing direction,
+    about ``gap`` apart over the sphere, azimuth-major.
+
+    The square grid (:func:`grid_views`) sees every direction twice: ``(h, v)`` and
+    ``(h + 180, 180 − v)`` are the same camera position turned half a turn in the
+    picture's plane, which the in-plane search covers (and which a gravity hint never
+    asks for: an upright camera has ``|v| ≤ 90``). Its rings of constant elevation also
+    crowd towards the poles, where a step of ``gap`` in azimuth is ``gap·cos v`` of arc.
+    So here the elevations are those of the grid in ``[−90, 90]`` (normalised to
+    ``[0, 360)``), and at elevation ``v`` the azimuth step is ``m·gap`` with ``m`` the
+    nearest whole number to ``1 / cos v``, at most :data:`POLAR_STRETCH`. Every view is a
+    view of the square grid, about two and a half times fewer of them at 10°.
+
+    Raises
+    ------
+    ValueError
+        If ``gap`` does not divide 360.
+    """
+    grid = grid_views(gap)  # checks the gap
+    steps = round(360.0 / gap)
+    quarter = int(90.0 // gap)
+    views = set()
+    for ring in range(-quarter, quarter + 1):
+        cos_v = math.cos(math.radians(ring * gap))
+        stretch = (POLAR_STRETCH if cos_v < 1.0 / POLAR_STRETCH
+                   else max(1, min(POLAR_STRETCH, round(1.0 / cos_v))))
+        # as grid indices, so the angles are the very floats of grid_views
+        views.update((i * stretch, ring % steps) for i in range(math.ceil(steps / stretch)))
+    return [hv for hv in grid if (round(hv[0] / gap), round(hv[1] / gap)) in views]
 
 
 def pixel_rays_to_camera(

@@ -232,6 +232,10 @@ class ClientFileConfig:
             raise ValueError(f"page_size must be a power of two in [512, 65536], got {self.page_size}")
 
 
+#: The layouts of :attr:`PerspectiveConfig.grid`.
+PERSPECTIVE_GRIDS = ("sphere", "square")
+
+
 @dataclass(frozen=True)
 class PerspectiveConfig:
     """Perspective silhouettes stored beside the orthographic views (schema revision 0004).
@@ -250,6 +254,18 @@ class PerspectiveConfig:
     distances: tuple[float, ...] = (3.0, 4.0, 6.0)
     #: Grid gap of the perspective views, degrees (divides 360).
     gap: float = 20.0
+    #: Which views of that grid: "sphere", one per viewing direction, spaced about ``gap``
+    #: over the sphere (:func:`viewdb.camera.sphere_views`); "square", every view of the
+    #: grid (:func:`viewdb.camera.grid_views`: each direction twice, crowded at the poles),
+    #: what files made before the sphere layout hold.
+    grid: str = "sphere"
+    #: A view whose curve lies within this distance (Euclidean, the search's units: a
+    #: match is typically 0.05–0.2 away) of a view already kept at the same camera
+    #: distance is left out, as a repeat. ``None``: within the skimming threshold
+    #: (:attr:`SkimConfig.sigma`) as an RMS difference, what files made before this
+    #: setting did; it is about 0.23 in the search's units and left out views a photo
+    #: needed.
+    tolerance: float | None = 0.01
 
     def __post_init__(self) -> None:
         try:
@@ -270,6 +286,12 @@ class PerspectiveConfig:
             )
         if not _divides_360(self.gap) or self.gap < LIMITS.min_gap:
             raise ValueError(f"perspective gap must divide 360 evenly, got {self.gap}")
+        if self.tolerance is not None and not (isinstance(self.tolerance, int | float)
+                                                and 0 <= self.tolerance < math.inf):
+            raise ValueError(f"perspective tolerance must be a distance of 0 or more, got {self.tolerance!r}")
+        if self.grid not in PERSPECTIVE_GRIDS:
+            raise ValueError(f"perspective grid must be one of {', '.join(PERSPECTIVE_GRIDS)}, "
+                             f"got {self.grid!r}")
 
     @property
     def enabled(self) -> bool:
@@ -679,7 +701,10 @@ class BuildConfig:
             index=IndexConfig(**data.get("index", {})),
             # files from before revision 0004 record none: they get the defaults, and an
             # ingest of their unchanged sources adds the perspective views they lack
-            perspective=PerspectiveConfig(**data.get("perspective", {})),
+            # files from before the sphere layout record no grid nor tolerance: they hold
+            # the square grid, skimmed by the RMS threshold
+            perspective=PerspectiveConfig(**{"grid": "square", "tolerance": None, **data["perspective"]}
+                                          if "perspective" in data else {}),
             # files from before revision 0005 record none: an ingest of their unchanged
             # sources adds the appearance rows with these defaults
             appearance=AppearanceConfig(**data.get("appearance", {})),

@@ -7,6 +7,7 @@ worker process can hand it back to the writer).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -14,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import grid_views
+from ..camera import grid_views, sphere_views
 from ..config import AppearanceConfig, BuildConfig
 from ..errors import FeatureError
 from .appearance import Appearance, appearance_of, carries_colour, opposite_view, turned_render, turned_view
@@ -131,8 +132,10 @@ def classify_object(
 
 def perspective_grid(config: BuildConfig) -> list[tuple[float, float, float]]:
     """``(azimuth, elevation, distance)`` of every perspective view the configuration asks
-    for: its grid (never finer than the server grid) at each distance."""
-    grid = grid_views(config.perspective_gap)
+    for: its grid's views (never finer than the server grid; :attr:`PerspectiveConfig.grid`)
+    at each distance."""
+    layout = sphere_views if config.perspective.grid == "sphere" else grid_views
+    grid = layout(config.perspective_gap)
     return [(h, v, d) for d in config.perspective.distances for h, v in grid]
 
 
@@ -144,14 +147,16 @@ def describe_perspective(
 ) -> list[PerspectiveView]:
     """The perspective silhouettes of :func:`perspective_grid`, skimmed of repeats.
 
-    At each distance a view whose curve lies within the skimming tolerance (RMS ``sigma``)
+    At each distance a view whose curve lies within :attr:`PerspectiveConfig.tolerance`
     of a view already kept is left out: it would be found at the same distance, give or
-    take ``sigma`` (an axisymmetric object's views around its axis, a box's faces). Views
-    with no silhouette are left out too. ``on_view(1)`` after each render.
+    take that much (an exactly axisymmetric object's views around its axis, a box's
+    faces). Views with no silhouette are left out too. ``on_view(1)`` after each render.
     """
     renderer = renderer or get_renderer(config.render)
     samples = config.features.curve_samples
-    sigma = config.skim.sigma
+    tolerance = config.perspective.tolerance
+    # the older files' threshold: an RMS difference of the skimming sigma
+    limit = config.skim.sigma * math.sqrt(samples) if tolerance is None else tolerance
     grid = perspective_grid(config)
     kept: list[PerspectiveView] = []
     # the curves kept so far at each distance, filled row by row
@@ -166,7 +171,7 @@ def describe_perspective(
         except FeatureError:
             continue
         same = kept_curves[distance][: n_kept[distance]]
-        if len(same) and float(np.min(np.sqrt(np.mean((same - curve) ** 2, axis=1)))) < sigma:
+        if len(same) and float(np.min(np.sqrt(np.sum((same - curve) ** 2, axis=1)))) < limit:
             continue
         kept_curves[distance][n_kept[distance]] = curve
         n_kept[distance] += 1
