@@ -110,8 +110,9 @@ def sphere_views(gap: float) -> list[tuple[float, float]]:
     crowd towards the poles, where a step of ``gap`` in azimuth is ``gap·cos v`` of arc.
     So here the elevations are those of the grid in ``[−90, 90]`` (normalised to
     ``[0, 360)``), and at elevation ``v`` the azimuth step is ``m·gap`` with ``m`` the
-    nearest whole number to ``1 / cos v``, at most :data:`POLAR_STRETCH`. Every view is a
-    view of the square grid, about two and a half times fewer of them at 10°.
+    largest whole number at most ``1 / cos v`` (so the step is at most ``gap`` of arc)
+    and at most :data:`POLAR_STRETCH`. Every view is a view of the square grid, and every
+    direction is about as close to one as on the square grid; 2.5 times fewer views at 10°.
 
     Raises
     ------
@@ -124,8 +125,7 @@ def sphere_views(gap: float) -> list[tuple[float, float]]:
     views = set()
     for ring in range(-quarter, quarter + 1):
         cos_v = math.cos(math.radians(ring * gap))
-        stretch = (POLAR_STRETCH if cos_v < 1.0 / POLAR_STRETCH
-                   else max(1, min(POLAR_STRETCH, round(1.0 / cos_v))))
+        stretch = POLAR_STRETCH if cos_v < 1.0 / POLAR_STRETCH else max(1, math.floor(1.0 / cos_v + 1e-9))
         # as grid indices, so the angles are the very floats of grid_views
         views.update((i * stretch, ring % steps) for i in range(math.ceil(steps / stretch)))
     return [hv for hv in grid if (round(hv[0] / gap), round(hv[1] / gap)) in views]
