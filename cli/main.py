@@ -175,14 +175,14 @@ def ingest(
     perspective: Annotated[
         str | None,
         typer.Option(help="Perspective views' camera distances in bounding radii, e.g. 3,4,6, "
-                          "or 'none' (new db; default 3,4,6)."),
+                          "or 'none' (new db; default 2,3,4,6)."),
     ] = None,
     perspective_gap: Annotated[
         float | None,
         typer.Option("--perspective-gap",
                      help="Perspective views' grid gap in degrees, rounded up to a multiple of --gap "
-                          "(new db; default 20). A finer grid follows close-up outlines more closely, "
-                          "for more ingest time and file (docs/results/real-photos.md).",
+                          "(new db; default 10). A finer grid follows close-up outlines more closely, "
+                          "for more ingest time and file (docs/results/latency.md).",
                      callback=_number(*GAP_RANGE)),
     ] = None,
     jobs: Annotated[int, typer.Option(help="Worker processes.", min=1, max=LIMITS.max_jobs)] = 1,

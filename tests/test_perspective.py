@@ -83,9 +83,10 @@ def test_a_configuration_from_before_revision_0004_reads_with_the_default_perspe
 def test_a_configuration_from_before_the_sphere_layout_keeps_its_square_grid():
     data = BuildConfig(gap=30).to_dict()
     assert data["perspective"].pop("grid") == "sphere"
+    assert data["perspective"].pop("tolerance") == 0.01
     old = BuildConfig.from_dict(data)
-    assert old.perspective.grid == "square"
-    assert len(perspective_grid(old)) == len(grid_views(old.perspective_gap)) * 3
+    assert (old.perspective.grid, old.perspective.tolerance) == ("square", None)
+    assert len(perspective_grid(old)) == len(grid_views(old.perspective_gap)) * len(old.perspective.distances)
     assert BuildConfig.from_dict(old.to_dict()) == old  # and keeps it when saved again
     with pytest.raises(ValueError, match="perspective grid"):
         PerspectiveConfig(grid="cube")

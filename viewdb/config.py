@@ -246,14 +246,14 @@ class PerspectiveConfig:
     view's axis at each of ``distances`` (in bounding radii from the model's centre, the
     bounding sphere just inside the frame); only its distance curve is stored, and it is
     indexed in the full tier (not the sparse one, so client files do not grow).
-    ``benchmarks/perspective_views.py`` measured the gain: rank-1 on the synthetic photos
-    52.5 → 60 % and 52.5 → 80 % (two seeds) with views from 3, 4 and 6 radii added.
+    ``docs/results/latency.md`` compares the grids: 10° on the sphere at 2, 3, 4 and 6 radii
+    (the default) against 20° at 3, 4 and 6.
     """
 
     #: Camera distances in bounding radii (each > 1); empty: no perspective views.
-    distances: tuple[float, ...] = (3.0, 4.0, 6.0)
+    distances: tuple[float, ...] = (2.0, 3.0, 4.0, 6.0)
     #: Grid gap of the perspective views, degrees (divides 360).
-    gap: float = 20.0
+    gap: float = 10.0
     #: Which views of that grid: "sphere", one per viewing direction, spaced about ``gap``
     #: over the sphere (:func:`viewdb.camera.sphere_views`); "square", every view of the
     #: grid (:func:`viewdb.camera.grid_views`: each direction twice, crowded at the poles),
