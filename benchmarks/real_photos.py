@@ -1,7 +1,7 @@
 """Real photographs queried with box prompts: the YCB-Video objects, the ViSP tea box and
 cube and the phone box, against the whole catalogue.
 
-    python benchmarks/real_photos.py [--db FILE | --gap 10 [--perspective-gap 20] [--subset N] [--jobs 2]]
+    python benchmarks/real_photos.py [--db FILE | --gap 10 [--perspective-gap 10] [--subset N] [--jobs 2]]
                                      [--out DIR] [-k 5] [--plan server] [--objects A,B] [--no-extras]
                                      [--overlays docs/results/real]
 
@@ -351,7 +351,7 @@ def main() -> None:
     parser.add_argument("--no-extras", action="store_true", help="skip the ViSP and phone-box cases")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--perspective-gap", type=float, default=None,
-                        help="the built catalogue's perspective grid gap (default the file default, 20)")
+                        help="the built catalogue's perspective grid gap (default the file default, 10)")
     parser.add_argument("--no-rerank", action="store_true",
                         help="no re-ranking by silhouette fit; only the best result is posed")
     args = parser.parse_args()
