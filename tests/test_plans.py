@@ -58,25 +58,47 @@ def test_cs1_equals_server_on_random_perturbations(tiered_db, client_file, seed,
         _same(db.recognise(q, k, band=band, plan="cs1", client=client).results, server.results)
 
 
+def _perspective_views(path):
+    """``(object, azimuth, elevation, distance) -> curve`` of every perspective view of a file."""
+    import sqlite3
+
+    from viewdb.storage.codecs import decode_array
+
+    with sqlite3.connect(path) as raw:
+        rows = raw.execute("SELECT o.name, p.azimuth, p.elevation, p.distance, p.samples FROM perspective_views p"
+                           " JOIN objects o ON o.id = p.object_id").fetchall()
+    return {(n, h, v, d): decode_array(b, np.float32, (None,)).astype(np.float64) for n, h, v, d, b in rows}
+
+
 def test_cs2_walks_to_real_views_never_better_than_exact(tiered_db, client_file):
     rng = np.random.default_rng(12)
+    perspective = _perspective_views(tiered_db)
+    keys = list(perspective)
     with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
-        agree = 0
+        agree = ended_on_perspective = 0
         queries = _queries(db, rng, 12)
+        # and outlines as a camera from close by sees them: stored perspective views, jittered
+        queries += [perspective[keys[i]] + rng.normal(0, 0.01, 128) for i in rng.choice(len(keys), 8, replace=False)]
         for q in queries:
             server = {c.object: c.distance for c in db.recognise(q, 6, plan="server").results}
             cs2 = db.recognise(q, 3, plan="cs2", client=client)
             assert cs2.client_results and len(cs2.results) <= 3
             assert {c.object for c in cs2.results} <= {c.object for c in cs2.client_results}
             for c in cs2.results:
-                # a real view of the full grid at the reported distance, never below the exact
-                curve = db.view(c.object, c.azimuth, c.elevation).curve
+                # a real view (of the full grid, or a perspective one) at the reported
+                # distance, never below the exact
+                if c.camera_distance is None:
+                    curve = db.view(c.object, c.azimuth, c.elevation).curve
+                else:
+                    curve = perspective[(c.object, c.azimuth, c.elevation, c.camera_distance)]
+                    ended_on_perspective += 1
                 target = mirror_curve(curve) if c.mirrored else curve
                 assert dtw(q, target, 6) == pytest.approx(c.distance, abs=1e-5)
                 assert c.object not in server or c.distance >= server[c.object] - 1e-9
             top = db.recognise(q, 1, plan="server").results[0].object
             agree += cs2.results[0].object == top
         assert agree >= len(queries) // 2  # a heuristic, but not a coin toss
+        assert ended_on_perspective  # the walk's perspective finish was reached
 
 
 def test_client_file_holds_the_sparse_tier_only(tiered_db, client_file):
@@ -257,3 +279,50 @@ def test_a_client_built_with_other_settings_is_stale(tmp_path, other):
         server_ans = db.recognise(q, 3, plan="server").results
         with viewdb.open(built["other"], read_only=True) as side:
             _same(db.recognise(q, 3, plan="cs1", client=side).results, server_ans)
+
+
+# ---------------------------------------------------------------- CS2's perspective finish
+def _fake_object(rng):
+    """Curves of one object's grid views (30°) and of perspective views at some directions."""
+    from viewdb.camera import grid_views
+
+    grid = {hv: 1 + 0.3 * rng.standard_normal(128) for hv in grid_views(30)}
+    perspective = {(h, v, d): 1 + 0.3 * rng.standard_normal(128)
+                   for h, v in grid_views(30) for d in (2.0, 4.0) if rng.random() < 0.5}
+    return grid, perspective
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0.0, 30.0, 45.0]))
+def test_cs2_walk_ends_on_the_best_perspective_view_near_where_it_stopped(seed, radius):
+    from viewdb.camera import camera_direction
+    from viewdb.search.plans import WalkRequest, walk
+
+    rng = np.random.default_rng(seed)
+    grid, perspective = _fake_object(rng)
+    q = 1 + 0.3 * rng.standard_normal(128)
+    asked: list[tuple[float, float, float]] = []
+
+    def near(name, h, v, r):
+        asked.append((h, v, r))
+        here = camera_direction(h, v)
+        return [(ph, pv, d, c) for (ph, pv, d), c in perspective.items()
+                if camera_direction(ph, pv) @ here >= np.cos(np.radians(r)) - 1e-9]
+
+    start = [viewdb.Candidate("thing", 0.0, 90.0, 30.0, False)]
+    request = WalkRequest(q, 6, 1, 90.0, start)
+    plain, _ = walk(request, lambda n, h, v: grid[(h, v)], 30.0)
+    finished, stats = walk(request, lambda n, h, v: grid[(h, v)], 30.0, perspective_near=near,
+                           perspective_radius=radius)
+    [(h, v, r)] = asked  # once, where the plain walk stopped
+    assert (h, v, r) == (plain[0].azimuth, plain[0].elevation, radius)
+    # brute force over the walked view and the perspective views near it, both orientations
+    options = [(plain[0].distance, plain[0].azimuth, plain[0].elevation, None)]
+    for ph, pv, d, c in near("thing", h, v, r):
+        options.append((min(dtw(q, c, 6), dtw(q, mirror_curve(c), 6)), ph, pv, d))
+    best = min(options, key=lambda o: o[0])
+    assert finished[0].distance == pytest.approx(best[0]) and finished[0].distance <= plain[0].distance
+    if finished[0].distance < plain[0].distance:
+        assert (finished[0].azimuth, finished[0].elevation, finished[0].camera_distance) == best[1:]
+    else:
+        assert finished[0] == plain[0]

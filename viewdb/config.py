@@ -830,6 +830,10 @@ class SearchConfig:
     #: Sources with fewer groups are searched on one thread: starting threads costs more
     #: than they save on a small catalogue.
     parallel_min_groups: int = 512
+    #: CS2's walk ends by comparing the object's perspective views within this many
+    #: perspective grid gaps of arc of where it ended (:func:`viewdb.search.plans.walk`);
+    #: 0: those of that direction alone; negative: none.
+    walk_perspective: float = 1.0
 
     def __post_init__(self) -> None:
         if self.threads < 1:

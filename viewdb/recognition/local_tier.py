@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import SearchConfig
 from ..errors import PoseError, QueryError, RenderError
 from ..pose.estimate import PoseConfig, PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
@@ -102,8 +103,10 @@ class LocalServerTier:
         with self.catalogue.tier_reader().snapshot() as reader:
             known = reader.object_versions()
         client = [c for c in request.client if c.object in known]
-        found, stats = walk(replace(request, curve=q, client=client), self.catalogue.grid_curve,
-                            self.catalogue.config.gap)
+        config, reach = self.catalogue.config, SearchConfig().walk_perspective
+        found, stats = walk(replace(request, curve=q, client=client), self.catalogue.grid_curve, config.gap,
+                            perspective_near=self.catalogue.perspective_near if reach >= 0 else None,
+                            perspective_radius=reach * config.perspective_gap)
         return ServerReply(found, stats)
 
     # ------------------------------------------------------------------ re-ranking

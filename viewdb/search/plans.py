@@ -401,34 +401,47 @@ def _norm(angle: float) -> float:
     return 0.0 if abs(a - 360.0) < 1e-9 else a
 
 
+#: ``perspective_near(object, h, v, radius)``: the object's perspective views within
+#: ``radius`` degrees of arc of direction ``(h, v)``, as ``(h, v, camera distance, curve)``.
+PerspectiveNear = Callable[[str, float, float, float],
+                           Sequence[tuple[float, float, float, NDArray[np.float64]]]]
+
+
 def walk(
     request: WalkRequest,
     curve_at: Callable[[str, float, float], NDArray[np.float64] | None],
     server_gap: float,
     max_steps: int = 16,
+    perspective_near: PerspectiveNear | None = None,
+    perspective_radius: float = 0.0,
 ) -> tuple[list[Candidate], dict[str, float]]:
     """CS2's server half (Algorithm 4): a neighbour walk per client candidate.
 
     ``curve_at(object, h, v)`` gives the curve of a server-grid view (None for a view
     without a silhouette). At each grid gap, from the client's gap halved down to
     ``server_gap``, the walk moves to the best of the current view's 8 neighbours until
-    none is better, then halves the gap. Returns the top-k objects by their best view.
-    A candidate found by a shift search (its ``shift``) is walked with the query curve
+    none is better, then halves the gap. Then, with ``perspective_near(object, h, v,
+    radius)`` (the object's perspective views within ``perspective_radius`` degrees of arc
+    of where the walk ended, as ``(h, v, camera distance, curve)``), each of those is
+    compared too and the best view kept: a photo's outline is a perspective one, which the
+    orthographic grid alone misses. Returns the top-k objects by their best view. A
+    candidate found by a shift search (its ``shift``) is walked with the query curve
     started at that sample.
     """
     evaluated: dict[tuple[str, float, float, int], tuple[float, bool]] = {}
+    compared = 0
+
+    def against(q: NDArray[np.float64], curve: NDArray[np.float64]) -> tuple[float, bool]:
+        d = dtw(q, curve, request.band)
+        dm = dtw(q, mirror_curve(curve), request.band)
+        return (dm, True) if dm < d else (d, False)
 
     def distance(name: str, h: float, v: float, shift: int) -> tuple[float, bool]:
         key = (name, _norm(h), _norm(v), shift)
         if key not in evaluated:
             curve = curve_at(*key[:3])
-            if curve is None:
-                evaluated[key] = (math.inf, False)
-            else:
-                q = shifted(request.curve, shift)
-                d = dtw(q, curve, request.band)
-                dm = dtw(q, mirror_curve(curve), request.band)
-                evaluated[key] = (dm, True) if dm < d else (d, False)
+            evaluated[key] = ((math.inf, False) if curve is None
+                              else against(shifted(request.curve, shift), curve))
         return evaluated[key]
 
     results = []
@@ -447,10 +460,19 @@ def walk(
                 if d >= best:
                     break
                 best, mirrored, h, v = d, m, _norm(nh), _norm(nv)
+        camera: float | None = None
+        if perspective_near is not None:
+            q = shifted(request.curve, shift)
+            for ph, pv, pd, curve in perspective_near(cand.object, h, v, perspective_radius):
+                compared += 1
+                d, m = against(q, curve)
+                if d < best:
+                    best, mirrored, h, v, camera = d, m, ph, pv, pd
         if math.isfinite(best):
-            results.append(Candidate(cand.object, best, h, v, mirrored, shift=cand.shift))
+            results.append(Candidate(cand.object, best, h, v, mirrored, camera_distance=camera,
+                                     shift=cand.shift))
     results.sort(key=lambda c: (c.distance, c.object))
-    return _one_per_object(results)[: request.k], {"dtw": float(2 * len(evaluated))}
+    return _one_per_object(results)[: request.k], {"dtw": float(2 * (len(evaluated) + compared))}
 
 
 def _one_per_object(ranked: Sequence[Candidate]) -> list[Candidate]:

@@ -10,6 +10,7 @@ written again.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -19,7 +20,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import grid_views, normalise_angle
+from ..camera import camera_direction, grid_views, normalise_angle
 from ..catalogue.appearance import Appearance, appearance_of, carries_colour, turned_view
 from ..catalogue.describe import describe_view
 from ..catalogue.features import mirror_curve
@@ -309,6 +310,27 @@ class StoredCatalogue:
     def stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
         """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
         return cached(self._curves, name, lambda: self._store.object_curves(name), CURVE_CACHE_OBJECTS)
+
+    def perspective_near(
+        self, name: str, azimuth: float, elevation: float, radius: float
+    ) -> list[tuple[float, float, float, NDArray[np.float64]]]:
+        """``(azimuth, elevation, camera distance, curve)`` of the object's perspective views
+        whose direction is within ``radius`` degrees of arc of ``(azimuth, elevation)``
+        (read from the file by their directions, and cached)."""
+        def read() -> list[tuple[float, float, float, NDArray[np.float64]]]:
+            grid, directions = self.derived("perspective_grid", ("",), self._perspective_directions, 1)
+            near = directions @ camera_direction(azimuth, elevation) >= math.cos(math.radians(radius)) - 1e-9
+            rows = self._store.perspective_curves_at(name, [grid[i] for i in np.flatnonzero(near)])
+            return [(a, e, d, np.asarray(c, np.float64)) for a, e, d, c in rows]
+
+        return self.derived("perspective_near", (name, azimuth, elevation, radius), read,
+                            CURVE_CACHE_OBJECTS * 8)
+
+    def _perspective_directions(self) -> tuple[list[tuple[float, float]], NDArray[np.float64]]:
+        """The perspective grid's views (every one a perspective view may sit at) and their
+        unit viewing directions."""
+        grid = grid_views(self.config.perspective_gap)
+        return grid, np.array([camera_direction(h, v) for h, v in grid])
 
     def grid_curve(self, name: str, azimuth: float, elevation: float) -> NDArray[np.float64] | None:
         """The curve of grid view (h, v) of ``name`` from the stored views (a pruned view is

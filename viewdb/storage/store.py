@@ -118,6 +118,27 @@ class Store(Database):
                 return self._group_curves(conn, name)
         return {(float(a), float(e)): decode_array(b, np.float32, (None,)) for a, e, b in rows}
 
+    def perspective_curves_at(
+        self, name: str, directions: Sequence[tuple[float, float]]
+    ) -> list[tuple[float, float, float, NDArray[np.float32]]]:
+        """``(azimuth, elevation, distance, curve)`` of object ``name``'s perspective views
+        at any of ``directions`` (``(azimuth, elevation)`` as stored), nearest camera
+        first per direction: one seek of the (object, azimuth, elevation, distance) index
+        each."""
+        out = []
+        with self.read() as conn:
+            object_id = self.object_id(conn, name)
+            raw = conn.connection.driver_connection
+            for azimuth, elevation in directions:
+                rows = raw.execute(
+                    "SELECT azimuth, elevation, distance, samples FROM perspective_views"
+                    " WHERE object_id = ? AND azimuth = ? AND elevation = ?",
+                    (object_id, float(azimuth), float(elevation)),
+                ).fetchall()
+                out += sorted((float(a), float(e), float(d), decode_array(b, np.float32, (None,)))
+                              for a, e, d, b in rows)
+        return out
+
     @staticmethod
     def _group_curves(conn: Connection, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
         raw = conn.connection.driver_connection
