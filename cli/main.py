@@ -298,7 +298,7 @@ def info(
     stored = data.rows.get("perspective_views", 0)
     lacking = sum(1 for o in data.objects if o.perspective_views == 0)
     out.print(f"  perspective views: {stored}"
-              + (f" ({data.config.perspective_gap:g}° grid from "
+              + (f" ({data.config.perspective_gap:g}° {data.config.perspective.grid} grid from "
                  f"{', '.join(f'{d:g}' for d in distances)} bounding radii)" if distances else " (none)")
               + (f"; {lacking} objects have none yet: ingest their files again to add them"
                  if distances and lacking else ""))
