@@ -41,6 +41,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # plain help: rich's formatter imports rich.markdown and more, a third of --help's time
+    rich_markup_mode=None,
 )
 out = Console(highlight=False, soft_wrap=True)
 err = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -858,6 +860,10 @@ def bench(
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit code (the console script calls this)."""
+    if not (sys.argv[1:] if argv is None else argv):
+        # no command: the help on stdout, as --help prints it, with a usage error's code
+        main(["--help"])
+        return 2
     command = typer.main.get_command(app)
     try:
         # without standalone mode click returns typer.Exit's code instead of raising it
