@@ -14,6 +14,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -318,7 +319,7 @@ class StoredCatalogue:
         whose direction is within ``radius`` degrees of arc of ``(azimuth, elevation)``
         (read from the file by their directions, and cached)."""
         def read() -> list[tuple[float, float, float, NDArray[np.float64]]]:
-            grid, directions = self.derived("perspective_grid", ("",), self._perspective_directions, 1)
+            grid, directions = self._perspective_directions
             near = directions @ camera_direction(azimuth, elevation) >= math.cos(math.radians(radius)) - 1e-9
             rows = self._store.perspective_curves_at(name, [grid[i] for i in np.flatnonzero(near)])
             return [(a, e, d, np.asarray(c, np.float64)) for a, e, d, c in rows]
@@ -326,6 +327,7 @@ class StoredCatalogue:
         return self.derived("perspective_near", (name, azimuth, elevation, radius), read,
                             CURVE_CACHE_OBJECTS * 8)
 
+    @cached_property
     def _perspective_directions(self) -> tuple[list[tuple[float, float]], NDArray[np.float64]]:
         """The perspective grid's views (every one a perspective view may sit at) and their
         unit viewing directions."""

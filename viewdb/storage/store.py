@@ -123,8 +123,8 @@ class Store(Database):
     ) -> list[tuple[float, float, float, NDArray[np.float32]]]:
         """``(azimuth, elevation, distance, curve)`` of object ``name``'s perspective views
         at any of ``directions`` (``(azimuth, elevation)`` as stored), nearest camera
-        first per direction: one seek of the (object, azimuth, elevation, distance) index
-        each."""
+        first per direction: one walk of the (object, azimuth, elevation, distance) index
+        each, which also gives the order."""
         out = []
         with self.read() as conn:
             object_id = self.object_id(conn, name)
@@ -132,11 +132,11 @@ class Store(Database):
             for azimuth, elevation in directions:
                 rows = raw.execute(
                     "SELECT azimuth, elevation, distance, samples FROM perspective_views"
-                    " WHERE object_id = ? AND azimuth = ? AND elevation = ?",
+                    " WHERE object_id = ? AND azimuth = ? AND elevation = ? ORDER BY distance",
                     (object_id, float(azimuth), float(elevation)),
                 ).fetchall()
-                out += sorted((float(a), float(e), float(d), decode_array(b, np.float32, (None,)))
-                              for a, e, d, b in rows)
+                out += [(float(a), float(e), float(d), decode_array(b, np.float32, (None,)))
+                        for a, e, d, b in rows]
         return out
 
     @staticmethod
