@@ -483,6 +483,27 @@ def test_group_bounds_are_the_chain_for_each_curve_and_its_mirror(case, size):
         assert leq(mirrored, B.lb_keogh(L, U, mirror_curve(cand)))
 
 
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cases(), st.integers(1, 6), st.sampled_from((1.0, 1e-3, 1e3)))
+def test_float32_curve_box_bound_is_at_most_the_exact_one(case, size, scale):
+    q, c, r, rng = case
+    n = len(q)
+    curves = (np.vstack([c] + [c + rng.normal(scale=0.1, size=n) for _ in range(size - 1)]) * scale)
+    curves = curves.astype(np.float32)
+    glo, ghi = curves.min(axis=0)[None], curves.max(axis=0)[None]
+    L, U = B.envelope(q * scale, r)
+    wlo, whi = B.outward32(L, U)
+    assert (wlo <= L).all() and (whi >= U).all()
+    key = B.curve_box32(glo, ghi, 0, wlo, whi)
+    exact = math.fsum(float(e) ** 2 for e in np.maximum(glo[0] - U, 0) + np.maximum(L - ghi[0], 0))
+    assert key <= exact
+    # and no weaker than the exact bound by more than its rounding and the envelope's
+    assert key >= exact * (1 - 1e-4) - 4 * n * (np.spacing(np.float32(np.abs(L).max() + 1)) ** 2 + (
+        np.spacing(np.float32(np.abs(L).max() + 1)) * 2 * math.sqrt(exact)))
+    for cand in curves:
+        assert leq(math.sqrt(key), B.lb_keogh(L, U, cand.astype(np.float64)))
+
+
 @SETTINGS
 @given(cases(), st.floats(0.0, 2.0))
 def test_cascade_dtw_is_dtw_unless_beyond_the_threshold(case, frac):

@@ -106,6 +106,14 @@ products (about ``4 N eps`` relative), so that a candidate lying inside the enve
 an FFT rather than from ``F @ c``; the box is wider than exact by ~1e-13 for
 ``N = 128`` curves of mean 1, which costs nothing in pruning.  Other comparisons in the
 chain hold up to rounding of the last few ulps.
+
+:func:`curve_box32` computes the curve-box bound in float32, which SIMD lanes do several
+at a time, for the search's many group keys: the group's range (float32 curves' minima and
+maxima, exact) against the envelope rounded outward to float32 (:func:`outward32`; a wider
+envelope only lowers the bound). Each term ``fl(fl(a - b)^2)`` is within ``3u`` (relative)
+of its exact value and a sum of ``N`` non-negative terms in any order within ``(N - 1) u``
+(``u = 2^-24``, first order), so the float32 sum times ``1 - 2 (N + 4) u`` is at most the
+exact bound; the scaled value is used.
 """
 
 from __future__ import annotations
@@ -121,6 +129,7 @@ from .jit import njit
 __all__ = [
     "cascade_dtw",
     "complex_to_coordinates",
+    "curve_box32",
     "curve_box_lb_many",
     "dtw",
     "envelope",
@@ -138,6 +147,7 @@ __all__ = [
     "mindist_many",
     "mirror_box",
     "mirror_coordinates",
+    "outward32",
     "paa_edges",
     "paa_envelope",
     "paa_means",
@@ -272,6 +282,24 @@ def lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compiled
         if s > limit2:
             return s
     return s
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _curve_box32_sum(lo, hi, g, wlo, whi):  # pragma: no cover - compiled
+    zero = np.float32(0.0)
+    s = np.float32(0.0)
+    for t in range(lo.shape[1]):
+        e = max(lo[g, t] - whi[t], zero) + max(wlo[t] - hi[g, t], zero)
+        s += e * e
+    return s
+
+
+@njit(cache=True, nogil=True)
+def curve_box32(lo, hi, g, wlo, whi):  # pragma: no cover - compiled
+    # squared curve-box bound of the float32 range [lo[g], hi[g]] against the float32
+    # envelope [wlo, whi], summed in float32 in any order (SIMD) and scaled below its
+    # rounding error (module doc, "Floating point")
+    return float(_curve_box32_sum(lo, hi, g, wlo, whi)) * (1.0 - (lo.shape[1] + 4) * 2.0 ** -23)
 
 
 @njit(cache=True, nogil=True)
@@ -776,6 +804,18 @@ def mirror_box(lo: np.ndarray, hi: np.ndarray) -> tuple[NDArray[np.float64], NDA
     new_lo = np.concatenate([lo_a[:m], -hi_a[m:]])
     new_hi = np.concatenate([hi_a[:m], -lo_a[m:]])
     return new_lo, new_hi
+
+
+def outward32(lo: np.ndarray, hi: np.ndarray) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """``lo`` and ``hi`` in float32, each value rounded outward (``lo`` down, ``hi`` up), so
+    the float32 interval holds the float64 one."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
+    up = lo32.astype(np.float64) > lo
+    lo32[up] = np.nextafter(lo32[up], np.float32(-np.inf))
+    down = hi32.astype(np.float64) < hi
+    hi32[down] = np.nextafter(hi32[down], np.float32(np.inf))
+    return np.ascontiguousarray(lo32), np.ascontiguousarray(hi32)
 
 
 def mirror_coordinates(p: np.ndarray) -> NDArray[np.float64]:

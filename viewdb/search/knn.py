@@ -68,6 +68,7 @@ from .bounds import (
     envelope_box,
     fourier_coordinates,
     mirror_box,
+    outward32,
     paa_edges,
     paa_envelope,
     paa_means,
@@ -205,9 +206,9 @@ class TierSource(Protocol):
 
     def group_boxes(
         self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Every group's MBR (``lo``, ``hi``: ``(n_groups, d)``) and per-sample curve range
-        (``(n_groups, N)`` each), float64."""
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float32], NDArray[np.float32]]:
+        """Every group's MBR (``lo``, ``hi``: ``(n_groups, d)``, float64) and per-sample curve
+        range (``(n_groups, N)`` each, float32 holding the range: rounded outward)."""
         ...
 
     def view_id(self, row: int) -> int: ...
@@ -245,8 +246,8 @@ class TierArrays:
     groups: list[NDArray[np.int64]] = field(init=False)
     mbr_lo: NDArray[np.float64] = field(init=False)
     mbr_hi: NDArray[np.float64] = field(init=False)
-    curve_lo: NDArray[np.float64] = field(init=False)
-    curve_hi: NDArray[np.float64] = field(init=False)
+    curve_lo: NDArray[np.float32] = field(init=False)
+    curve_hi: NDArray[np.float32] = field(init=False)
 
     def __post_init__(self) -> None:
         self.curves = np.ascontiguousarray(self.curves, dtype=np.float64)
@@ -260,8 +261,9 @@ class TierArrays:
         g, d, n = len(self.groups), coords.shape[1], self.curves.shape[1]
         self.mbr_lo = np.array([b[0] for b in boxes]).reshape(g, d)
         self.mbr_hi = np.array([b[1] for b in boxes]).reshape(g, d)
-        self.curve_lo = np.array([self.curves[v].min(axis=0) for v in self.groups]).reshape(g, n)
-        self.curve_hi = np.array([self.curves[v].max(axis=0) for v in self.groups]).reshape(g, n)
+        self.curve_lo, self.curve_hi = outward32(
+            np.array([self.curves[v].min(axis=0) for v in self.groups]).reshape(g, n),
+            np.array([self.curves[v].max(axis=0) for v in self.groups]).reshape(g, n))
         self._rows, self.group_start, self.group_count = _packed(self.groups)
         self.group_owner = np.array([self.owner[v[0]] for v in self.groups], dtype=np.int64)
         self.row_owner = np.ascontiguousarray(self.owner[self._rows])
@@ -291,7 +293,7 @@ class TierArrays:
 
     def group_boxes(
         self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float32], NDArray[np.float32]]:
         return self.mbr_lo, self.mbr_hi, self.curve_lo, self.curve_hi
 
     def view_id(self, row: int) -> int:

@@ -49,7 +49,7 @@ import math
 
 import numpy as np
 
-from .bounds import cascade_env_kernel, fourier_dist2, lb_keogh2, lb_paa2
+from .bounds import cascade_env_kernel, curve_box32, fourier_dist2, lb_keogh2, lb_paa2
 from .jit import njit
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, heap_pop, heap_push, kth_distance, load_row, widen
 
@@ -75,16 +75,14 @@ def _first(row, mirrored, curve, other_row, other_mirrored, other_curve):  # pra
 
 @njit(cache=True, nogil=True)
 def _group_block_key2(lo, hi, clo, chi, g, blo, bhi, wlo, whi):  # pragma: no cover - compiled
-    # squared max(MINDIST(block box, MBR of g), curve-box bound(block wedge, range of g))
+    # squared max(MINDIST(block box, MBR of g), curve-box bound(block wedge, range of g));
+    # the latter in float32 (bounds.curve_box32): the search computes one per opened group,
+    # block and orientation
     a = 0.0
     for j in range(lo.shape[1]):
         e = max(blo[j] - hi[g, j], 0.0) + max(lo[g, j] - bhi[j], 0.0)
         a += e * e
-    b = 0.0
-    for t in range(clo.shape[1]):
-        e = max(clo[g, t] - whi[t], 0.0) + max(wlo[t] - chi[g, t], 0.0)
-        b += e * e
-    return max(a, b)
+    return max(a, curve_box32(clo, chi, g, wlo, whi))
 
 
 @njit(cache=True, nogil=True)
@@ -94,7 +92,7 @@ def _code(payload, m, kind):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _open_group(  # pragma: no cover - compiled
-    g, gk, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge_lo, wedge_hi,
+    g, gk, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge32_lo, wedge32_hi,
     hkey, hcode, size,
 ):
     # one GB entry per block and orientation still under the limit
@@ -102,7 +100,7 @@ def _open_group(  # pragma: no cover - compiled
     for b in range(n_blocks):
         for m in range(2):
             kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
-                                   wbox_hi[m, b], wedge_lo[m, b], wedge_hi[m, b])
+                                   wbox_hi[m, b], wedge32_lo[m, b], wedge32_hi[m, b])
             if kb <= limit2:
                 size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
                                   _code(g * n_blocks + b, m, _GB))
@@ -242,7 +240,7 @@ def _room(block_start, block_end, group_count):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _stack_kernel(  # pragma: no cover - compiled
     Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
-    block_start, block_end, wedge_lo, wedge_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
+    block_start, block_end, wedge_lo, wedge_hi, wedge32_lo, wedge32_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
     order, keys, start_at, ready, stop_key,
     group_start, group_count, group_owner, row_owner, curves, coords, means,
     mbr_lo, mbr_hi, range_lo, range_hi,
@@ -285,7 +283,7 @@ def _stack_kernel(  # pragma: no cover - compiled
             if gk <= limit:
                 stats[0] += 1
                 size = _open_group(g, gk, limit * limit, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo,
-                                   wbox_hi, wedge_lo, wedge_hi, hkey, hcode, size)
+                                   wbox_hi, wedge32_lo, wedge32_hi, hkey, hcode, size)
             continue
         if top > stop_key:
             status = RADIUS
@@ -333,7 +331,7 @@ def refine_stack(
     q = query
     i, status = _stack_kernel(
         q.curves, q.band, q.env_lo, q.env_hi, q.box_lo, q.box_hi, q.seg_lo, q.seg_hi, q.widths,
-        q.block_start, q.block_end, q.wedge_lo, q.wedge_hi, q.wbox_lo, q.wbox_hi,
+        q.block_start, q.block_end, q.wedge_lo, q.wedge_hi, q.wedge32_lo, q.wedge32_hi, q.wbox_lo, q.wbox_hi,
         q.wseg_lo, q.wseg_hi, order, keys, start_at, ready, stop_key,
         *source_groups, *rows, *groups, *state[:5], k, cap, stats, *state[5:],
     )

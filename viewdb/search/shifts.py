@@ -68,7 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import QueryError
-from .bounds import envelope_box, fourier_coordinates, paa_edges
+from .bounds import envelope_box, fourier_coordinates, outward32, paa_edges
 from .grouping import INDEXED_COEFFICIENTS, indexed_rows
 from .jit import njit
 
@@ -297,6 +297,10 @@ class CurveQuery:
     wbox_hi: NDArray[np.float64]
     wseg_lo: NDArray[np.float64]
     wseg_hi: NDArray[np.float64]
+    #: The wedges in float32, rounded outward (:func:`~viewdb.search.bounds.outward32`), for
+    #: the float32 curve-box bound of a group (:func:`~viewdb.search.bounds.curve_box32`).
+    wedge32_lo: NDArray[np.float32]
+    wedge32_hi: NDArray[np.float32]
     #: The whole stack: wedge ``(2, N)``, union box ``(2, d)`` and rings ``(d / 2,)``.
     all_lo: NDArray[np.float64]
     all_hi: NDArray[np.float64]
@@ -344,6 +348,7 @@ class CurveQuery:
             Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi,
             np.diff(edges).astype(np.float64), starts, ends,
             lows(env_lo), highs(env_hi), lows(box_lo), highs(box_hi), lows(seg_lo), highs(seg_hi),
+            *outward32(lows(env_lo), highs(env_hi)),
             np.ascontiguousarray(env_lo.min(axis=1)), np.ascontiguousarray(env_hi.max(axis=1)),
             np.ascontiguousarray(box_lo.min(axis=1)), np.ascontiguousarray(box_hi.max(axis=1)),
             np.hypot(gx, gy).min(axis=0), np.hypot(fx, fy).max(axis=0),

@@ -40,14 +40,14 @@ from numpy.typing import NDArray
 
 __all__ = ["ARRAYS", "map_tier_file", "tier_file_path", "tier_key", "write_tier_file"]
 
-MAGIC = b"VDBTIER1"
+MAGIC = b"VDBTIER2"
 _LENGTH = struct.Struct("<I")
 _ALIGN = 64
 
 #: The arrays a file holds (:class:`~viewdb.storage.tiers.StoredTier`'s), with their dtypes.
 ARRAYS = {
     "ids": "<i8", "object_ids": "<i8", "group_owner": "<i8", "group_count": "<i8",
-    "views": "<i8", "lo": "<f8", "hi": "<f8", "curve_lo": "<f8", "curve_hi": "<f8",
+    "views": "<i8", "lo": "<f8", "hi": "<f8", "curve_lo": "<f4", "curve_hi": "<f4",
     "curves": "<f4", "coords": "<f8", "means": "<f8",
 }
 

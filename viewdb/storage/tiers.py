@@ -94,10 +94,9 @@ def _group_columns(conn: sqlite3.Connection, tier: str) -> dict[str, NDArray[Any
         (tier,),
     ).fetchall()
     object_ids, owner = np.unique(np.array([r[1] for r in rows], dtype=np.int64), return_inverse=True)
-    lo, hi, curve_lo, curve_hi = (
-        _stacked([r[i] for r in rows], dtype).astype(np.float64)
-        for i, dtype in ((2, np.float64), (3, np.float64), (4, np.float32), (5, np.float32))
-    )
+    # copies, writable as a tier file's arrays are (the kernels are compiled for those)
+    lo, hi = (np.array(_stacked([r[i] for r in rows], np.float64)) for i in (2, 3))
+    curve_lo, curve_hi = (np.array(_stacked([r[i] for r in rows], np.float32)) for i in (4, 5))
     views, shapes = decode_many([r[6] for r in rows], np.int64, 1)
     return {"ids": np.array([r[0] for r in rows], dtype=np.int64), "object_ids": object_ids,
             "group_owner": owner.astype(np.int64).reshape(-1), "group_count": shapes[:, 0].copy(),
@@ -314,7 +313,7 @@ class StoredTier:
         self._loaded[groups] = True
     def group_boxes(
         self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float32], NDArray[np.float32]]:
         """Every group's MBR and per-sample curve range (read when the tier was opened)."""
         return self._lo, self._hi, self._curve_lo, self._curve_hi
 
