@@ -790,7 +790,7 @@ class RecognitionConfig:
     hidden_min_share: float = 0.02
     #: With a gravity hint (``roll``), the in-plane turns searched: those within this many
     #: degrees of the hint's (:func:`viewdb.search.shifts.turn_window`).
-    roll_tolerance: float = 15.0
+    roll_tolerance: float = 10.0
     #: How the in-plane turns (``rotations``) are searched by the ``server`` and ``cs1``
     #: plans: "stack" (one search whose distance is the smallest over the turned curves,
     #: :func:`viewdb.search.knn.knn_stack`) or "separate" (one search per turn, each
