@@ -402,7 +402,7 @@ def query(
     rotations: Annotated[
         int, typer.Option(help="In-plane turns of the silhouette tried (1 = upright only).", min=1, max=72)
     ] = 12,
-    band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 5,
+    band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
     roll: Annotated[float | None, typer.Option(
         help="Gravity hint: the camera's roll in degrees (the in-plane turn that makes the photo "
              "upright, e.g. from an IMU); the search then covers only the turns within the "

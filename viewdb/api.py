@@ -220,7 +220,7 @@ class ViewDB:
         client: ViewDB | None = None,
         server: ServerTier | None = None,
         mask: NDArray[Any] | str | Path | None = None,
-        band: int = 5,
+        band: int = 6,
         rotations: int = 12,
         pose: bool = True,
         intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
