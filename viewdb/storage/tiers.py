@@ -280,6 +280,8 @@ class StoredTier:
     def rows(
         self, groups: NDArray[np.int64]
     ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
+        if self.mapped:  # a tier file's: every group is loaded
+            return self._curves, self._coords, self._means
         missing = np.unique(groups[~self._loaded[groups]])
         if len(missing):
             found = dict(rows_with_ids(self.conn, "SELECT id, curves FROM index_groups WHERE id IN ({})",
