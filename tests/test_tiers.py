@@ -167,3 +167,33 @@ def test_info_reports_both_tiers(tiered_db, capsys):
     assert tiers["sparse"]["groups"] <= tiers["full"]["groups"] and tiers["full"]["rtree_bytes"] > 0
     assert main(["info", "--db", str(tiered_db)]) == 0
     assert "sparse tier: 90° grid" in capsys.readouterr().out
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.lists(st.floats(0.0, 2.0), min_size=1, max_size=4))
+def test_groups_within_answers_each_ask_as_the_r_tree_does(tiered_db, seed, radii):
+    """The threads of one search ask for the same boxes in turn, each for its own objects
+    (the last R-tree answer is kept for that): every ask, repeated or not, gives the groups
+    whose MBR meets the widened boxes and that are not yet seen, with their keys."""
+    from viewdb.search.shifts import CurveQuery
+
+    rng = np.random.default_rng(seed)
+    with viewdb.open(tiered_db, read_only=True) as db:
+        arrays, _ = db.search_tier("full")
+        curves = arrays.curves[rng.integers(len(arrays.curves), size=3)] + rng.normal(0, 0.05, (3, 128))
+        query = CurveQuery.of(curves, 4)
+        with db._catalogue.tier_reader().snapshot() as reader:
+            tier = reader.tier("full")
+            lo, hi, curve_lo, curve_hi = tier.group_boxes()
+            part = rng.integers(2, size=tier.n_objects)
+            for radius in [r for r in radii for _ in range(2)]:  # each radius asked twice
+                for thread in (0, 1):
+                    seen = part[tier.group_owner] != thread
+                    got, keys = tier.groups_within(query, radius, seen.copy())
+                    meets = np.zeros(tier.n_groups, dtype=bool)
+                    for box_lo, box_hi in (query.box, query.mirrored_box):
+                        meets |= ((lo <= box_hi + radius) & (hi >= box_lo - radius)).all(axis=1)
+                    expected = np.flatnonzero(meets & ~seen)
+                    assert sorted(got.tolist()) == expected.tolist()
+                    _, want = query.group_keys(lo, hi, curve_lo, curve_hi, got)
+                    assert np.array_equal(keys, want)

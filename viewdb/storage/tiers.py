@@ -242,6 +242,8 @@ class StoredTier:
         names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
         self._names = [names[int(i)] for i in self._object_ids]
         self._index_by_name = {name: i for i, name in enumerate(self._names)}
+        #: the last R-tree answer of :meth:`groups_within`: (its boxes, its group rows)
+        self._last_within: tuple[tuple[bytes, bytes], NDArray[np.int64]] | None = None
 
     def _read_errors(self) -> None:
         at = {int(gid): g for g, gid in enumerate(self._ids.tolist())}
@@ -270,7 +272,14 @@ class StoredTier:
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         los = np.stack([query.box[0], query.mirrored_box[0]]) - radius
         his = np.stack([query.box[1], query.mirrored_box[1]]) + radius
-        at = np.searchsorted(self._ids, self.index.intersection_many(los, his)).astype(np.int64)
+        # the threads of one search (knn.py) ask for the same boxes in turn, each for its own
+        # objects' groups: the R-tree's last answer serves the next ask for the same boxes
+        boxes = (los.tobytes(), his.tobytes())
+        if self._last_within is not None and self._last_within[0] == boxes:
+            at = self._last_within[1]
+        else:
+            at = np.searchsorted(self._ids, self.index.intersection_many(los, his)).astype(np.int64)
+            self._last_within = (boxes, at)
         at = at[~seen[at]]
         if not len(at):
             return at, np.zeros(0)
