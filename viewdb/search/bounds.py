@@ -151,6 +151,7 @@ __all__ = [
     "paa_edges",
     "paa_envelope",
     "paa_means",
+    "rounded32",
 ]
 
 #: Segments of the LB_PAA bound (fewer when a curve has fewer samples).
@@ -806,16 +807,19 @@ def mirror_box(lo: np.ndarray, hi: np.ndarray) -> tuple[NDArray[np.float64], NDA
     return new_lo, new_hi
 
 
+def rounded32(x: np.ndarray, up: bool) -> NDArray[np.float32]:
+    """``x`` as float32, each value rounded up (never below ``x``) or down (never above)."""
+    x = np.asarray(x, dtype=np.float64)
+    out = np.array(x, dtype=np.float32)
+    off = out.astype(np.float64) < x if up else out.astype(np.float64) > x
+    out[off] = np.nextafter(out[off], np.float32(np.inf if up else -np.inf))
+    return np.ascontiguousarray(out)
+
+
 def outward32(lo: np.ndarray, hi: np.ndarray) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """``lo`` and ``hi`` in float32, each value rounded outward (``lo`` down, ``hi`` up), so
     the float32 interval holds the float64 one."""
-    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
-    up = lo32.astype(np.float64) > lo
-    lo32[up] = np.nextafter(lo32[up], np.float32(-np.inf))
-    down = hi32.astype(np.float64) < hi
-    hi32[down] = np.nextafter(hi32[down], np.float32(np.inf))
-    return np.ascontiguousarray(lo32), np.ascontiguousarray(hi32)
+    return rounded32(lo, up=False), rounded32(hi, up=True)
 
 
 def mirror_coordinates(p: np.ndarray) -> NDArray[np.float64]:

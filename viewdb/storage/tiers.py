@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from ..config import BuildConfig
 from ..errors import QueryError, StorageError
-from ..search.bounds import paa_edges, paa_means
+from ..search.bounds import paa_edges, paa_means, rounded32
 from ..search.grouping import (
     DIMENSION,
     group_points,
@@ -66,15 +66,6 @@ def rows_with_ids(conn: sqlite3.Connection, sql: str, ids: Sequence[int]) -> Ite
     for start in range(0, len(ids), 900):
         chunk = list(ids[start : start + 900])
         yield from conn.execute(sql.format(",".join("?" * len(chunk))), chunk)
-
-
-def rounded_up32(x: NDArray[np.floating]) -> NDArray[np.float32]:
-    """``x`` as float32, each value rounded up (never below ``x``)."""
-    x = np.asarray(x, dtype=np.float64)
-    out = x.astype(np.float32)
-    low = out.astype(np.float64) < x
-    out[low] = np.nextafter(out[low], np.float32(np.inf))
-    return out
 
 
 def _stacked(blobs: list[Any], dtype: type) -> NDArray[Any]:
@@ -157,7 +148,7 @@ def write_groups(
                 ).lastrowid
                 if errors is not None:
                     raw.execute("INSERT INTO curve_errors (group_id, errors) VALUES (?, ?)",
-                                (gid, encode_array(rounded_up32(errors))))
+                                (gid, encode_array(rounded32(errors, up=True))))
                 index.insert_box(int(gid), lo, hi)
                 counts[tier] += 1
             index.close()
