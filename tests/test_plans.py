@@ -1,5 +1,6 @@
-"""The three query plans: CS1 equals server exactly; CS2 walks to real views; the client
-file holds the sparse tier only and is enough for the client half."""
+"""The three query plans: CS1 equals server exactly; CS2 searches the client's shortlist
+exactly, or walks to real views; the client file holds the sparse tier only and is enough
+for the client half."""
 
 import json
 
@@ -81,7 +82,7 @@ def test_cs2_walks_to_real_views_never_better_than_exact(tiered_db, client_file)
         queries += [perspective[keys[i]] + rng.normal(0, 0.01, 128) for i in rng.choice(len(keys), 8, replace=False)]
         for q in queries:
             server = {c.object: c.distance for c in db.recognise(q, 6, plan="server").results}
-            cs2 = db.recognise(q, 3, plan="cs2", client=client)
+            cs2 = db.recognise(q, 3, plan="cs2", client=client, cs2="walk")
             assert cs2.client_results and len(cs2.results) <= 3
             assert {c.object for c in cs2.results} <= {c.object for c in cs2.client_results}
             for c in cs2.results:
@@ -99,6 +100,35 @@ def test_cs2_walks_to_real_views_never_better_than_exact(tiered_db, client_file)
             agree += cs2.results[0].object == top
         assert agree >= len(queries) // 2  # a heuristic, but not a coin toss
         assert ended_on_perspective  # the walk's perspective finish was reached
+
+
+def test_cs2_searches_the_client_shortlist_exactly(tiered_db, client_file):
+    rng = np.random.default_rng(13)
+    with viewdb.open(tiered_db, create=False) as db, viewdb.open(client_file, create=False) as client:
+        arrays, _ = db.search_tier("full")
+        names = [o.name for o in db.objects()]
+        for q in _queries(db, rng, 10):
+            for k, shortlist, band in ((1, 1, 6), (2, 2, 4), (3, 2, 6), (2, len(names), 5)):
+                cs2 = db.recognise(q, k, band=band, plan="cs2", client=client, shortlist=shortlist)
+                listed = {c.object for c in cs2.client_results}
+                assert len(listed) == min(max(k, shortlist), len(names))
+                # the brute force over the listed objects alone
+                everything = brute_force_knn(q, arrays, len(names), band)
+                _same(cs2.results, [nb for nb in everything if nb.object in listed][:k])
+                if len(listed) == len(names):
+                    _same(cs2.results, db.recognise(q, k, band=band, plan="server").results)
+
+
+def test_a_shortlist_request_goes_over_the_wire_and_bad_ones_are_refused():
+    from viewdb.http import RefineRequest
+
+    c = viewdb.Candidate("mug", 0.5, 10.0, 20.0, False)
+    request = RefineRequest.of_stack(np.ones((2, 128)), 6, 3, [c], shortlist=True)
+    again = RefineRequest.from_dict(json.loads(json.dumps(request.to_dict())), 128)
+    assert again.shortlist and again.client == [c] and again.curves.shape == (2, 128)
+    assert not RefineRequest.from_dict(RefineRequest(np.ones(128), 6, 3, [c]).to_dict()).shortlist
+    with pytest.raises(viewdb.QueryError, match="shortlist must be true or false"):
+        RefineRequest.from_dict({**request.to_dict(), "shortlist": "yes"})
 
 
 def test_client_file_holds_the_sparse_tier_only(tiered_db, client_file):

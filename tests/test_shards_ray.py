@@ -41,9 +41,10 @@ def test_shard_actors_answer_curves_and_photos_as_the_single_file(local_ray, tie
             for _ in range(12):
                 q = np.clip(arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.05, 128), 0, None)
                 k = int(rng.integers(1, 7))
-                for plan in ("server", "cs1", "cs2"):
-                    here = db.recognise(q, k, plan=plan)
-                    there = db.recognise(q, k, plan=plan, server=tier)
+                for plan, cs2 in (("server", "shortlist"), ("cs1", "shortlist"), ("cs2", "shortlist"),
+                                  ("cs2", "walk")):
+                    here = db.recognise(q, k, plan=plan, cs2=cs2, shortlist=3)
+                    there = db.recognise(q, k, plan=plan, server=tier, cs2=cs2, shortlist=3)
                     assert [c.to_dict() for c in there.results] == [c.to_dict() for c in here.results]
             for name, h, v in (("car", 200, 15), ("mug", 37, 22), ("chair", 110, 40), ("arrow", 300, -20)):
                 img, _ = composite_photo(db.render(name, h, v), turn=20, scale=0.8, background=200)

@@ -149,6 +149,47 @@ def test_a_search_split_over_threads_reports_what_one_search_reports(seed, k, r,
     assert stats.dtw >= len(split)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5), st.integers(0, 5), st.integers(2, 8), st.integers(1, 3),
+       st.sampled_from(["stack", "shifts", "fixed"]), st.booleans())
+def test_a_search_over_some_objects_equals_brute_force_over_them(seed, k, r, objects, threads, kind, bounded):
+    """CS2's shortlist search (``only``): exactly the brute force over a tier of the
+    listed objects alone, on one thread or split over several, bounded by those objects'
+    distances or not; the objects left out never appear, whatever their distances."""
+    rng = np.random.default_rng(seed)
+    n = 20
+    tier = random_tier(rng, objects, 48, n, int(rng.integers(1, 7)))
+    only = rng.random(objects) < 0.5
+    rows = only[tier.owner]
+    q = tier.curves[rng.integers(48)] + rng.normal(0, 0.02, n)  # near some view, listed or not
+    window = ShiftWindow(int(rng.integers(n)), int(rng.integers(0, 6)), 1)
+    stack = (np.stack([q, *smooth_curves(rng, 2, n)]) if kind == "stack"
+             else shifted_curves(q, window.shifts(n)) if kind == "shifts" else q[None, :])
+    expected = naive_knn_over_curves(stack, tier.curves[rows], tier.owner[rows], tier.names, k, r)
+    upper, known = math.inf, None
+    if bounded and expected:
+        known = {tier.names.index(e[1]): e[0] * (1 + rng.random()) for e in expected if rng.random() < 0.6}
+        upper = expected[k - 1][0] * (1 + rng.random()) if len(expected) >= k else math.inf
+    if kind == "stack":
+        result, _ = knn_stack(stack, tier, k, r, threads=threads, only=only, upper=upper, known=known)
+    elif kind == "shifts":
+        result, _ = knn(q, tier, k, r, shifts=window, only=only, upper=upper, known=known)
+        starts = window.shifts(n).tolist()
+        result = [nb.__class__(nb.object, nb.view, nb.distance, nb.mirrored, starts.index(nb.shift))
+                  for nb in result]
+    else:
+        result, _ = knn(q, tier, k, r, only=only, upper=upper, known=known)
+    check_against_oracle(result, expected, stack, tier, r)
+    assert all(only[tier.names.index(nb.object)] for nb in result)
+
+
+def test_a_search_over_some_objects_needs_a_mask_of_every_object():
+    rng = np.random.default_rng(0)
+    tier = random_tier(rng, 3, 20, 16, 4)
+    with pytest.raises(ValueError, match="only must mask"):
+        knn_stack(smooth_curves(rng, 2, 16), tier, 2, 2, only=np.ones(2, dtype=bool))
+
+
 def test_threads_must_be_positive():
     rng = np.random.default_rng(0)
     tier = random_tier(rng, 3, 20, 16, 4)

@@ -24,7 +24,15 @@ from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
-from .config import BuildConfig, ClientFileConfig, OverlayConfig, RayIngestConfig, RenderConfig, finite
+from .config import (
+    BuildConfig,
+    ClientFileConfig,
+    OverlayConfig,
+    RayIngestConfig,
+    RecognitionConfig,
+    RenderConfig,
+    finite,
+)
 from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
@@ -297,9 +305,11 @@ class ViewDB:
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
         client: ViewDB | None = None, server: ServerTier | None = None,
         prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
+        cs2: str = RecognitionConfig().cs2, shortlist: int = RecognitionConfig().cs2_shortlist,
     ) -> Recognition:
         """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``;
-        :mod:`viewdb.recognition.retrieval`).
+        :mod:`viewdb.recognition.retrieval`; ``cs2`` searches the client's ``shortlist`` or
+        walks, as :attr:`~viewdb.config.RecognitionConfig.cs2`).
 
         ``client`` is the file the client half runs on (a client file from
         :meth:`export_client`, or any full file); default this file. With ``server`` (e.g.
@@ -314,7 +324,8 @@ class ViewDB:
         curve, in one search (each result's ``shift`` is the start that matched).
         """
         q = self._catalogue.query_curve(curve, k, "full" if server is None else "sparse")
-        return recognise_curve(q, k, band, plan, *self._tiers(plan, client, server), prior, shifts)
+        return recognise_curve(q, k, band, plan, *self._tiers(plan, client, server), prior, shifts,
+                               cs2=cs2, shortlist=shortlist)
 
     def _tiers(
         self, plan: str, client: ViewDB | None, server: ServerTier | None

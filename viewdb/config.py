@@ -752,6 +752,8 @@ def search_threads_from_env(default: int = 2) -> int:
 
 #: The ways of searching a query's in-plane turns (:attr:`RecognitionConfig.turn_search`).
 TURN_SEARCHES = ("stack", "separate")
+#: The ways of :attr:`RecognitionConfig.cs2`.
+CS2_SEARCHES = ("shortlist", "walk")
 
 
 @dataclass(frozen=True)
@@ -796,8 +798,21 @@ class RecognitionConfig:
     #: :func:`viewdb.search.knn.knn_stack`) or "separate" (one search per turn, each
     #: bounded by the turns before it). Both give the same answer; ``cs2`` walks per turn.
     turn_search: str = "stack"
+    #: How the ``cs2`` plan's server half searches: "shortlist" (exactly, over the
+    #: objects of the client's shortlist alone) or "walk" (the paper's neighbour walk,
+    #: Algorithm 4, from the client's best k views): :mod:`viewdb.search.plans`.
+    cs2: str = "shortlist"
+    #: "shortlist": the client's nearest objects on its sparse tier the server searches
+    #: (at most 100; at least k). The sparse tier holds coarse orthographic views, so a
+    #: photo's object ranks lower there than on the full tier
+    #: (docs/results/synthetic-photos.md#cs2).
+    cs2_shortlist: int = 100
 
     def __post_init__(self) -> None:
+        if self.cs2 not in CS2_SEARCHES:
+            raise ValueError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {self.cs2!r}")
+        if not 1 <= self.cs2_shortlist <= 100:
+            raise ValueError(f"cs2_shortlist must be in [1, 100], got {self.cs2_shortlist}")
         if self.turn_search not in TURN_SEARCHES:
             raise ValueError(f"turn_search must be one of {', '.join(TURN_SEARCHES)}, "
                              f"got {self.turn_search!r}")

@@ -4,8 +4,9 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 :mod:`viewdb.http.wire`; the HTTP layer is only transport):
 
 ``POST /refine``  CS1's server half (Algorithm 3); with no client candidates, the
-                  ``server`` plan's exact k-NN
-``POST /walk``    CS2's server half (Algorithm 4)
+                  ``server`` plan's exact k-NN; with ``shortlist``, CS2's (the exact
+                  k-NN over the client's shortlisted objects)
+``POST /walk``    CS2's server half by the paper's neighbour walk (Algorithm 4)
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
@@ -368,7 +369,7 @@ def _routes(server: _Server) -> APIRouter:
 
     @router.post("/refine", dependencies=guarded, openapi_extra=_body(models.RefineRequestModel),
                  responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-                 summary="CS1: exact top-k refined from the client's candidates")
+                 summary="CS1: exact top-k refined from the client's candidates (CS2: over them alone)")
     async def refine(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: RefineRequest.from_dict(data, state().curve_samples))
@@ -377,7 +378,7 @@ def _routes(server: _Server) -> APIRouter:
 
     @router.post("/walk", dependencies=guarded, openapi_extra=_body(models.WalkRequestModel),
                  responses={200: {"model": models.ServerReplyModel}, **_ERRORS},
-                 summary="CS2: neighbour walk from the client's views")
+                 summary="CS2 by the paper's walk: neighbour walk from the client's views")
     async def walk(request: Request) -> dict[str, Any]:
         data = await _json(request)
         req = _parse(lambda: WalkRequest.from_dict(data, state().curve_samples))

@@ -96,7 +96,7 @@ class _CurveRequest(_Strict):
 class RefineRequestModel(_CurveRequest):
     """CS1: the query's distance curve (or a stack of curves) and the client's top-k on its
     sparse tier (an empty ``client`` list gives the ``server`` plan: exact k-NN on the full
-    tier)."""
+    tier). CS2: the same with ``shortlist``, the client's shortlist as ``client``."""
 
     curve: list[Sample] | None = Field(  # type: ignore[assignment]
         default=None, min_length=8,
@@ -110,10 +110,13 @@ class RefineRequestModel(_CurveRequest):
     shifts: ShiftWindowModel | None = Field(
         default=None, description="search the smallest distance over these circular shifts of "
                                   "the curve (absent: the curve as given; not with curves)")
+    shortlist: bool = Field(
+        default=False, description="CS2: search only the objects the client candidates name "
+                                   "(the answer is exact among them); absent or false: every object")
 
 
 class WalkRequestModel(_CurveRequest):
-    """CS2: as for CS1, plus the client file's grid gap the walk starts from."""
+    """CS2 by the paper's walk: as for CS1, plus the client file's grid gap the walk starts from."""
 
     client_gap: float = Field(gt=0, le=180)
 

@@ -180,7 +180,8 @@ def _search(
     for i, (angle, curve) in enumerate(shape.curves):
         prior = [c for c, _ in merge(per_curve, pool)]
         window = _window(shape, i, options)
-        found = recognise_curve(curve, pool, options.band, options.plan, server, client, prior, window)
+        found = recognise_curve(curve, pool, options.band, options.plan, server, client, prior, window,
+                                **_cs2(options))
         if window is None:
             per_curve.append((angle, found.results))
         else:  # each result at the in-plane turn its shift stands for
@@ -195,10 +196,16 @@ def _search(
     return merge(per_curve, pool), client_ms, server_ms
 
 
+def _cs2(options: QueryOptions) -> dict[str, Any]:
+    """How the ``cs2`` plan searches (:func:`~viewdb.recognition.retrieval.recognise_curve`)."""
+    return {"cs2": options.recognition.cs2, "shortlist": options.recognition.cs2_shortlist}
+
+
 def _stacked(shape: QueryShape, options: QueryOptions) -> bool:
     """Whether the turned curves are searched as one stack
-    (:attr:`~viewdb.config.RecognitionConfig.turn_search`; ``cs2`` walks each turn)."""
-    return (options.recognition.turn_search == "stack" and options.plan != "cs2" and len(shape.curves) > 1
+    (:attr:`~viewdb.config.RecognitionConfig.turn_search`; the ``cs2`` walk walks each turn)."""
+    walks = options.plan == "cs2" and options.recognition.cs2 == "walk"
+    return (options.recognition.turn_search == "stack" and not walks and len(shape.curves) > 1
             and shape.bearings is None and len(shape.curves) <= MAX_CURVES)
 
 
@@ -209,7 +216,7 @@ def _search_stack(
     """Stage 3 in one search: each view's distance is the smallest over the curves, each
     result at the in-plane angle of the curve that matched."""
     stack = np.stack([curve for _, curve in shape.curves])
-    found = recognise_curve(stack, pool, options.band, options.plan, server, client)
+    found = recognise_curve(stack, pool, options.band, options.plan, server, client, **_cs2(options))
     traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
     pooled = [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in found.results]
     return pooled, found.client_ms, found.server_ms

@@ -2,8 +2,10 @@
 
 ``server``: the server tier's exact k-NN (CS1 with no client candidates). ``cs1``: the
 client tier's k-NN on its sparse tier bounds the server's exact refinement (Algorithm 3;
-the same answer as ``server``). ``cs2``: the server walks the grid from the client's
-views (Algorithm 4; heuristic). A query searches several curves (in-plane turns, a
+the same answer as ``server``). ``cs2`` (heuristic): the client's shortlist, its nearest
+``shortlist`` objects on the sparse tier, bounds the server's exact search over those
+objects alone (``cs2="shortlist"``, the default), or the server walks the grid from the
+client's views (``cs2="walk"``, Algorithm 4). A query searches several curves (in-plane turns, a
 completed silhouette): ``server`` and ``cs1`` in one search over the stack of them (a
 ``(T, N)`` curve: each view's distance is the smallest over the rows, each result's
 ``curve_index`` the row that matched), or one search per curve, where :func:`merge` keeps
@@ -20,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import CS2_SEARCHES, RecognitionConfig
 from ..errors import QueryError
-from ..search.plans import PLANS, Candidate, RefineRequest, WalkRequest
+from ..search.plans import MAX_K, PLANS, Candidate, RefineRequest, WalkRequest
 from ..search.shifts import ShiftWindow
 from .client_tier import ClientTier
 from .server_tier import ServerTier
@@ -61,31 +64,40 @@ def best_of(mine: Sequence[Candidate], prior: Sequence[Candidate], k: int) -> li
 def recognise_curve(
     curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
     client: ClientTier | None, prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
+    *, cs2: str = RecognitionConfig().cs2, shortlist: int = RecognitionConfig().cs2_shortlist,
 ) -> Recognition:
     """The k objects ``curve`` shows by ``plan`` (module doc). ``client`` runs the client
     half of ``cs1``/``cs2`` (unused by ``server``). ``prior``: the best objects already
     found for the same photo by other curves; their distances bound the search as a CS1
     client's do (``server``, ``cs1``). ``shifts``: both halves search the smallest distance
     over these circular shifts of the curve (:class:`~viewdb.search.shifts.ShiftWindow`).
-    A ``(T, N)`` ``curve`` (``server``, ``cs1``): both halves search the smallest distance
-    over its rows."""
+    A ``(T, N)`` ``curve`` (``server``, ``cs1``, ``cs2`` by shortlist): both halves search
+    the smallest distance over its rows.
+
+    ``cs2``: how that plan's server half searches: ``"shortlist"``, exactly over the
+    client's nearest ``shortlist`` objects (and those of ``prior``), or ``"walk"``."""
     if plan not in PLANS:
         raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
+    if cs2 not in CS2_SEARCHES:
+        raise QueryError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {cs2!r}")
     if plan != "server" and client is None:
         raise QueryError(f"the {plan} plan needs a client tier")
     q = np.asarray(curve, dtype=np.float64)
-    if q.ndim == 2 and plan == "cs2":
-        raise QueryError("the cs2 plan walks one curve at a time, not a stack")
+    walks = plan == "cs2" and cs2 == "walk"
+    if q.ndim == 2 and walks:
+        raise QueryError("the cs2 walk takes one curve at a time, not a stack")
+    listed = plan == "cs2" and not walks
+    asked = max(k, min(shortlist, MAX_K)) if listed else k
     start = time.perf_counter()
-    mine = [] if client is None or plan == "server" else client.candidates(q, k, band, shifts)
+    mine = [] if client is None or plan == "server" else client.candidates(q, asked, band, shifts)
     client_ms = (time.perf_counter() - start) * 1e3
-    if plan == "cs2":
+    if walks:
         assert client is not None
         reply, exchange = server.walk(WalkRequest(q, band, k, client.client_gap, mine))
     else:
-        bounds = best_of(mine, prior, k)
-        request = (RefineRequest.of_stack(q, band, k, bounds) if q.ndim == 2
-                   else RefineRequest(q, band, k, bounds, shifts))
+        bounds = best_of(mine, prior, MAX_K if listed else k)
+        request = (RefineRequest.of_stack(q, band, k, bounds, listed) if q.ndim == 2
+                   else RefineRequest(q, band, k, bounds, shifts, shortlist=listed))
         reply, exchange = server.refine(request)
     return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                        exchange.sent, exchange.received, max(exchange.wall_ms - exchange.server_ms, 0.0),

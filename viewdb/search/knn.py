@@ -335,6 +335,7 @@ def knn(
     initial_radius: float = INITIAL_RADIUS,
     shifts: ShiftWindow | None = None,
     block: int | None = None,
+    only: NDArray[np.bool_] | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects (Algorithm 2), exactly as :func:`brute_force_knn`.
 
@@ -351,6 +352,9 @@ def knn(
     that matched, and ``upper``/``known`` must be distances under the same window. None:
     the curve as given, by the fixed-start search below.
 
+    ``only``: a mask over the source's objects; the search is over those objects alone
+    (exactly :func:`brute_force_knn` of a tier holding only them; None: every object).
+
     Candidate groups are refined in the order of their keys by the compiled loop of
     :func:`~viewdb.search.refine.refine_groups` (each group's views in the order of their
     own keys, the UCR cascade, DTW abandoning past ``min(U, b_o)``); see the module doc
@@ -360,7 +364,7 @@ def knn(
         q = np.asarray(query, dtype=np.float64)
         starts = shifts.shifts(len(q))
         found, stats = knn_stack(shifted_curves(q, starts), source, k, r, upper=upper, known=known,
-                                 initial_radius=initial_radius, block=block)
+                                 initial_radius=initial_radius, block=block, only=only)
         return [replace(nb, shift=int(starts[nb.shift])) for nb in found], stats
     qb = QueryBoxes.of(query, r)
     envelope_pair = (qb.lower, qb.upper)
@@ -375,7 +379,18 @@ def knn(
             search.cap, search.counters, search.heap,
         )
 
-    return _Search(source, k, upper, known, 2).run(qb, step, initial_radius)
+    return _Search(source, k, upper, known, 2).run(qb, step, initial_radius, _left_out(source, only))
+
+
+def _left_out(source: TierSource, only: NDArray[np.bool_] | None) -> NDArray[np.bool_] | None:
+    """The groups of the objects a search leaves out (None: none), from the mask ``only``
+    over the source's objects."""
+    if only is None:
+        return None
+    mask = np.asarray(only, dtype=np.bool_)
+    if mask.shape != (source.n_objects,):
+        raise ValueError(f"only must mask the source's {source.n_objects} objects, got shape {mask.shape}")
+    return ~mask[source.group_owner]
 
 
 def knn_stack(
@@ -389,12 +404,13 @@ def knn_stack(
     initial_radius: float = INITIAL_RADIUS,
     block: int | None = None,
     threads: int | None = None,
+    only: NDArray[np.bool_] | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest distinct objects to a stack of query curves ``(T, N)``: a view's
     distance is the smallest over the curves (and the view's mirror), found in one
     best-first search (:mod:`viewdb.search.shifts`, :mod:`viewdb.search.multirefine`);
     each result's ``shift`` is the row of the curve that matched. Exactly
-    :func:`brute_force_knn` of each curve, merged; ``upper``/``known`` as in :func:`knn`.
+    :func:`brute_force_knn` of each curve, merged; ``upper``/``known``/``only`` as in :func:`knn`.
 
     ``threads``: the search split over that many threads (module doc; at most one per
     object); the answer is the same. Default: :class:`~viewdb.config.SearchConfig`'s, at
@@ -418,9 +434,10 @@ def knn_stack(
     if threads is not None and threads < 1:
         raise ValueError(f"threads must be at least 1, got {threads}")
     threads = search_threads(source, config) if threads is None else min(threads, source.n_objects)
+    left_out = _left_out(source, only)
     if threads <= 1:
-        return _Search(source, k, upper, known, 4).run(stack, step, initial_radius)
-    return _parallel(source, k, upper, known, threads, stack, step, initial_radius)
+        return _Search(source, k, upper, known, 4).run(stack, step, initial_radius, left_out)
+    return _parallel(source, k, upper, known, threads, stack, step, initial_radius, left_out)
 
 
 def search_threads(source: TierSource, config: SearchConfig) -> int:
@@ -432,11 +449,15 @@ def search_threads(source: TierSource, config: SearchConfig) -> int:
     return max(1, min(config.threads, os.cpu_count() or 1, source.n_objects))
 
 
-def deal_objects(source: TierSource, parts: int) -> NDArray[np.int64]:
+def deal_objects(
+    source: TierSource, parts: int, left_out: NDArray[np.bool_] | None = None,
+) -> NDArray[np.int64]:
     """The part (``0 .. parts - 1``) of each object: the objects dealt by their numbers of
     views, largest first, to the parts in turn and back (0, 1, …, p − 1, p − 1, …, 0, …),
-    so each part has about as many views to search."""
-    views = np.bincount(source.group_owner, weights=source.group_count, minlength=source.n_objects)
+    so each part has about as many views to search (``left_out``: groups not searched,
+    whose views do not count)."""
+    counts = source.group_count if left_out is None else np.where(left_out, 0, source.group_count)
+    views = np.bincount(source.group_owner, weights=counts, minlength=source.n_objects)
     turn = np.r_[np.arange(parts), np.arange(parts)[::-1]]
     part = np.zeros(source.n_objects, dtype=np.int64)
     part[np.argsort(-views, kind="stable")] = turn[np.arange(source.n_objects) % len(turn)]
@@ -445,12 +466,15 @@ def deal_objects(source: TierSource, parts: int) -> NDArray[np.int64]:
 
 def _parallel(
     source: TierSource, k: int, upper: float, known: Mapping[int, float] | None, threads: int,
-    query: Any, step: Any, initial_radius: float,
+    query: Any, step: Any, initial_radius: float, left_out: NDArray[np.bool_] | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
-    """One search split over ``threads`` threads, each over its objects' groups (module doc)."""
+    """One search split over ``threads`` threads, each over its objects' groups (module doc;
+    ``left_out``: groups no thread searches)."""
     first = _Search(source, k, upper, known, 4)
     searches = [first] + [_Search(source, k, upper, known, 4, shared=first) for _ in range(threads - 1)]
-    group_part = deal_objects(source, threads)[source.group_owner]
+    group_part = deal_objects(source, threads, left_out)[source.group_owner]
+    if left_out is not None:
+        group_part = np.where(left_out, -1, group_part)
     lock = threading.Lock()  # the source (an R-tree, a read connection) is one thread's at a time
     with ThreadPoolExecutor(threads, thread_name_prefix="viewdb-search") as pool:
         runs = [pool.submit(search.run, query, step, initial_radius, group_part != t, lock)

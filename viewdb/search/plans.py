@@ -11,10 +11,15 @@ Three plans answer "which k objects does this distance curve show":
     the full tier (same curves), so both bounds hold and the answer is exactly the
     ``server`` answer (:func:`refine`; tests compare them on many queries).
 ``cs2``
-    The heuristic neighbour walk of Algorithm 4: from each object's best client view the
-    server evaluates the neighbouring views on ever finer grids, halving the gap from the
-    client grid down to the server grid, and keeps the best (:func:`walk`). Fewer
-    distances computed; it may miss the best view or object.
+    Heuristic: the server searches only the objects of the client's shortlist. The
+    client sends its nearest objects on the sparse tier (a longer list than k); the
+    server runs CS1's bounded exact search over those objects alone
+    (``RefineRequest.shortlist``). The answer is exact among them; an object the client
+    ranks below its shortlist is missed. Or the paper's neighbour walk of Algorithm 4:
+    from each object's best client view the server evaluates the neighbouring views on
+    ever finer grids, halving the gap from the client grid down to the server grid, and
+    keeps the best (:func:`walk`). Fewer distances computed; it may miss the best view
+    or object.
 
 Everything a client sends or receives is a plain dataclass with ``to_dict``/``from_dict``
 (JSON-able), so putting HTTP between the halves is only transport.
@@ -233,7 +238,10 @@ class RefineRequest:
     (:func:`~viewdb.search.knn.knn_stack`), and ``curve`` is its first row; on the wire
     the stack goes as ``"curves"`` instead of ``"curve"`` (a server that predates stacks
     refuses it as lacking ``"curve"`` rather than answering for one curve). A stack
-    goes without ``shifts``."""
+    goes without ``shifts``.
+
+    ``shortlist`` (CS2): the server searches only the objects the ``client`` candidates
+    name, and the answer is exact among them; without it, every object it holds (CS1)."""
 
     curve: NDArray[np.float64] = field(repr=False)
     band: int
@@ -241,6 +249,7 @@ class RefineRequest:
     client: list[Candidate]
     shifts: ShiftWindow | None = None
     curves: NDArray[np.float64] | None = field(default=None, repr=False)
+    shortlist: bool = False
 
     def __post_init__(self) -> None:
         if self.curves is not None and self.shifts is not None:
@@ -248,13 +257,14 @@ class RefineRequest:
 
     @classmethod
     def of_stack(
-        cls, curves: NDArray[np.floating], band: int, k: int, client: list[Candidate]
+        cls, curves: NDArray[np.floating], band: int, k: int, client: list[Candidate],
+        shortlist: bool = False,
     ) -> RefineRequest:
         """A request searching the smallest distance over the rows of ``curves``."""
         stack = np.ascontiguousarray(curves, dtype=np.float64)
         if stack.ndim != 2 or not 1 <= len(stack) <= MAX_CURVES:
             raise QueryError(f"a stack must hold 1 to {MAX_CURVES} curves, got shape {stack.shape}")
-        return cls(stack[0], band, k, client, curves=stack)
+        return cls(stack[0], band, k, client, curves=stack, shortlist=shortlist)
 
     @property
     def stack(self) -> NDArray[np.float64]:
@@ -269,6 +279,8 @@ class RefineRequest:
             out["curves"] = [[float(x) for x in c] for c in self.curves]
         if self.shifts is not None:
             out["shifts"] = self.shifts.to_dict()
+        if self.shortlist:
+            out["shortlist"] = True
         return out
 
     @classmethod
@@ -281,11 +293,14 @@ class RefineRequest:
             band, k = _int(data["band"], "band", 0, MAX_BAND), _int(data["k"], "k", 1, MAX_K)
             client = candidates_from_json(data["client"], MAX_K)
             shifts = _shifts(data.get("shifts"))
+            shortlist = data.get("shortlist", False)
+            if not isinstance(shortlist, bool):
+                raise QueryError(f"shortlist must be true or false, got {shortlist!r}"[:120])
             if "curves" in data:
                 if shifts is not None:
                     raise QueryError("a request with curves must not have shifts")
-                return cls.of_stack(curves_from_json(data["curves"], samples), band, k, client)
-            return cls(curve_from_json(data["curve"], samples), band, k, client, shifts)
+                return cls.of_stack(curves_from_json(data["curves"], samples), band, k, client, shortlist)
+            return cls(curve_from_json(data["curve"], samples), band, k, client, shifts, shortlist=shortlist)
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -374,7 +389,11 @@ def refine(
     smallest over that stack (:func:`~viewdb.search.knn.knn_stack`, each result's
     ``shift`` the row that matched). ``upper``: a further upper bound
     of the k-th distance from elsewhere (a sharded catalogue's other shards); objects
-    farther than it may be left out of the answer."""
+    farther than it may be left out of the answer.
+
+    ``request.shortlist`` (CS2): only the objects the client candidates name are
+    searched (whether or not their distances bound: a stale candidate's object is still
+    searched), and the answer is exact among them."""
     client = usable_client(request, lambda name: source.object_index(name) is not None, versions)
     if len(client) >= request.k:
         upper = min(upper, client[request.k - 1].distance)
@@ -383,11 +402,18 @@ def refine(
         index = source.object_index(c.object)
         if index is not None:
             known[index] = min(c.distance, known.get(index, math.inf))
+    only = None
+    if request.shortlist:
+        only = np.zeros(source.n_objects, dtype=np.bool_)
+        for c in request.client:
+            index = source.object_index(c.object)
+            if index is not None:
+                only[index] = True
     if request.curves is not None:
         return knn_stack(request.curves, source, request.k, request.band, upper=upper, known=known,
-                         block=SearchConfig().stack_block)
+                         block=SearchConfig().stack_block, only=only)
     return knn(request.curve, source, request.k, request.band, upper=upper, known=known,
-               shifts=request.shifts)
+               shifts=request.shifts, only=only)
 
 
 def next_gap(gap: float, server_gap: float) -> float:
