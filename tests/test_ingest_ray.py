@@ -161,6 +161,9 @@ def test_ray_ingest_into_new_shards_serves_and_exports_as_the_single_file(local_
     assert schema_a == schema_b and a.keys() == b.keys()
     timing = {10, 11}  # objects.ingest_seconds and created_at differ between two ingests
     for table in b:
+        if table == "settings":  # the index's generation is a fresh token on every write
+            a[table] = [r for r in a[table] if r[0] != "index_generation"]
+            b[table] = [r for r in b[table] if r[0] != "index_generation"]
         if table == "objects":
             a[table] = [tuple(v for i, v in enumerate(r) if i not in timing) for r in a[table]]
             b[table] = [tuple(v for i, v in enumerate(r) if i not in timing) for r in b[table]]

@@ -20,10 +20,12 @@ SETTINGS = {"gap": 90, "image_size": 64}
 
 
 def _rows(path):
-    """Every row of every table of a SQLite file, table by table (the schema too)."""
+    """Every row of every table of a SQLite file, table by table (the schema too),"""
     with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
         tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")]
-        return {t: conn.execute(f'SELECT * FROM "{t}"').fetchall() for t in tables}, \
+        # but the index's generation, a fresh token on every write
+        return {t: conn.execute(f'SELECT * FROM "{t}"' + (" WHERE key != 'index_generation'" if t == "settings"
+                                                          else "")).fetchall() for t in tables}, \
             conn.execute("SELECT type, name, sql FROM sqlite_master ORDER BY name").fetchall()
 
 

@@ -13,6 +13,7 @@ import viewdb
 from tests.conftest import sample
 from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.search.shifts import ShiftWindow
+from viewdb.storage.codecs import decode_array
 from viewdb.storage.tier_file import ARRAYS, map_tier_file, tier_file_path, tier_key
 from viewdb.storage.tiers import TIERS, StoredTier
 
@@ -115,6 +116,42 @@ def test_a_stale_tier_file_is_not_used_and_is_written_again(mapped_db, tmp_path)
     assert mapped is not None and len(mapped["ids"]) == len(decoded["ids"])
     # the old file, put back, no longer matches the file's content: not used
     tier_file_path(path, "full").write_bytes(old)
+    assert _decoded_and_mapped(path, "full")[1] is None
+
+
+def test_groups_written_again_under_the_same_ids_make_the_tier_file_stale(mapped_db, tmp_path):
+    """The last object's groups deleted and written again, with different curves, in one
+    transaction: SQLite gives them the same ids, so the groups' count, id sum and maximum
+    and the objects' names and hashes are what they were; the index's generation tells the
+    tier file is stale."""
+    from viewdb.storage.tiers import delete_groups, write_groups
+
+    path = _copy(mapped_db, tmp_path / "copy.db")
+    for tier in TIERS:
+        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    assert _decoded_and_mapped(path, "full")[1] is not None
+    conn = sqlite3.connect(path, isolation_level=None)
+    try:
+        last = conn.execute("SELECT object_id FROM index_groups ORDER BY id DESC LIMIT 1").fetchone()[0]
+        before = conn.execute("SELECT count(*), total(id), max(id) FROM index_groups").fetchone()
+        views = {}
+        for tier in TIERS:
+            ids, curves = [], []
+            for view_ids, blob in conn.execute("SELECT view_ids, curves FROM index_groups WHERE object_id = ?"
+                                               " AND tier = ? ORDER BY id", (last, tier)):
+                v = decode_array(view_ids, np.int64, (None,))
+                ids += v.tolist()
+                curves.append(decode_array(blob, np.float32, (len(v), 128)))
+            views[tier] = (ids, np.concatenate(curves))
+        ids, curves = views["full"]
+        members = {"full": range(len(ids)), "sparse": [ids.index(v) for v in views["sparse"][0]]}
+        conn.execute("BEGIN IMMEDIATE")
+        delete_groups(conn, [last])
+        write_groups(conn, last, ids, curves * 1.01, members, 32)
+        conn.execute("COMMIT")
+        assert conn.execute("SELECT count(*), total(id), max(id) FROM index_groups").fetchone() == before
+    finally:
+        conn.close()
     assert _decoded_and_mapped(path, "full")[1] is None
 
 

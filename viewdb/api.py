@@ -205,7 +205,11 @@ class ViewDB:
 
     def write_tier_files(self) -> None:
         """Write the tiers' search arrays next to the file, ready to map for the next fresh
-        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends."""
+        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends. A file
+        written before index generations gets one first, which makes checking its tier
+        files quick."""
+        if not self.read_only:
+            self._store.mark_generation()
         with self._catalogue.tier_reader().snapshot() as reader:
             reader.write_tier_files()
 

@@ -31,6 +31,7 @@ from ..errors import StorageError, ViewDBError
 from ..search.grouping import DIMENSION
 from ..storage.codecs import decode_array
 from ..storage.spatial import FourierIndex
+from ..storage.tier_file import new_generation
 from ..storage.tiers import TIERS
 
 __all__ = ["MANIFEST", "Manifest", "check_new_folder", "read_manifest", "shard_file", "shard_of",
@@ -180,6 +181,7 @@ def _write_shard(source: Path, target: Path, keep: set[str]) -> None:
         conn.execute("BEGIN IMMEDIATE")
         drop = [(i,) for i, name in conn.execute("SELECT id, name FROM objects") if name not in keep]
         conn.executemany("DELETE FROM index_groups WHERE object_id = ?", drop)
+        new_generation(conn)
         conn.executemany("DELETE FROM objects WHERE id = ?", drop)
         conn.execute("DELETE FROM rtree_meta")
         conn.execute("DELETE FROM rtree_pages")

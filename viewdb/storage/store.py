@@ -26,6 +26,8 @@ from . import schema as s
 from .appearances import pack_records
 from .codecs import decode_array, encode_array
 from .connection import Database
+from .spatial import raw_connection
+from .tier_file import new_generation
 from .tiers import delete_groups, rows_with_ids, write_groups
 
 __all__ = ["ObjectRow", "Store", "ViewRow"]
@@ -92,6 +94,12 @@ class Store(Database):
                 sa.insert(s.settings).values(key="build", value=json.dumps(config.to_dict()))
             )
             conn.execute(sa.insert(s.settings).values(key="role", value=json.dumps(role)))
+
+    def mark_generation(self) -> None:
+        """Give a file written before index generations one
+        (:func:`~viewdb.storage.tier_file.new_generation`); a file with one keeps it."""
+        with self.transaction() as conn:
+            new_generation(raw_connection(conn), keep=True)
 
     def role(self) -> str:
         """``"full"`` (built by ingest: meshes, SIFT, both tiers) or ``"client"`` (written by

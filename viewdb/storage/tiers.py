@@ -39,7 +39,7 @@ from ..search.grouping import (
 from ..search.knn import QueryBoxes, TierArrays
 from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
-from .tier_file import map_tier_file, tier_file_path, tier_key, write_tier_file
+from .tier_file import map_tier_file, new_generation, tier_file_path, tier_key, write_tier_file
 
 __all__ = [
     "TIERS",
@@ -118,6 +118,7 @@ def write_groups(
     on an error the caller must roll back.
     """
     raw = raw_connection(conn)
+    new_generation(raw)
     ids = np.asarray(view_ids, dtype=np.int64)
     all_curves = np.asarray(curves, dtype=np.float32)
     counts = {}
@@ -161,6 +162,7 @@ def write_groups(
 def delete_groups(conn: Any, object_ids: Iterable[int], tiers: Sequence[str] = TIERS) -> None:
     """Take the objects' groups out of ``tiers`` (default both; caller's transaction)."""
     raw = raw_connection(conn)
+    new_generation(raw)
     for object_id in object_ids:
         rows = [r for r in raw.execute(
             "SELECT id, tier, lo, hi FROM index_groups WHERE object_id = ?", (int(object_id),)
