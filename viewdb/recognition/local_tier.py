@@ -85,7 +85,8 @@ class LocalServerTier:
         curves = (None if request.curves is None
                   else np.stack([self.catalogue.query_curve(c, request.k, "full") for c in request.curves]))
         with self.catalogue.tier_reader().snapshot() as reader:
-            versions = reader.object_versions()
+            # the versions tell which client candidates bound (none to tell without them)
+            versions = reader.object_versions() if request.client else None
             found, stats = refine(reader.tier("full"), replace(request, curve=q, curves=curves), versions)
             angles = reader.view_projections([n.view for n in found])
         return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None,
