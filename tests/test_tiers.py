@@ -13,6 +13,7 @@ from tests.conftest import sample
 from viewdb.catalogue.describe import perspective_grid
 from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.search.knn import brute_force_knn
+from viewdb.storage.tiers import SCAN_SAMPLE
 
 
 def tier_views_of(db, tier, perspective=False):
@@ -170,11 +171,14 @@ def test_info_reports_both_tiers(tiered_db, capsys):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.lists(st.floats(0.0, 2.0), min_size=1, max_size=4))
-def test_groups_within_answers_each_ask_as_the_r_tree_does(tiered_db, seed, radii):
+@given(st.integers(0, 2**32 - 1), st.lists(st.floats(0.0, 2.0), min_size=1, max_size=4),
+       st.sampled_from([0.0, 0.25, 1.0]))
+def test_groups_within_answers_each_ask_as_the_r_tree_does(tiered_db, seed, radii, scan_share):
     """The threads of one search ask for the same boxes in turn, each for its own objects
-    (the last R-tree answer is kept for that): every ask, repeated or not, gives the groups
-    whose MBR meets the widened boxes and that are not yet seen, with their keys."""
+    (the last answer is kept for that): every ask, repeated or not, gives the groups whose
+    MBR meets the widened boxes and that are not yet seen, with their keys, whether the
+    R-tree answers or the MBRs are compared (``scan_share`` 1: always the R-tree; 0: always
+    the comparison); and the R-tree is asked exactly when the sample says it should be."""
     from viewdb.search.shifts import CurveQuery
 
     rng = np.random.default_rng(seed)
@@ -184,11 +188,18 @@ def test_groups_within_answers_each_ask_as_the_r_tree_does(tiered_db, seed, radi
         query = CurveQuery.of(curves, 4)
         with db._catalogue.tier_reader().snapshot() as reader:
             tier = reader.tier("full")
+            tier.scan_share = scan_share
+            asked = []
+            r_tree = tier.index.intersection_many
+            tier.index.intersection_many = lambda los, his: asked.append(1) or r_tree(los, his)
             lo, hi, curve_lo, curve_hi = tier.group_boxes()
             part = rng.integers(2, size=tier.n_objects)
             for radius in [r for r in radii for _ in range(2)]:  # each radius asked twice
                 for thread in (0, 1):
                     seen = part[tier.group_owner] != thread
+                    before = len(asked)
+                    his = (np.stack([query.box[1], query.mirrored_box[1]]) + radius).tobytes()
+                    fresh = tier._last_within is None or tier._last_within[0][1] != his
                     got, keys = tier.groups_within(query, radius, seen.copy())
                     meets = np.zeros(tier.n_groups, dtype=bool)
                     for box_lo, box_hi in (query.box, query.mirrored_box):
@@ -197,3 +208,7 @@ def test_groups_within_answers_each_ask_as_the_r_tree_does(tiered_db, seed, radi
                     assert sorted(got.tolist()) == expected.tolist()
                     _, want = query.group_keys(lo, hi, curve_lo, curve_hi, got)
                     assert np.array_equal(keys, want)
+                    # the R-tree is asked for a fresh ask whose sample share is at most scan_share
+                    sample = np.arange(0, tier.n_groups, max(1, tier.n_groups // SCAN_SAMPLE))
+                    share = meets[sample].mean()
+                    assert len(asked) - before == int(fresh and share <= scan_share)

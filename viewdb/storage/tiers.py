@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import BuildConfig
+from ..config import BuildConfig, SearchConfig
 from ..errors import QueryError, StorageError
 from ..search.bounds import paa_edges, paa_means, rounded32
 from ..search.grouping import (
@@ -185,6 +185,21 @@ def delete_groups(conn: Any, object_ids: Iterable[int], tiers: Sequence[str] = T
         raw.executemany("DELETE FROM index_groups WHERE id = ?", [(int(r[0]),) for r in rows])
 
 
+#: Groups :meth:`StoredTier.groups_meeting` tests to estimate a browse's share.
+SCAN_SAMPLE = 256
+
+
+def _meeting(
+    lo: NDArray[np.float64], hi: NDArray[np.float64], los: NDArray[np.float64], his: NDArray[np.float64],
+) -> NDArray[np.bool_]:
+    """Whether each MBR ``[lo[g], hi[g]]`` meets any of the closed boxes ``[los[i], his[i]]``
+    (as the R-tree decides: every coordinate's intervals overlap, ends included)."""
+    meets = np.zeros(len(lo), dtype=np.bool_)
+    for box_lo, box_hi in zip(los, his, strict=True):
+        meets |= ((lo <= box_hi) & (hi >= box_lo)).all(axis=1)
+    return meets
+
+
 class StoredTier:
     """One tier of an open database as a search source (see the module doc).
 
@@ -235,8 +250,12 @@ class StoredTier:
         names: dict[int, str] = dict(conn.execute("SELECT id, name FROM objects"))
         self._names = [names[int(i)] for i in self._object_ids]
         self._index_by_name = {name: i for i, name in enumerate(self._names)}
-        #: the last R-tree answer of :meth:`groups_within`: (its boxes, its group rows)
+        #: the last answer of :meth:`groups_within`: (its boxes, its group rows)
         self._last_within: tuple[tuple[bytes, bytes], NDArray[np.int64]] | None = None
+        #: a browse estimated to meet more than this share of the groups scans their MBRs
+        #: instead of asking the R-tree (:meth:`groups_meeting`)
+        self.scan_share = SearchConfig().scan_share
+        self._sample = np.arange(0, self.n_groups, max(1, self.n_groups // SCAN_SAMPLE), dtype=np.int64)
 
     def _read_errors(self) -> None:
         at = {int(gid): g for g, gid in enumerate(self._ids.tolist())}
@@ -271,13 +290,25 @@ class StoredTier:
         if self._last_within is not None and self._last_within[0] == boxes:
             at = self._last_within[1]
         else:
-            at = np.searchsorted(self._ids, self.index.intersection_many(los, his)).astype(np.int64)
+            at = self.groups_meeting(los, his)
             self._last_within = (boxes, at)
         at = at[~seen[at]]
         if not len(at):
             return at, np.zeros(0)
         _, keys = query.group_keys(self._lo, self._hi, self._curve_lo, self._curve_hi, at)
         return at, keys
+
+    def groups_meeting(self, los: NDArray[np.float64], his: NDArray[np.float64]) -> NDArray[np.int64]:
+        """The groups (rows, ascending) whose MBR meets any of the closed boxes ``[los[i],
+        his[i]]``: the R-tree's answer, or the same groups found by comparing every group's
+        MBR with the boxes when a strided sample of the groups says the boxes meet more
+        than :attr:`scan_share` of them. An R-tree pays when it can skip most of its
+        nodes; a browse wide enough to meet most groups reads nearly every node, one page
+        at a time, where the comparison is one pass over arrays already in memory."""
+        if len(self._sample) and _meeting(self._lo[self._sample], self._hi[self._sample], los, his).mean() \
+                > self.scan_share:
+            return np.flatnonzero(_meeting(self._lo, self._hi, los, his)).astype(np.int64)
+        return np.searchsorted(self._ids, self.index.intersection_many(los, his)).astype(np.int64)
 
     def rows(
         self, groups: NDArray[np.int64]
