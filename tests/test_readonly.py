@@ -166,6 +166,38 @@ def test_a_full_file_from_revision_0003_searches_its_orthographic_views_read_onl
     assert _snapshot(path) == before
 
 
+def test_a_file_from_revision_0006_answers_read_only_without_the_objects_index(tiered_db, tmp_path):
+    """Revision 0007 only added an index: a file from 0006 opens read-only as it is, answers
+    as the current file does (the CS1 server reads the objects' versions through the
+    table), and opened normally gets the index."""
+    path = tmp_path / "old.db"
+    with sqlite3.connect(tiered_db) as src, sqlite3.connect(path) as dst:
+        src.backup(dst)
+    _downgrade(path, "0006")
+    with sqlite3.connect(path) as conn:
+        assert not conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'ix_objects_versions'").fetchall()
+    before = _snapshot(path)
+    with viewdb.open(path, read_only=True) as db, viewdb.open(tiered_db, read_only=True) as ref:
+        assert db.info().schema_revision == "0006"
+        for q in mixed_query_curves(ref, np.random.default_rng(3), 4):
+            assert db.recognise(q, 3, plan="cs1").results == ref.recognise(q, 3, plan="cs1").results
+        _use(db)
+    assert _snapshot(path) == before
+    with viewdb.open(path, create=False) as db:
+        assert db.info().schema_revision == "0007"
+
+
+def test_what_reads_the_columns_after_an_objects_mesh_reads_the_index(tiered_db):
+    """The objects' versions and the key of a tier file without a generation read columns
+    that lie after the mesh in an object's row; the planner answers both from the index of
+    revision 0007, without the rows (and so without walking the meshes' pages)."""
+    with sqlite3.connect(f"file:{tiered_db}?mode=ro", uri=True) as conn:
+        for sql in ("SELECT name, content_hash, skimmed FROM objects",
+                    "SELECT id, name, content_hash, created_at FROM objects"):
+            plan = " ".join(str(r[-1]) for r in conn.execute("EXPLAIN QUERY PLAN " + sql))
+            assert "COVERING INDEX ix_objects_versions" in plan, (sql, plan)
+
+
 def test_unfinished_newer_missing_and_foreign_files_are_refused(tmp_path):
     cut = tmp_path / "cut.db"
     Store(cut).close()  # schema but no build configuration

@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0006"
+SCHEMA_REVISION = "0007"
 
 metadata = MetaData()
 
@@ -104,6 +104,8 @@ objects = Table(
     Column("v_period", Float, nullable=True),
     Column("symmetry", Text, nullable=True),
 )
+# revision 0007: what reads the columns after the mesh reads them here, not through its pages
+Index("ix_objects_versions", objects.c.name, objects.c.content_hash, objects.c.skimmed, objects.c.created_at)
 
 views = Table(
     "views",

@@ -103,7 +103,9 @@ def _unmarked_key(conn: sqlite3.Connection, tier: str) -> str:
         " FROM index_groups WHERE tier = ?", (tier,),
     ).fetchone()
     digest.update(repr(tuple(groups)).encode())
-    for row in conn.execute("SELECT id, name, content_hash, created_at FROM objects ORDER BY id"):
+    # sorted here, not by the query, which then reads the objects' index (revision 0007), not
+    # their rows: a row's time of writing lies after its mesh
+    for row in sorted(conn.execute("SELECT id, name, content_hash, created_at FROM objects")):
         digest.update(repr(tuple(row)).encode())
     return digest.hexdigest()
 
