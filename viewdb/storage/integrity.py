@@ -19,6 +19,7 @@ file has no per-view curve or Fourier rows: its curves are in its groups).
 from __future__ import annotations
 
 import json
+import sqlite3
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -106,12 +107,15 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
             report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
         client = store.role() == "client"
         raw = conn.connection.driver_connection
-        compact = client and raw.execute("SELECT 1 FROM curve_errors LIMIT 1").fetchone() is not None
-        _check_objects(conn, config.gap, report, client)
-        _check_views(conn, config, report, progress, client, compact)
-        _check_tiers(raw, config, report, client)
-        _check_curve_errors(raw, config.features.curve_samples, report, compact)
-        _check_appearances(conn.connection.driver_connection, config, report, client)
+        try:
+            compact = client and raw.execute("SELECT 1 FROM curve_errors LIMIT 1").fetchone() is not None
+            _check_objects(conn, config.gap, report, client)
+            _check_views(conn, config, report, progress, client, compact)
+            _check_tiers(raw, config, report, client)
+            _check_curve_errors(raw, config.features.curve_samples, report, compact)
+            _check_appearances(raw, config, report, client)
+        except (sqlite3.DatabaseError, sa.exc.DatabaseError) as exc:  # pages SQLite cannot read
+            report.add(f"cannot read the file's rows: {str(exc).splitlines()[0]}")
     return report
 
 
