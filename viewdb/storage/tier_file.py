@@ -23,9 +23,9 @@ count, id sum and maximum (read from the tier's index alone), and every object's
 and content hash. A database no writer with generations has changed has none; its key is
 the tier's group count, id sum and maximum, the total length of its curve and view-id
 BLOBs, and every object's id, name, content hash and time of writing, which cost a read of
-every group row and of every stored mesh (an object's time lies after its mesh in the
-row): 0.1–0.3 s on the 212-model file with the pages cached. A file whose key differs from
-the database's is not used.
+every group row (0.1–0.3 s on the 212-model file with the pages cached) and, before schema
+revision 0007 indexed it, of every stored mesh (an object's time lies after its mesh in the
+row). A file whose key differs from the database's is not used.
 """
 
 from __future__ import annotations
