@@ -306,9 +306,16 @@ def info(
                  if distances and lacking else ""))
     if data.rows.get("sift_features", 0):  # a full file (a client file has no appearance)
         without = sum(1 for o in data.objects if o.appearances == 0 and o.views_stored)
+        from viewdb.camera import grid_views
+
+        directions = len(grid_views(data.config.gap)) // 2  # a view and its turned twin share one
+        partial = sum(1 for o in data.objects if 0 < o.appearances < directions) \
+            if data.config.appearance.every_view else 0
         out.print(f"  appearance records: {data.rows.get('appearances', 0)}"
                   + (f"; {without} objects have none yet (queries render their views): ingest "
-                     "their files again to add them" if without else ""))
+                     "their files again to add them" if without else "")
+                  + (f"; {partial} objects lack those of some views (queries render them): ingest "
+                     "their files again to add them" if partial else ""))
     for tier, t in data.tiers.items():
         out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
                   f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import shutil
 import sqlite3
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -186,6 +187,8 @@ def _swap_theta(data: bytes, theta) -> bytes:
 # --------------------------------------------------------------------------- a database
 CONFIG = BuildConfig(gap=60, render=RenderConfig(image_size=96), index=IndexConfig(client_gap=120),
                      perspective=PerspectiveConfig(distances=()))
+#: As files from before revision 0008 recorded: the stored views and their opposites only.
+OLD_CONFIG = replace(CONFIG, appearance=AppearanceConfig(every_view=False))
 DB_MODELS = ("l_bracket", "car", "cube_dice", "cylinder")
 
 
@@ -206,30 +209,49 @@ def _rows(path):
             " ORDER BY o.name, a.azimuth, a.elevation")]
 
 
-def test_an_ingest_records_every_direction_of_the_stored_views_and_their_opposites(appearance_db):
-    with_opposite = {}
+def _scopes(path):
+    with sqlite3.connect(path) as conn:
+        return dict(conn.execute(
+            "SELECT o.name, s.scope FROM appearance_scopes s JOIN objects o ON o.id = s.object_id"))
+
+
+def test_an_ingest_records_every_grid_direction_of_every_object(appearance_db):
+    """One record per viewing direction of the grid (a view and its turned twin share
+    one), the views the skim plan pruned included, coloured or not; the objects are marked
+    as such."""
     with viewdb.open(appearance_db, read_only=True) as db:
         rows = _rows(appearance_db)
         assert db.check().ok
+        coloured = {n for n, a, e, data in rows if decode_record(data, a, e, 96).signature is not None}
+        assert coloured == {"car", "cube_dice"}  # the sample meshes with colour of their own
+        assert _scopes(appearance_db) == dict.fromkeys(DB_MODELS, "every")
+        grid = {frozenset((v, turned_view(*v))) for v in grid_views(CONFIG.gap)}
+        for info in db.objects():
+            recorded = {(a, e) for n, a, e, *_ in rows if n == info.name}
+            assert info.appearances == len(recorded) == len(grid)
+            assert {frozenset((v, turned_view(*v))) for v in recorded} == grid
+        assert min(o.views_stored for o in db.objects()) < len(grid_views(CONFIG.gap))  # pruned ones too
+
+
+def test_without_every_view_an_ingest_records_the_stored_views_and_their_opposites(symmetric_db):
+    """``every_view=False`` (and files from before revision 0008): the stored views'
+    directions, and the opposite views' when they cost no renders."""
+    path, _ = symmetric_db
+    with viewdb.open(path, read_only=True) as db:
+        rows = _rows(path)
+        assert db.check().ok and not _scopes(path)
         for info in db.objects():
             stored = db._catalogue.views(info.name)
             recorded = {(a, e) for n, a, e, *_ in rows if n == info.name}
-            assert info.appearances == len(recorded) > 0
-            wanted = appearance_views(stored, CONFIG.appearance)
-            assert recorded == set(wanted)
+            assert recorded == set(appearance_views(stored, OLD_CONFIG.appearance))
             own = {frozenset((v, turned_view(*v))) for v in stored}
             both = own | {frozenset((o, turned_view(*o))) for o in (opposite_view(*s) for s in stored)}
-            # one record per viewing direction; the opposite views' too when they cost no renders
-            assert len(recorded) == (len(both) if len(both) <= len(stored) else len(own))
-            with_opposite[info.name] = len(recorded) == len(both)
-            coloured = {n for n, a, e, data in rows if decode_record(data, a, e, 96).signature is not None}
-        assert coloured == {"car", "cube_dice"}  # the sample meshes with colour of their own
-    assert with_opposite["l_bracket"]  # asymmetric: every direction of the sphere
+            assert len(recorded) == (len(both) if len(both) <= len(stored) else len(own)) < len(grid_views(60))
 
 
 def test_stored_and_rendered_appearance_compare_alike_on_every_grid_view(appearance_db, meshes):
-    """Every grid view's appearance, from the file (stored, a turned twin, or rendered on
-    demand for a pruned view) against one made from a fresh render of that view."""
+    """Every grid view's appearance, from the file (stored, or a turned twin's: nothing is
+    rendered, the car's colour included) against one made from a fresh render of that view."""
     renderer = get_renderer(CONFIG.render)
     with viewdb.open(appearance_db, read_only=True) as db:
         catalogue = db._catalogue
@@ -238,6 +260,7 @@ def test_stored_and_rendered_appearance_compare_alike_on_every_grid_view(appeara
             photo = colour_signature(query.color, query.mask)
             for h, v in grid_views(CONFIG.gap):
                 record = catalogue.appearance(name, h, v)
+                assert (name, h, v) not in catalogue._renders  # every grid view has a record
                 view = renderer.render(meshes[name], h, v)
                 assert np.count_nonzero(record.mask != view.mask) <= 0.01 * max(view.mask.sum(), 1)
                 fresh = appearance_of(view, CONFIG.appearance, name == "car")
@@ -310,8 +333,10 @@ def test_a_damaged_appearance_record_fails_the_check(appearance_db, tmp_path):
             " WHERE o.name = 'l_bracket' ORDER BY a.id LIMIT 2").fetchall()
         # the first stored view's record now points at the second's bytes: not its silhouette
         conn.execute("UPDATE appearances SET offset = ?, size = ? WHERE id = ?", (second[1], second[2], first[0]))
-        conn.execute("DELETE FROM appearances WHERE id = (SELECT max(id) FROM appearances"
-                     " WHERE object_id = (SELECT id FROM objects WHERE name = 'car'))")
+        conn.execute("DELETE FROM appearances WHERE id = (SELECT min(a.id) FROM appearances a"
+                     " JOIN views v ON v.object_id = a.object_id AND v.azimuth = a.azimuth"
+                     " AND v.elevation = a.elevation WHERE a.object_id = (SELECT id FROM objects"
+                     " WHERE name = 'car'))")  # a stored view's
         conn.execute("UPDATE appearances SET size = size + 100000 WHERE id = (SELECT min(id) FROM appearances"
                      " WHERE object_id = (SELECT id FROM objects WHERE name = 'cube_dice'))")
     with viewdb.open(path, read_only=True) as db:
@@ -329,13 +354,15 @@ def test_replacing_an_object_replaces_its_appearance(tmp_path):
     shutil.copy(sample("cone"), model)
     with viewdb.open(path, config=CONFIG) as db:
         db.ingest([model])
-        before = db.object("thing").appearances
+    before = _rows(path)
     shutil.copy(sample("pyramid"), model)
     with viewdb.open(path, create=False) as db:
         assert db.ingest([model]).counts()["replaced"] == 1
         after = db.object("thing").appearances
         assert db.check().ok
-    assert len(_rows(path)) == after != before
+    rows = _rows(path)
+    assert len(rows) == after and _scopes(path) == {"thing": "every"}
+    assert {r[3] for r in rows}.isdisjoint({r[3] for r in before})  # the pyramid's, not the cone's
 
 
 def _downgrade(path, revision):
@@ -374,6 +401,56 @@ def test_an_older_file_answers_read_only_and_gains_its_appearance_by_ingesting_a
     fresh, upgraded = _rows(appearance_db), _rows(path)
     assert [r[:3] for r in upgraded] == [r[:3] for r in fresh]
     for a, b in zip(fresh, upgraded, strict=True):  # the same renders (one may be a turned one)
+        ma = decode_record(a[3], *a[1:3], CONFIG.render.image_size).mask
+        mb = decode_record(b[3], *b[1:3], CONFIG.render.image_size).mask
+        assert np.count_nonzero(ma != mb) <= 0.01 * ma.sum()
+
+
+def test_an_object_recorded_at_its_stored_views_gains_every_direction_by_ingesting_again(
+        appearance_db, tmp_path, capsys):
+    """A file from revision 0007 recorded the stored views (and opposites) only, and
+    rendered a coloured mesh's pruned views at query time; ingesting its unchanged files
+    again records the rest, as a fresh ingest does, and renders nothing more."""
+    path = tmp_path / "0007.db"
+    shutil.copy(appearance_db, path)
+    _downgrade(path, "0007")
+    with viewdb.open(path, read_only=True) as db:
+        stored = {name: db._catalogue.views(name) for name in DB_MODELS}
+    with sqlite3.connect(path) as conn:  # as it was recorded before 0008
+        for name, views in stored.items():
+            old = {frozenset((v, turned_view(*v))) for v in appearance_views(views, CONFIG.appearance)}
+            oid = conn.execute("SELECT id FROM objects WHERE name = ?", (name,)).fetchone()[0]
+            for rid, a, e in conn.execute("SELECT id, azimuth, elevation FROM appearances WHERE object_id = ?",
+                                          (oid,)).fetchall():
+                if frozenset(((a, e), turned_view(a, e))) not in old:
+                    conn.execute("DELETE FROM appearances WHERE id = ?", (rid,))
+    pruned = next((h, v) for h, v in grid_views(CONFIG.gap)
+                  if (h, v) not in stored["car"] and turned_view(h, v) not in stored["car"]
+                  and opposite_view(h, v) not in stored["car"])
+    with viewdb.open(path, read_only=True) as db:  # as the old file answered: a render
+        assert db.info().schema_revision == "0007" and db.check().ok
+        db._catalogue.appearance("car", *pruned)
+        assert ("car", *pruned) in db._catalogue._renders
+    files = [str(sample(n)) for n in DB_MODELS]
+    capsys.readouterr()
+    partial = sum(len({(a, e) for n, a, e, _ in _rows(path) if n == name}) < len(grid_views(CONFIG.gap)) // 2
+                  for name in DB_MODELS)
+    assert main(["info", "--db", str(path)]) == 0
+    assert partial >= 2 and f"{partial} objects lack those of some views" in capsys.readouterr().out
+    assert main(["ingest", *files, "--db", str(path)]) == 0
+    assert "4 upgraded" in capsys.readouterr().out
+    assert main(["info", "--db", str(path)]) == 0
+    assert "lack" not in capsys.readouterr().out
+    with viewdb.open(path, create=False) as db:
+        assert db.check().ok
+        assert db.ingest(files).counts()["unchanged"] == 4
+        db._catalogue.appearance("car", *pruned)
+        assert ("car", *pruned) not in db._catalogue._renders
+    assert _scopes(path) == _scopes(appearance_db)
+    fresh, upgraded = _rows(appearance_db), _rows(path)
+    assert [r[:3] for r in upgraded] == [r[:3] for r in fresh]
+    for a, b in zip(fresh, upgraded, strict=True):
+        assert decode_record(a[3], *a[1:3], 96).signature is not None or a[3] == b[3]
         ma = decode_record(a[3], *a[1:3], CONFIG.render.image_size).mask
         mb = decode_record(b[3], *b[1:3], CONFIG.render.image_size).mask
         assert np.count_nonzero(ma != mb) <= 0.01 * ma.sum()
@@ -485,7 +562,7 @@ def symmetric_db(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("symmetric")
     trimesh.load(sample("mug"), force="mesh").export(folder / "plain_mug.stl")
-    with viewdb.open(folder / "s.db", config=CONFIG) as db:
+    with viewdb.open(folder / "s.db", config=OLD_CONFIG) as db:  # views without records
         assert not db.ingest([sample("cylinder"), folder / "plain_mug.stl"]).failed
         meshes = {name: db.mesh(name) for name in ("cylinder", "plain_mug")}
     return folder / "s.db", meshes

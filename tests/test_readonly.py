@@ -16,6 +16,7 @@ import viewdb
 from tests.conftest import ROOT, mixed_query_curves, sample
 from viewdb.config import PerspectiveConfig
 from viewdb.errors import SchemaMismatch, StorageError
+from viewdb.storage.schema import SCHEMA_REVISION
 from viewdb.storage.store import Store
 
 
@@ -184,7 +185,7 @@ def test_a_file_from_revision_0006_answers_read_only_without_the_objects_index(t
         _use(db)
     assert _snapshot(path) == before
     with viewdb.open(path, create=False) as db:
-        assert db.info().schema_revision == "0007"
+        assert db.info().schema_revision == SCHEMA_REVISION
 
 
 def test_what_reads_the_columns_after_an_objects_mesh_reads_the_index(tiered_db):

@@ -194,12 +194,14 @@ class ViewDB:
             if upgrade.perspective is not None:
                 self._store.add_perspective(upgrade.name, upgrade.perspective, self.config)
             if upgrade.appearance is not None:
-                self._store.add_appearance(upgrade.name, upgrade.appearance)
+                self._store.add_appearance(upgrade.name, upgrade.appearance, upgrade.appearance_scope)
             self._catalogue.forget(upgrade.name)
 
         return IngestTarget(
             self._store.object_hashes(), write, self._store.objects_lacking_perspective(),
-            {name: self._catalogue.views(name) for name in self._store.objects_lacking_appearance()},
+            {name: (self._catalogue.views(name), recorded)
+             for name, recorded in self._store.objects_lacking_appearance(
+                 self.config.appearance.every_view).items()},
             write_upgrade,
         )
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +27,7 @@ from .skimming import plan_without_skimming, skim_plan
 from .symmetry import SymmetryType, classify
 
 __all__ = [
+    "EVERY_VIEW",
     "ObjectDescription",
     "PerspectiveView",
     "ViewDescription",
@@ -37,7 +38,13 @@ __all__ = [
     "describe_perspective",
     "describe_view",
     "perspective_grid",
+    "recorded_views",
 ]
+
+#: The appearance scope of an object whose records cover every grid direction
+#: (:attr:`~viewdb.config.AppearanceConfig.every_view`; schema revision 0008's
+#: ``appearance_scopes``).
+EVERY_VIEW = "every"
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,8 +95,10 @@ class ObjectDescription:
     #: Perspective silhouettes (:func:`describe_perspective`); empty when the build
     #: configuration has none.
     perspective: list[PerspectiveView] = field(default_factory=list, repr=False)
-    #: The appearance of every direction of :func:`appearance_views`.
+    #: The appearance of every direction of :func:`recorded_views`.
     appearance: list[Appearance] = field(default_factory=list, repr=False)
+    #: :data:`EVERY_VIEW` when ``appearance`` covers every grid direction, else None.
+    appearance_scope: str | None = None
 
 
 def describe_view(view: RenderedView, config: BuildConfig) -> ViewDescription:
@@ -180,14 +189,16 @@ def describe_perspective(
 
 
 def appearance_views(
-    stored: list[tuple[float, float]], config: AppearanceConfig
+    stored: list[tuple[float, float]], config: AppearanceConfig,
+    grid: Sequence[tuple[float, float]] = (),
 ) -> list[tuple[float, float]]:
     """The views whose appearance is recorded for an object with ``stored`` views, one per
     viewing direction (a view whose turned twin,
     :func:`~viewdb.catalogue.appearance.turned_view`, is already recorded is left out):
     each stored view, and the view opposite each
     (:func:`~viewdb.catalogue.appearance.opposite_view`, the side a mirrored match shows)
-    when that adds at most ``config.opposite_cost`` of the stored views' renders."""
+    when that adds at most ``config.opposite_cost`` of the stored views' renders; and every
+    view of ``grid`` (the whole grid: :func:`recorded_views`)."""
 
     def directions(views: list[tuple[float, float]]) -> list[tuple[float, float]]:
         out: list[tuple[float, float]] = []
@@ -199,6 +210,8 @@ def appearance_views(
         return out
 
     both = directions([*stored, *(opposite_view(h, v) for h, v in stored)])
+    if grid:
+        return directions([*both, *grid])
     if len(both) <= (1.0 + config.opposite_cost) * len(stored):
         return both
     return directions(stored)
@@ -224,22 +237,39 @@ def _render_views(
             yield turned_render(rendered)
 
 
+def recorded_views(config: BuildConfig, stored: list[tuple[float, float]]
+                   ) -> tuple[list[tuple[float, float]], str | None]:
+    """The views whose appearance an ingest records for an object stored with views
+    ``stored`` (:func:`appearance_views`; the whole grid with
+    :attr:`~viewdb.config.AppearanceConfig.every_view`), and the scope the file marks the
+    object with (:data:`EVERY_VIEW`, or None)."""
+    if config.appearance.every_view:
+        return appearance_views(stored, config.appearance, grid_views(config.gap)), EVERY_VIEW
+    return appearance_views(stored, config.appearance), None
+
+
 def describe_appearance(
     mesh: NormalisedMesh, config: BuildConfig, stored: list[tuple[float, float]],
     renderer: Renderer | None = None, on_view: Callable[[int], None] | None = None,
-) -> list[Appearance]:
+    recorded: Collection[tuple[float, float]] = (),
+) -> tuple[list[Appearance], str | None]:
     """The appearance records of an object stored with views ``stored`` (its
-    :func:`appearance_views`; views without a silhouette have none). ``on_view(1)`` after
-    each."""
+    :func:`recorded_views`; views without a silhouette have none) that ``recorded`` (the
+    views it has records of) lacks, and its scope. ``on_view(1)`` after each."""
+    wanted, scope = recorded_views(config, stored)
+    have = set(recorded)
+    todo = [view for view in wanted if view not in have and turned_view(*view) not in have]
+    if not todo:
+        return [], scope
     renderer = renderer or get_renderer(config.render)
     coloured = carries_colour(mesh)
     records = []
-    for rendered in _render_views(mesh, appearance_views(stored, config.appearance), renderer):
+    for rendered in _render_views(mesh, todo, renderer):
         if rendered.mask.any():
             records.append(appearance_of(rendered, config.appearance, coloured))
         if on_view is not None:
             on_view(1)
-    return records
+    return records, scope
 
 
 def describe_object(
@@ -265,7 +295,7 @@ def describe_object(
     if on_view is not None and plan.views_grid > plan.views_stored:
         on_view(plan.views_grid - plan.views_stored)
     kept = set(views)
-    recorded = appearance_views(views, config.appearance)
+    recorded, scope = recorded_views(config, views)
     to_record = set(recorded)
     coloured = carries_colour(mesh)
     described: dict[tuple[float, float], ViewDescription] = {}
@@ -301,4 +331,5 @@ def describe_object(
         skimmed=skim,
         perspective=perspective,
         appearance=[appearance[view] for view in recorded if view in appearance],
+        appearance_scope=scope,
     )

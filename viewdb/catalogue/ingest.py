@@ -27,15 +27,15 @@ from ..camera import grid_views
 from ..config import LIMITS, BuildConfig, RayIngestConfig, integer
 from ..errors import MeshError, ViewDBError
 from ..paths import not_regular
-from .appearance import Appearance
+from .appearance import Appearance, turned_view
 from .describe import (
     ObjectDescription,
     PerspectiveView,
-    appearance_views,
     describe_appearance,
     describe_object,
     describe_perspective,
     perspective_grid,
+    recorded_views,
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
@@ -154,8 +154,11 @@ class Upgrade:
 
     name: str
     perspective: list[PerspectiveView] | None
+    #: The records it lacked (added to those it has).
     appearance: list[Appearance] | None
     seconds: float
+    #: The scope its records now have (:func:`~viewdb.catalogue.describe.recorded_views`).
+    appearance_scope: str | None = None
 
     @property
     def views(self) -> list[Any]:
@@ -171,9 +174,10 @@ def _describe(
     if job.upgrade:
         perspective = (describe_perspective(mesh, config, on_view=on_view)
                        if "perspective" in job.upgrade else None)
-        appearance = (describe_appearance(mesh, config, job.stored, on_view=on_view)
-                      if "appearance" in job.upgrade else None)
-        return Upgrade(job.name, perspective, appearance, time.perf_counter() - start)
+        appearance, scope = (describe_appearance(mesh, config, job.stored, on_view=on_view,
+                                                 recorded=job.recorded)
+                             if "appearance" in job.upgrade else (None, None))
+        return Upgrade(job.name, perspective, appearance, time.perf_counter() - start, scope)
     return describe_object(mesh, config, skim=skim, on_view=on_view)
 
 
@@ -192,7 +196,8 @@ class IngestTarget:
     existing_hashes: dict[str, str]
     write: Callable[[ObjectDescription], None]
     lacking_perspective: set[str] | frozenset[str]
-    lacking_appearance: dict[str, list[tuple[float, float]]]
+    #: name → (its stored views, the views it has appearance records of).
+    lacking_appearance: dict[str, tuple[list[tuple[float, float]], list[tuple[float, float]]]]
     write_upgrade: Callable[[Upgrade], None]
 
 
@@ -206,8 +211,10 @@ class _Job:
     #: The file is unchanged and its object lacks only these: "perspective" (views),
     #: "appearance" (records).
     upgrade: frozenset[str] = frozenset()
-    #: The object's stored views (for an appearance upgrade).
+    #: The object's stored views, and those it has appearance records of (for an
+    #: appearance upgrade).
     stored: list[tuple[float, float]] = field(default_factory=list)
+    recorded: list[tuple[float, float]] = field(default_factory=list)
     #: Appearance records to make (an appearance upgrade).
     records: int = 0
 
@@ -279,7 +286,7 @@ class _Lacking:
     (name → stored views)."""
 
     perspective: set[str] | frozenset[str]
-    appearance: dict[str, list[tuple[float, float]]]
+    appearance: dict[str, tuple[list[tuple[float, float]], list[tuple[float, float]]]]
     config: BuildConfig
 
     def job(self, path: Path, name: str, digest: str) -> _Job | None:
@@ -288,9 +295,16 @@ class _Lacking:
                          | ({"appearance"} if name in self.appearance else set()))
         if not adds:
             return None
-        stored = list(self.appearance.get(name, []))
-        records = len(appearance_views(stored, self.config.appearance)) if "appearance" in adds else 0
-        return _Job(str(path), name, digest, True, adds, stored, records)
+        stored, recorded = self.appearance.get(name, ([], []))
+        return _Job(str(path), name, digest, True, adds, list(stored), list(recorded),
+                    self._records(stored, recorded) if "appearance" in adds else 0)
+
+    def _records(self, stored: list[tuple[float, float]], recorded: list[tuple[float, float]]) -> int:
+        """The records an appearance upgrade makes (the progress total; views without a
+        silhouette make none)."""
+        have = set(recorded)
+        return sum(view not in have and turned_view(*view) not in have
+                   for view in recorded_views(self.config, stored)[0])
 
 
 def _plan_jobs(

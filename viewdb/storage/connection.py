@@ -103,12 +103,18 @@ _CURVE_ERRORS_STAND_IN = (
     "CREATE TEMP TABLE IF NOT EXISTS curve_errors (group_id INTEGER PRIMARY KEY, errors BLOB NOT NULL)"
 )
 #: Revision 0007 only added an index (`migrations/versions/0007_object_versions_index.py`):
-#: without it the same rows are read through the table, more slowly.
+#: without it the same rows are read through the table, more slowly. Revision 0008 only
+#: marked the objects whose appearance records cover every grid direction, which only an
+#: ingest reads (a query renders any view without a record, as before).
+_SCOPES_STAND_IN = (
+    "CREATE TEMP TABLE IF NOT EXISTS appearance_scopes (object_id INTEGER PRIMARY KEY, scope TEXT NOT NULL)"
+)
 READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
-    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN),
-    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN),
-    "0005": (_CURVE_ERRORS_STAND_IN,),
-    "0006": (),
+    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
+    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
+    "0005": (_CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
+    "0006": (_SCOPES_STAND_IN,),
+    "0007": (_SCOPES_STAND_IN,),
 }
 
 

@@ -53,6 +53,7 @@ from sqlalchemy import (
 __all__ = [
     "SCHEMA_REVISION",
     "appearance_blobs",
+    "appearance_scopes",
     "appearances",
     "curve_errors",
     "curves",
@@ -70,7 +71,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0007"
+SCHEMA_REVISION = "0008"
 
 metadata = MetaData()
 
@@ -179,6 +180,15 @@ appearance_blobs = Table(
     metadata,
     Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True),
     Column("data", LargeBinary, nullable=False),
+)
+
+# revision 0008: the objects whose appearance records cover every grid direction (a mesh
+# with colour: its pruned views have no image twin to take a record from)
+appearance_scopes = Table(
+    "appearance_scopes",
+    metadata,
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True),
+    Column("scope", String, nullable=False),
 )
 
 

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from sqlalchemy.engine import Connection
 
 from ..config import BuildConfig
-from ..errors import NotFound, StorageError
+from ..errors import NotFound
 from ..search.grouping import tier_members
 from . import schema as s
 from .appearances import pack_records
@@ -255,6 +255,7 @@ class Store(Database):
                 )
             ).inserted_primary_key[0]
             self._insert_appearances(conn, object_id, getattr(desc, "appearance", []))
+            self._mark_scope(conn, object_id, getattr(desc, "appearance_scope", None))
             if not desc.views:
                 return
             conn.execute(
@@ -348,33 +349,58 @@ class Store(Database):
                 for v in views]
 
     @staticmethod
-    def _insert_appearances(conn: Connection, object_id: int, records: Any) -> None:
+    def _insert_appearances(conn: Connection, object_id: int, records: Any, before: bytes = b"") -> None:
+        """Write an object's records as one blob, after the bytes ``before`` (records it
+        keeps, whose rows stay as they are)."""
         if not records:
             return
         data, index = pack_records(records)
-        conn.execute(sa.insert(s.appearance_blobs).values(object_id=object_id, data=data))
+        conn.execute(sa.insert(s.appearance_blobs).values(object_id=object_id, data=before + data))
         conn.execute(sa.insert(s.appearances), [
-            {"object_id": object_id, "azimuth": a, "elevation": e, "offset": at, "size": size}
+            {"object_id": object_id, "azimuth": a, "elevation": e, "offset": len(before) + at, "size": size}
             for a, e, at, size in index
         ])
 
-    def add_appearance(self, name: str, records: Any) -> None:
-        """Give a stored object its appearance records (an older file's object) in one
-        transaction, replacing any it has."""
+    @staticmethod
+    def _mark_scope(conn: Connection, object_id: int, scope: str | None) -> None:
+        if scope is not None:
+            conn.execute(sa.delete(s.appearance_scopes).where(s.appearance_scopes.c.object_id == object_id))
+            conn.execute(sa.insert(s.appearance_scopes).values(object_id=object_id, scope=scope))
+
+    def add_appearance(self, name: str, records: Any, scope: str | None = None) -> None:
+        """Add the appearance records a stored object lacks (an older file's object), and
+        mark its scope, in one transaction; a record of a view it already has replaces that."""
+        a, b = s.appearances, s.appearance_blobs
         with self.transaction() as conn:
             object_id = self.object_id(conn, name)
-            conn.execute(sa.delete(s.appearances).where(s.appearances.c.object_id == object_id))
-            conn.execute(sa.delete(s.appearance_blobs).where(s.appearance_blobs.c.object_id == object_id))
-            self._insert_appearances(conn, object_id, records)
+            if records:
+                views = [(float(r.azimuth), float(r.elevation)) for r in records]
+                for azimuth, elevation in views:
+                    conn.execute(sa.delete(a).where(a.c.object_id == object_id, a.c.azimuth == azimuth,
+                                                    a.c.elevation == elevation))
+                before = conn.execute(sa.select(b.c.data).where(b.c.object_id == object_id)).scalar()
+                conn.execute(sa.delete(b).where(b.c.object_id == object_id))
+                self._insert_appearances(conn, object_id, records, bytes(before or b""))
+            self._mark_scope(conn, object_id, scope)
 
-    def objects_lacking_appearance(self) -> set[str]:
-        """Names of the objects with stored views but no appearance records (stored before
-        revision 0005)."""
-        o, v, a = s.objects, s.views, s.appearances
+    def objects_lacking_appearance(self, every_view: bool) -> dict[str, list[tuple[float, float]]]:
+        """The objects whose appearance records lack views an ingest now records, each with
+        the views it has records of: those with stored views but no records (stored before
+        revision 0005), and with ``every_view``
+        (:attr:`~viewdb.config.AppearanceConfig.every_view`) those not marked as recorded
+        at every grid direction (recorded before revision 0008)."""
+        o, v, a, sc = s.objects, s.views, s.appearances, s.appearance_scopes
         has_views = sa.select(v.c.id).where(v.c.object_id == o.c.id).exists()
         has = sa.select(a.c.id).where(a.c.object_id == o.c.id).exists()
+        marked = sa.select(sc.c.object_id).where(sc.c.object_id == o.c.id).exists()
         with self.read() as conn:
-            return {r[0] for r in conn.execute(sa.select(o.c.name).where(has_views, ~has))}
+            out: dict[str, list[tuple[float, float]]] = {
+                r[0]: [] for r in conn.execute(sa.select(o.c.name).where(has_views, ~has))}
+            if every_view:
+                for object_id, name in conn.execute(sa.select(o.c.id, o.c.name).where(has, ~marked)).all():
+                    out[name] = [(float(h), float(e)) for h, e in conn.execute(
+                        sa.select(a.c.azimuth, a.c.elevation).where(a.c.object_id == object_id))]
+        return out
 
     def appearance_records(
         self, name: str, views: Sequence[tuple[float, float]]
@@ -525,3 +551,4 @@ class Store(Database):
                 out.setdefault(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})
                 out[tier]["rtree_bytes"] = int(size or 0)
         return out
+
