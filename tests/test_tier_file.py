@@ -166,3 +166,30 @@ def test_a_damaged_tier_file_is_ignored(mapped_db, tmp_path, damage):
     q = distance_curve(viewdb.render_model(sample("car"), 50, 20, image_size=96).mask, 128)
     with viewdb.open(path, read_only=True) as db, viewdb.open(mapped_db, read_only=True) as ref:
         assert db.search(q, k=3)[0] == ref.search(q, k=3)[0]
+
+
+def test_stored_curves_come_from_the_mapped_tier_as_the_file_holds_them(mapped_db, tmp_path):
+    """Once a search has mapped the full tier, an object's stored curves (the pose's
+    nearest views) are read from it: the same curves, in the same order, as the file's
+    rows; an object written again since then is read from the file."""
+    path = _copy(mapped_db, tmp_path / "copy.db")
+    for tier in TIERS:
+        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    with viewdb.open(path, create=False) as db:
+        catalogue = db._catalogue
+        names = [o.name for o in db.objects()]
+        assert all(catalogue._tier_curves(n) is None for n in names)  # nothing mapped yet
+        db.search(np.ones(128), k=1)
+        assert catalogue._reader.loaded("full").mapped
+        for name in names:
+            from_tier, from_rows = catalogue._tier_curves(name), catalogue._store.object_curves(name)
+            assert from_tier is not None and list(from_tier) == list(from_rows)
+            assert all(np.array_equal(from_tier[key], from_rows[key]) for key in from_rows)
+        db.ingest([sample("sphere")])  # the tier that search mapped is out of date
+        assert all(catalogue._tier_curves(n) is None for n in [*names, "sphere"])
+        curves, rows = catalogue.stored_curves("sphere"), catalogue._store.object_curves("sphere")
+        assert list(curves) == list(rows) and all(np.array_equal(curves[k], rows[k]) for k in rows)
+    with viewdb.open(path, read_only=True) as db:  # the tier file written again, mapped
+        db.search(np.ones(128), k=1)
+        curves = db._catalogue._tier_curves("sphere")
+        assert list(curves) == list(rows) and all(np.array_equal(curves[k], rows[k]) for k in rows)

@@ -131,6 +131,8 @@ class StoredCatalogue:
 
     def forget(self, name: str) -> None:
         """Drop what is cached of object ``name`` (it was written again)."""
+        if self._reader is not None:
+            self._reader.written()
         self._curves.clear()
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
@@ -309,8 +311,28 @@ class StoredCatalogue:
 
     # ------------------------------------------------------------------ curves
     def stored_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
-        """``(azimuth, elevation) -> curve`` of the object's stored views (cached)."""
-        return cached(self._curves, name, lambda: self._store.object_curves(name), CURVE_CACHE_OBJECTS)
+        """``(azimuth, elevation) -> curve`` of the object's stored views (cached), in the
+        order of their directions."""
+        def read() -> dict[tuple[float, float], NDArray[np.float32]]:
+            found = self._tier_curves(name)
+            return self._store.object_curves(name) if found is None else found
+
+        return cached(self._curves, name, read, CURVE_CACHE_OBJECTS)
+
+    def _tier_curves(self, name: str) -> dict[tuple[float, float], NDArray[np.float32]] | None:
+        """:meth:`stored_curves` from the full tier's mapped arrays, when a search has
+        mapped them (the same float32 curves; only the views' directions are read from the
+        file, through the views' index, not the curves' pages), else None."""
+        tier = None if self._reader is None else self._reader.loaded("full")
+        found = None if tier is None or tier.quantised else tier.orthographic_views(name)
+        if found is None or not len(found[0]):
+            return None
+        ids, curves = found
+        angles = self._store.view_angles(ids.tolist())
+        if len(angles) != len(ids):  # written again since that search: read it from the file
+            return None
+        order = sorted(range(len(ids)), key=lambda i: angles[int(ids[i])])
+        return {angles[int(ids[i])]: curves[i] for i in order}
 
     def perspective_near(
         self, name: str, azimuth: float, elevation: float, radius: float

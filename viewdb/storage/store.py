@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from sqlalchemy.engine import Connection
 
 from ..config import BuildConfig
-from ..errors import NotFound
+from ..errors import NotFound, StorageError
 from ..search.grouping import tier_members
 from . import schema as s
 from .appearances import pack_records
@@ -125,6 +125,14 @@ class Store(Database):
             if not rows:  # a compact client file keeps its curves in the groups only
                 return self._group_curves(conn, name)
         return {(float(a), float(e)): decode_array(b, np.float32, (None,)) for a, e, b in rows}
+
+    def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
+        """``view id -> (azimuth, elevation)`` of stored orthographic views (ids not stored
+        are left out)."""
+        with self.read() as conn:
+            raw = conn.connection.driver_connection
+            return {int(i): (float(a), float(e)) for i, a, e in rows_with_ids(
+                raw, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})", [int(i) for i in view_ids])}
 
     def perspective_curves_at(
         self, name: str, directions: Sequence[tuple[float, float]]

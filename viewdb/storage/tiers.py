@@ -368,6 +368,19 @@ class StoredTier:
         """The source's index of object ``name`` (None if it has none)."""
         return self._index_by_name.get(name)
 
+    def orthographic_views(self, name: str) -> tuple[NDArray[np.int64], NDArray[np.float32]] | None:
+        """The view ids and curves of object ``name``'s orthographic views in this tier (its
+        rows of positive view id), or None for an object it does not hold or a tier whose
+        curves are not all loaded (read from the groups on demand)."""
+        o = self._index_by_name.get(name)
+        if o is None or not self.mapped:
+            return None
+        groups = np.flatnonzero(self.group_owner == o)
+        rows = np.concatenate([np.arange(self.group_start[g], self.group_start[g] + self.group_count[g])
+                               for g in groups]) if len(groups) else np.zeros(0, np.int64)
+        rows = rows[self._views[rows] > 0]
+        return np.asarray(self._views[rows], np.int64), self._curves[rows]
+
 
 def index_stored_objects(conn: Any, config: BuildConfig) -> int:
     """Index every stored object's views in both tiers (for files from before the
@@ -421,6 +434,8 @@ class TierReader:
         self._tiers: dict[str, StoredTier] = {}
         self._version: int | None = None
         self._versions: dict[str, str] | None = None
+        #: this process wrote the file since the last snapshot (:meth:`written`)
+        self._written = False
 
     def close(self) -> None:
         with self._lock:
@@ -447,12 +462,24 @@ class TierReader:
             if version != self._version:
                 self._drop()
                 self._version = version
+            self._written = False
             try:
                 yield self
             except sqlite3.Error as exc:
                 raise StorageError(f"database error: {exc}", self.path) from exc
             finally:
                 self.conn.execute("ROLLBACK")
+
+    def loaded(self, name: str) -> StoredTier | None:
+        """Tier ``name`` as the last :meth:`snapshot` left it, if one opened it and this
+        process has not written the file since (no lock taken, nothing read: for reads of
+        what the last search saw)."""
+        return None if self._written else self._tiers.get(name)
+
+    def written(self) -> None:
+        """This process wrote the file: :meth:`loaded` answers nothing until the next
+        :meth:`snapshot` (which sees the new version)."""
+        self._written = True
 
     def tier(self, name: str) -> StoredTier:
         """Tier ``name`` (call inside :meth:`snapshot`)."""
