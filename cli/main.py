@@ -894,7 +894,28 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    sys.exit(main())
+    """The console script: :func:`main`, then the process ends without the interpreter's
+    teardown (:func:`exit_now`)."""
+    exit_now(main())
+
+
+def exit_now(code: int) -> None:
+    """End the process with ``code`` once the exit handlers have run (temporary folders,
+    logging, Ray) and the standard streams are flushed, skipping the interpreter's teardown,
+    which frees every object one by one: after a query, numba's compiler state made that
+    0.4–0.7 s of a 2 s command. Every command has closed its database by then."""
+    import atexit
+    import os
+
+    try:
+        getattr(atexit, "_run_exitfuncs", lambda: None)()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # a closed pipe or stream: nothing more to say
+                pass
+        os._exit(code)
 
 
 if __name__ == "__main__":

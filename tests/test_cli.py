@@ -148,3 +148,37 @@ def test_missing_textures_refused_unless_allowed(tmp_path, capsys):
     assert code == 1 and "gone.jpg" in err and str(obj) in err
     code, out, _ = run(capsys, "ingest", obj, "--db", db, "--allow-missing-textures")
     assert code == 0 and "1 added" in out
+
+
+def _script(*args, **kwargs):
+    """The ``viewdb`` console script in a fresh process, as a user runs it."""
+    import sys
+
+    return subprocess.run([sys.executable, "-c", "from viewdb_cli.main import run; run()", *map(str, args)],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT, **kwargs)
+
+
+def test_the_console_script_exits_with_the_command_s_code_and_all_its_output(small_db, tmp_path):
+    """The script ends the process without the interpreter's teardown: the exit code, the
+    whole output and the one-line errors are still what ``main`` gives."""
+    ok = _script("info", "--db", small_db, "--json")
+    assert ok.returncode == 0, ok.stderr
+    assert len(json.loads(ok.stdout)["objects"]) == 4
+    missing = _script("info", "--db", tmp_path / "missing.db")
+    assert missing.returncode == 1 and missing.stdout == ""
+    assert missing.stderr.strip().count("\n") == 0 and "missing.db" in missing.stderr
+    assert _script().returncode == 2
+    assert _script("query", "--bogus-option").returncode == 2
+
+
+def test_exit_now_runs_the_exit_handlers_and_flushes_the_streams(tmp_path):
+    import sys
+
+    flag = tmp_path / "handler-ran"
+    program = (f"import atexit, sys\nfrom viewdb_cli.main import exit_now\n"
+               f"atexit.register(lambda: open({str(flag)!r}, 'w').write('ran'))\n"
+               f"sys.stdout.write('x' * 100000)\nsys.stderr.write('y' * 5000)\nexit_now(3)\n")
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 3
+    assert done.stdout == "x" * 100000 and done.stderr == "y" * 5000
+    assert flag.read_text() == "ran"
