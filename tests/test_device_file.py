@@ -164,7 +164,9 @@ from viewdb.search.bounds import dtw
 rng = np.random.default_rng(0)
 q, c = rng.random(64), rng.random(64)
 dtw(q, c, 6)
-print("scipy.linalg" in sys.modules, "numpy.f2py" in sys.modules)
+print("scipy.linalg" in sys.modules, "numpy.f2py" in sys.modules, "colorama" in sys.modules,
+      "yaml" in sys.modules)
+import colorama, yaml  # still there for other code
 import numba
 @numba.njit
 def product(a, b):
@@ -174,12 +176,18 @@ print(bool(np.allclose(product(a, b), a @ b)))
 """
 
 
-def test_a_fresh_first_kernel_call_skips_the_blas_probe_and_blas_still_works():
-    # numba's first call would import scipy.linalg (and numpy.f2py) to probe for BLAS;
-    # the client half needs neither, and a jitted np.dot compiled later still finds BLAS
+def test_a_fresh_first_kernel_call_skips_the_blas_probe_and_blas_still_works(tmp_path):
+    # numba's first call would import scipy.linalg (and numpy.f2py) to probe for BLAS, and
+    # numba colorama and yaml; the client half needs none of them, and a jitted np.dot
+    # compiled later still finds BLAS
     import subprocess
     import sys
 
     done = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
                           check=True, cwd=Path(__file__).parents[1])
-    assert done.stdout.split() == ["False", "False", "True"]
+    assert done.stdout.split() == ["False", "False", "False", "False", "True"]
+    # a numba configuration file in the working folder is still read
+    (tmp_path / ".numba_config.yaml").write_text("DISABLE_JIT: 0\n")
+    done = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
+                          check=True, cwd=tmp_path)
+    assert done.stdout.split() == ["False", "False", "False", "True", "True"]
