@@ -170,6 +170,9 @@ def _describe(
     on_view: Callable[[int], None],
 ) -> ObjectDescription | Upgrade:
     start = time.perf_counter()
+    if job.upgrade == {"appearance"} and job.stored and not job.records:
+        # every view it should have a record of has one: only its scope is written
+        return Upgrade(job.name, None, [], time.perf_counter() - start, recorded_views(config, job.stored)[1])
     mesh = load_mesh(job.path, job.name, job.digest, options)
     if job.upgrade:
         perspective = (describe_perspective(mesh, config, on_view=on_view)
