@@ -286,7 +286,7 @@ def run_ingest(
 @dataclass(frozen=True)
 class _Lacking:
     """What objects stored by an older viewdb lack: perspective views, appearance records
-    (name → stored views)."""
+    (name → its stored views and the views it has records of)."""
 
     perspective: set[str] | frozenset[str]
     appearance: dict[str, tuple[list[tuple[float, float]], list[tuple[float, float]]]]

@@ -182,8 +182,8 @@ appearance_blobs = Table(
     Column("data", LargeBinary, nullable=False),
 )
 
-# revision 0008: the objects whose appearance records cover every grid direction (a mesh
-# with colour: its pruned views have no image twin to take a record from)
+# revision 0008: the objects whose appearance records cover every grid direction (every
+# object an ingest writes since, with AppearanceConfig.every_view)
 appearance_scopes = Table(
     "appearance_scopes",
     metadata,
