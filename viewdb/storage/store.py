@@ -28,7 +28,7 @@ from .codecs import decode_array, encode_array
 from .connection import Database
 from .spatial import raw_connection
 from .tier_file import new_generation
-from .tiers import delete_groups, rows_with_ids, write_groups
+from .tiers import delete_groups, orthographic_angles, write_groups
 
 __all__ = ["ObjectRow", "Store", "ViewRow"]
 
@@ -130,9 +130,7 @@ class Store(Database):
         """``view id -> (azimuth, elevation)`` of stored orthographic views (ids not stored
         are left out)."""
         with self.read() as conn:
-            raw = conn.connection.driver_connection
-            return {int(i): (float(a), float(e)) for i, a, e in rows_with_ids(
-                raw, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})", [int(i) for i in view_ids])}
+            return orthographic_angles(conn.connection.driver_connection, view_ids)
 
     def perspective_curves_at(
         self, name: str, directions: Sequence[tuple[float, float]]
@@ -165,8 +163,7 @@ class Store(Database):
         ):
             ids = decode_array(ids_blob, np.int64, (None,))
             curves = decode_array(curves_blob, np.float32, (len(ids), None))
-            angles = {int(i): (float(a), float(e)) for i, a, e in rows_with_ids(
-                raw, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})", ids.tolist())}
+            angles = orthographic_angles(raw, ids.tolist())
             for vid, curve in zip(ids.tolist(), curves, strict=True):
                 out[angles[int(vid)]] = curve
         return out
@@ -382,10 +379,9 @@ class Store(Database):
         with self.transaction() as conn:
             object_id = self.object_id(conn, name)
             if records:
-                views = [(float(r.azimuth), float(r.elevation)) for r in records]
-                for azimuth, elevation in views:
-                    conn.execute(sa.delete(a).where(a.c.object_id == object_id, a.c.azimuth == azimuth,
-                                                    a.c.elevation == elevation))
+                conn.execute(sa.delete(a).where(a.c.object_id == object_id, a.c.azimuth == sa.bindparam("h"),
+                                                a.c.elevation == sa.bindparam("v")),
+                             [{"h": float(r.azimuth), "v": float(r.elevation)} for r in records])
                 before = conn.execute(sa.select(b.c.data).where(b.c.object_id == object_id)).scalar()
                 conn.execute(sa.delete(b).where(b.c.object_id == object_id))
                 self._insert_appearances(conn, object_id, records, bytes(before or b""))
@@ -404,10 +400,11 @@ class Store(Database):
         with self.read() as conn:
             out: dict[str, list[tuple[float, float]]] = {
                 r[0]: [] for r in conn.execute(sa.select(o.c.name).where(has_views, ~has))}
-            if every_view:
-                for object_id, name in conn.execute(sa.select(o.c.id, o.c.name).where(has, ~marked)).all():
-                    out[name] = [(float(h), float(e)) for h, e in conn.execute(
-                        sa.select(a.c.azimuth, a.c.elevation).where(a.c.object_id == object_id))]
+            if every_view:  # one read of the unmarked objects' records' views
+                for name, h, e in conn.execute(
+                        sa.select(o.c.name, a.c.azimuth, a.c.elevation)
+                        .select_from(a.join(o, o.c.id == a.c.object_id)).where(~marked)):
+                    out.setdefault(name, []).append((float(h), float(e)))
         return out
 
     def appearance_records(

@@ -48,6 +48,7 @@ __all__ = [
     "create_tiers",
     "delete_groups",
     "index_stored_objects",
+    "orthographic_angles",
     "write_groups",
 ]
 
@@ -66,6 +67,13 @@ def rows_with_ids(conn: sqlite3.Connection, sql: str, ids: Sequence[int]) -> Ite
     for start in range(0, len(ids), 900):
         chunk = list(ids[start : start + 900])
         yield from conn.execute(sql.format(",".join("?" * len(chunk))), chunk)
+
+
+def orthographic_angles(conn: sqlite3.Connection, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
+    """``view id -> (azimuth, elevation)`` of stored orthographic views (ids not stored are
+    left out)."""
+    return {int(i): (float(a), float(e)) for i, a, e in rows_with_ids(
+        conn, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})", [int(i) for i in view_ids])}
 
 
 def _stacked(blobs: list[Any], dtype: type) -> NDArray[Any]:
@@ -375,10 +383,7 @@ class StoredTier:
         o = self._index_by_name.get(name)
         if o is None or not self.mapped:
             return None
-        groups = np.flatnonzero(self.group_owner == o)
-        rows = np.concatenate([np.arange(self.group_start[g], self.group_start[g] + self.group_count[g])
-                               for g in groups]) if len(groups) else np.zeros(0, np.int64)
-        rows = rows[self._views[rows] > 0]
+        rows = np.flatnonzero((self.row_owner == o) & (self._views > 0))
         return np.asarray(self._views[rows], np.int64), self._curves[rows]
 
 
@@ -521,12 +526,9 @@ class TierReader:
         """``view id -> (azimuth, elevation, distance)``, distance None for an orthographic
         view and the camera distance in bounding radii for a perspective one."""
         ids = [int(i) for i in view_ids]
-        out: dict[int, tuple[float, float, float | None]] = {}
-        for i, a, e in rows_with_ids(
-            self.conn, "SELECT id, azimuth, elevation FROM views WHERE id IN ({})",
-            [i for i in ids if i > 0],
-        ):
-            out[int(i)] = (float(a), float(e), None)
+        orthographic = orthographic_angles(self.conn, [i for i in ids if i > 0])
+        out: dict[int, tuple[float, float, float | None]] = {
+            i: (a, e, None) for i, (a, e) in orthographic.items()}
         for i, a, e, d in rows_with_ids(
             self.conn, "SELECT id, azimuth, elevation, distance FROM perspective_views WHERE id IN ({})",
             [-i for i in ids if i < 0],
