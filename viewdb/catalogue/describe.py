@@ -37,6 +37,7 @@ __all__ = [
     "describe_object",
     "describe_perspective",
     "describe_view",
+    "lacking_views",
     "perspective_grid",
     "recorded_views",
 ]
@@ -248,6 +249,16 @@ def recorded_views(config: BuildConfig, stored: list[tuple[float, float]]
     return appearance_views(stored, config.appearance), None
 
 
+def lacking_views(
+    config: BuildConfig, stored: list[tuple[float, float]], recorded: Collection[tuple[float, float]],
+) -> tuple[list[tuple[float, float]], str | None]:
+    """The views of :func:`recorded_views` whose direction ``recorded`` (the views an
+    object has records of) lacks (a view's turned twin's record serves it), and the scope."""
+    wanted, scope = recorded_views(config, stored)
+    have = set(recorded)
+    return [view for view in wanted if view not in have and turned_view(*view) not in have], scope
+
+
 def describe_appearance(
     mesh: NormalisedMesh, config: BuildConfig, stored: list[tuple[float, float]],
     renderer: Renderer | None = None, on_view: Callable[[int], None] | None = None,
@@ -256,9 +267,7 @@ def describe_appearance(
     """The appearance records of an object stored with views ``stored`` (its
     :func:`recorded_views`; views without a silhouette have none) that ``recorded`` (the
     views it has records of) lacks, and its scope. ``on_view(1)`` after each."""
-    wanted, scope = recorded_views(config, stored)
-    have = set(recorded)
-    todo = [view for view in wanted if view not in have and turned_view(*view) not in have]
+    todo, scope = lacking_views(config, stored, recorded)
     if not todo:
         return [], scope
     renderer = renderer or get_renderer(config.render)

@@ -27,13 +27,14 @@ from ..camera import grid_views
 from ..config import LIMITS, BuildConfig, RayIngestConfig, integer
 from ..errors import MeshError, ViewDBError
 from ..paths import not_regular
-from .appearance import Appearance, turned_view
+from .appearance import Appearance
 from .describe import (
     ObjectDescription,
     PerspectiveView,
     describe_appearance,
     describe_object,
     describe_perspective,
+    lacking_views,
     perspective_grid,
     recorded_views,
 )
@@ -305,9 +306,7 @@ class _Lacking:
     def _records(self, stored: list[tuple[float, float]], recorded: list[tuple[float, float]]) -> int:
         """The records an appearance upgrade makes (the progress total; views without a
         silhouette make none)."""
-        have = set(recorded)
-        return sum(view not in have and turned_view(*view) not in have
-                   for view in recorded_views(self.config, stored)[0])
+        return len(lacking_views(self.config, stored, recorded)[0])
 
 
 def _plan_jobs(

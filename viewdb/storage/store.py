@@ -556,4 +556,3 @@ class Store(Database):
                 out.setdefault(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})
                 out[tier]["rtree_bytes"] = int(size or 0)
         return out
-
