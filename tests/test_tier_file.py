@@ -26,6 +26,14 @@ def _copy(src, dst):
     return dst
 
 
+def _copy_with_tier_files(src, dst):
+    """A copy of ``src`` with its tier files, as they were written for it."""
+    _copy(src, dst)
+    for tier in TIERS:
+        tier_file_path(dst, tier).write_bytes(tier_file_path(src, tier).read_bytes())
+    return dst
+
+
 @pytest.fixture(scope="module")
 def mapped_db(tiered_db, tmp_path_factory):
     """A copy of the tiered file with its tier files written (a writable reader's first
@@ -101,9 +109,7 @@ def test_a_read_only_open_writes_no_tier_file_and_answers_without_one(tiered_db,
 
 
 def test_a_stale_tier_file_is_not_used_and_is_written_again(mapped_db, tmp_path):
-    path = _copy(mapped_db, tmp_path / "copy.db")
-    for tier in TIERS:  # the tier files of the file before the ingest
-        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    path = _copy_with_tier_files(mapped_db, tmp_path / "copy.db")  # the tier files before the ingest
     old = tier_file_path(path, "full").read_bytes()
     with viewdb.open(path, create=False) as db:
         db.ingest([sample("sphere")])
@@ -126,9 +132,7 @@ def test_groups_written_again_under_the_same_ids_make_the_tier_file_stale(mapped
     tier file is stale."""
     from viewdb.storage.tiers import delete_groups, write_groups
 
-    path = _copy(mapped_db, tmp_path / "copy.db")
-    for tier in TIERS:
-        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    path = _copy_with_tier_files(mapped_db, tmp_path / "copy.db")
     assert _decoded_and_mapped(path, "full")[1] is not None
     conn = sqlite3.connect(path, isolation_level=None)
     try:
@@ -172,9 +176,7 @@ def test_stored_curves_come_from_the_mapped_tier_as_the_file_holds_them(mapped_d
     """Once a search has mapped the full tier, an object's stored curves (the pose's
     nearest views) are read from it: the same curves, in the same order, as the file's
     rows; an object written again since then is read from the file."""
-    path = _copy(mapped_db, tmp_path / "copy.db")
-    for tier in TIERS:
-        tier_file_path(path, tier).write_bytes(tier_file_path(mapped_db, tier).read_bytes())
+    path = _copy_with_tier_files(mapped_db, tmp_path / "copy.db")
     with viewdb.open(path, create=False) as db:
         catalogue = db._catalogue
         names = [o.name for o in db.objects()]
