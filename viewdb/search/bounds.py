@@ -285,22 +285,30 @@ def lb_keogh2(curves, row, lower, upper, limit2):  # pragma: no cover - compiled
     return s
 
 
+#: float32's unit roundoff (2**-23, a constant: a power in the kernel is computed per call)
+_UNIT32 = 2.0**-23
+
+
 @njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def _curve_box32_sum(lo, hi, g, wlo, whi):  # pragma: no cover - compiled
+    # each gap clipped at zero by a comparison rather than max(), which LLVM vectorises
+    # (max() keeps its NaN rule and stays scalar): 2-3 times faster
     zero = np.float32(0.0)
     s = np.float32(0.0)
     for t in range(lo.shape[1]):
-        e = max(lo[g, t] - whi[t], zero) + max(wlo[t] - hi[g, t], zero)
+        a = lo[g, t] - whi[t]
+        b = wlo[t] - hi[g, t]
+        e = (a if a > zero else zero) + (b if b > zero else zero)
         s += e * e
     return s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def curve_box32(lo, hi, g, wlo, whi):  # pragma: no cover - compiled
     # squared curve-box bound of the float32 range [lo[g], hi[g]] against the float32
     # envelope [wlo, whi], summed in float32 in any order (SIMD) and scaled below its
     # rounding error (module doc, "Floating point")
-    return float(_curve_box32_sum(lo, hi, g, wlo, whi)) * (1.0 - (lo.shape[1] + 4) * 2.0 ** -23)
+    return float(_curve_box32_sum(lo, hi, g, wlo, whi)) * (1.0 - (lo.shape[1] + 4) * _UNIT32)
 
 
 @njit(cache=True, nogil=True)

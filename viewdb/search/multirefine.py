@@ -74,20 +74,31 @@ def _first(row, mirrored, curve, other_row, other_mirrored, other_curve):  # pra
 
 
 @njit(cache=True, nogil=True)
-def _group_block_key2(lo, hi, clo, chi, g, blo, bhi, wlo, whi):  # pragma: no cover - compiled
-    # squared max(MINDIST(block box, MBR of g), curve-box bound(block wedge, range of g));
-    # the latter in float32 (bounds.curve_box32): the search computes one per opened group,
-    # block and orientation
+def _mindist2(lo, hi, g, blo, bhi):  # pragma: no cover - compiled
+    # squared MINDIST of the block's union box [blo, bhi] to the MBR of group g
     a = 0.0
     for j in range(lo.shape[1]):
         e = max(blo[j] - hi[g, j], 0.0) + max(lo[g, j] - bhi[j], 0.0)
         a += e * e
-    return max(a, curve_box32(clo, chi, g, wlo, whi))
+    return a
 
 
 @njit(cache=True, nogil=True)
 def _code(payload, m, kind):  # pragma: no cover - compiled
     return ((payload << 1 | m) << 3) | kind
+
+
+@njit(cache=True, nogil=True)
+def _block_key2(  # pragma: no cover - compiled
+    g, b, m, best2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge32_lo, wedge32_hi,
+):
+    # squared key of group g against block b, orientation m: max(MINDIST(block box, MBR of
+    # g), curve-box bound(block wedge, range of g)), the latter in float32 (bounds.curve_box32)
+    # and first: it is the one that prunes; MINDIST only if that is at most best2
+    kb = curve_box32(range_lo, range_hi, g, wedge32_lo[m, b], wedge32_hi[m, b])
+    if kb > best2:
+        return kb
+    return max(kb, _mindist2(mbr_lo, mbr_hi, g, wbox_lo[m, b], wbox_hi[m, b]))
 
 
 @njit(cache=True, nogil=True)
@@ -99,11 +110,10 @@ def _open_group(  # pragma: no cover - compiled
     n_blocks = wbox_lo.shape[1]
     for b in range(n_blocks):
         for m in range(2):
-            kb = _group_block_key2(mbr_lo, mbr_hi, range_lo, range_hi, g, wbox_lo[m, b],
-                                   wbox_hi[m, b], wedge32_lo[m, b], wedge32_hi[m, b])
+            kb = _block_key2(g, b, m, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi,
+                             wedge32_lo, wedge32_hi)
             if kb <= limit2:
-                size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
-                                  _code(g * n_blocks + b, m, _GB))
+                size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk), _code(g * n_blocks + b, m, _GB))
     return size
 
 
@@ -125,19 +135,29 @@ def _group_curves_key2(range_lo, range_hi, g, lo, hi, t0, t1, limit2):  # pragma
 
 @njit(cache=True, nogil=True)
 def _push_views(  # pragma: no cover - compiled
-    g, b, m, key, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo,
-    wseg_hi, widths, hkey, hcode, size,
+    g, b, m, key, limit2, subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, wedge32_lo,
+    wedge32_hi, widths, hkey, hcode, size, stats,
 ):
-    # a GB entry: the group's views against the block, by Fourier_Dist and LB_PAA
+    # a GB entry: the group's subgroups against the block's wedge (the curve-box bound of
+    # each run's range; a group of one run was bounded by its own range already), then the
+    # views of each run under the limit, by Fourier_Dist and LB_PAA
+    first, start, order, sub_lo, sub_hi = subgroups
     n_blocks = wbox_lo.shape[1]
-    for row in range(group_start[g], group_start[g] + group_count[g]):
-        fd = fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
-        if fd > limit2:
+    several = first[g + 1] - first[g] > 1
+    for s in range(first[g], first[g + 1]):
+        sb = curve_box32(sub_lo, sub_hi, s, wedge32_lo[m, b], wedge32_hi[m, b]) if several else 0.0
+        if sb > limit2:
             continue
-        pd = lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
-        if pd <= limit2:
-            size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), key),
-                              _code(row * n_blocks + b, m, _VB))
+        stats[1] += start[s + 1] - start[s]
+        for j in range(start[s], start[s + 1]):
+            row = order[j]
+            fd = fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
+            if fd > limit2:
+                continue
+            pd = lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
+            if pd <= limit2:
+                size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd, sb)), key),
+                                  _code(row * n_blocks + b, m, _VB))
     return size
 
 
@@ -161,7 +181,7 @@ def _push_curves(  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _group_block(  # pragma: no cover - compiled
     fresh, g, b, m, top, limit2, block_start, block_end, range_lo, range_hi, env_lo, env_hi,
-    group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, widths,
+    subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, wedge32_lo, wedge32_hi, widths,
     hkey, hcode, size, stats,
 ):
     # a GB entry (``fresh``) of a block of several curves: the group against each of them,
@@ -175,9 +195,8 @@ def _group_block(  # pragma: no cover - compiled
         if math.sqrt(kt) > top:
             n_blocks = wbox_lo.shape[1]
             return heap_push(hkey, hcode, size, math.sqrt(kt), _code(g * n_blocks + b, m, _GBC))
-    stats[1] += group_count[g]
-    return _push_views(g, b, m, top, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi,
-                       wseg_lo, wseg_hi, widths, hkey, hcode, size)
+    return _push_views(g, b, m, top, limit2, subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
+                       wedge32_lo, wedge32_hi, widths, hkey, hcode, size, stats)
 
 
 @njit(cache=True, nogil=True)
@@ -242,7 +261,7 @@ def _stack_kernel(  # pragma: no cover - compiled
     Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
     block_start, block_end, wedge_lo, wedge_hi, wedge32_lo, wedge32_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
     order, keys, start_at, ready, stop_key,
-    group_start, group_count, group_owner, row_owner, curves, coords, means,
+    group_start, group_count, group_owner, row_owner, curves, coords, means, subgroups,
     mbr_lo, mbr_hi, range_lo, range_hi,
     bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize, kth,
 ):
@@ -301,8 +320,9 @@ def _stack_kernel(  # pragma: no cover - compiled
             continue
         if kind == _GB or kind == _GBC:
             size = _group_block(kind == _GB, row, b, m, top, limit * limit, block_start, block_end, range_lo,
-                                range_hi, env_lo, env_hi, group_start, group_count, coords, means, wbox_lo,
-                                wbox_hi, wseg_lo, wseg_hi, widths, hkey, hcode, size, stats)
+                                range_hi, env_lo, env_hi, subgroups, coords, means, wbox_lo,
+                                wbox_hi, wseg_lo, wseg_hi, wedge32_lo, wedge32_hi, widths, hkey, hcode, size,
+                                stats)
         elif kind != _VC:
             size = _view_block(kind == _VB, row, b, m, top, limit * limit, block_start, block_end, curves,
                                wedge_lo, wedge_hi, env_lo, env_hi, n_curves, hkey, hcode, size, stats)
@@ -315,14 +335,16 @@ def _stack_kernel(  # pragma: no cover - compiled
 
 
 def refine_stack(
-    query, order, keys, start_at, ready, stop_key, source_groups, rows, groups, state, k, cap, stats,
+    query, order, keys, start_at, ready, stop_key, source_groups, rows, subgroups, groups, state, k, cap,
+    stats,
 ) -> tuple[int, int]:
     """One call of the compiled refinement for a :class:`~viewdb.search.shifts.CurveQuery`;
     returns ``(next group position, status)`` with the statuses of
     :func:`~viewdb.search.refine.refine_groups` and :data:`FULL`.
 
     ``source_groups`` is ``(group_start, group_count, group_owner, row_owner)``, ``rows``
-    the source's ``(curves, coords, means)``, ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
+    the source's ``(curves, coords, means)``, ``subgroups`` its ``(first, start, order,
+    lo, hi)`` (:mod:`.subgroups`), ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
     curve_hi)`` and ``state`` ``(bound, exact, exact_row, exact_mirrored, exact_curve,
     heap keys, heap codes, heap size, kth)``, all updated in place; ``kth[0]`` is an upper
     bound of the k-th distance that the threads sharing one search (:mod:`.knn`) lower as
@@ -333,7 +355,7 @@ def refine_stack(
         q.curves, q.band, q.env_lo, q.env_hi, q.box_lo, q.box_hi, q.seg_lo, q.seg_hi, q.widths,
         q.block_start, q.block_end, q.wedge_lo, q.wedge_hi, q.wedge32_lo, q.wedge32_hi, q.wbox_lo, q.wbox_hi,
         q.wseg_lo, q.wseg_hi, order, keys, start_at, ready, stop_key,
-        *source_groups, *rows, *groups, *state[:5], k, cap, stats, *state[5:],
+        *source_groups, *rows, tuple(subgroups), *groups, *state[:5], k, cap, stats, *state[5:],
     )
     return int(i), int(status)
 
