@@ -195,33 +195,3 @@ def test_stored_curves_come_from_the_mapped_tier_as_the_file_holds_them(mapped_d
         db.search(np.ones(128), k=1)
         curves = db._catalogue._tier_curves("sphere")
         assert list(curves) == list(rows) and all(np.array_equal(curves[k], rows[k]) for k in rows)
-
-
-def test_a_tier_file_without_subgroups_is_mapped_with_them_computed_and_written_again(mapped_db, tmp_path,
-                                                                                     monkeypatch):
-    import viewdb.storage.tier_file as tier_file
-
-    path = _copy(mapped_db, tmp_path / "copy.db")
-    conn = sqlite3.connect(path)
-    conn.execute("BEGIN")
-    key = tier_key(conn, "full")
-    decoded = StoredTier(conn, "full").file_arrays()
-    conn.execute("ROLLBACK")
-    conn.close()
-    earlier = {n: d for n, d in ARRAYS.items() if n not in tier_file.LATER_ARRAYS}
-    with monkeypatch.context() as patch:  # a file of the layout before subgroups
-        patch.setattr(tier_file, "ARRAYS", earlier)
-        tier_file.write_tier_file(tier_file_path(path, "full"), key, "full", decoded)
-    old = tier_file_path(path, "full").read_bytes()
-    with viewdb.open(path, read_only=True) as db:
-        with db._catalogue.tier_reader().snapshot() as reader:
-            tier = reader.tier("full")
-            assert tier.mapped and not tier.file_current
-            for got, want in zip(tier.subgroups()[2:], (decoded[n] for n in tier_file.LATER_ARRAYS),
-                                 strict=True):
-                np.testing.assert_array_equal(got, want)
-    assert tier_file_path(path, "full").read_bytes() == old  # a read-only open writes nothing
-    with viewdb.open(path, create=False) as db:
-        db.write_tier_files()
-    mapped = map_tier_file(tier_file_path(path, "full"), key, "full")
-    assert mapped is not None and set(mapped) == set(ARRAYS)

@@ -77,7 +77,6 @@ from .grouping import INDEXED_COEFFICIENTS, group_points, indexed_coordinates, i
 from .multirefine import FULL, refine_stack
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, WIDEN_ABS, WIDEN_REL, refine_groups
 from .shifts import CurveQuery, ShiftWindow, shifted_curves
-from .subgroups import Subgroups, fill_subgroups, subgroup_layout
 
 __all__ = [
     "Neighbour",
@@ -205,11 +204,6 @@ class TierSource(Protocol):
         views; the rows of ``groups`` are filled in (others may not be)."""
         ...
 
-    def subgroups(self) -> Subgroups:
-        """Every group's subgroups (:mod:`~viewdb.search.subgroups`): ``(first, start, order,
-        lo, hi)``, the order and ranges filled in for the groups :meth:`rows` has filled."""
-        ...
-
     def group_boxes(
         self,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float32], NDArray[np.float32]]:
@@ -276,12 +270,6 @@ class TierArrays:
         self._curves = np.ascontiguousarray(self.curves[self._rows])
         self._coords = np.ascontiguousarray(coords[self._rows])
         self._means = paa_means(self._curves, paa_edges(n)) if len(self._curves) else np.zeros((0, 1))
-        first, start = subgroup_layout(self.group_start, self.group_count)
-        runs = len(start) - 1
-        self._subgroups = (first, start, np.zeros(len(self._curves), dtype=np.int64),
-                           np.empty((runs, n), dtype=np.float32), np.empty((runs, n), dtype=np.float32))
-        fill_subgroups(np.arange(g, dtype=np.int64), self._curves, self._means, self.group_start,
-                       self.group_count, *self._subgroups)
 
     @property
     def n_groups(self) -> int:
@@ -302,9 +290,6 @@ class TierArrays:
         self, groups: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         return self._curves, self._coords, self._means
-
-    def subgroups(self) -> Subgroups:
-        return self._subgroups
 
     def group_boxes(
         self,
@@ -438,7 +423,7 @@ def knn_stack(
     def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
         while True:
             pos, status = refine_stack(
-                stack, order, keys, pos, ready, stop_key, group_arrays, rows, source.subgroups(), boxes,
+                stack, order, keys, pos, ready, stop_key, group_arrays, rows, boxes,
                 (search.bound, search.exact, search.exact_row, search.exact_mirrored,
                  search.exact_curve, *search.heap, search.kth), k, search.cap, search.counters,
             )

@@ -89,31 +89,24 @@ def _code(payload, m, kind):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _block_key2(  # pragma: no cover - compiled
-    g, b, m, best2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge32_lo, wedge32_hi,
-):
-    # squared key of group g against block b, orientation m: max(MINDIST(block box, MBR of
-    # g), curve-box bound(block wedge, range of g)), the latter in float32 (bounds.curve_box32)
-    # and first: it is the one that prunes; MINDIST only if that is at most best2
-    kb = curve_box32(range_lo, range_hi, g, wedge32_lo[m, b], wedge32_hi[m, b])
-    if kb > best2:
-        return kb
-    return max(kb, _mindist2(mbr_lo, mbr_hi, g, wbox_lo[m, b], wbox_hi[m, b]))
-
-
-@njit(cache=True, nogil=True)
 def _open_group(  # pragma: no cover - compiled
     g, gk, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi, wedge32_lo, wedge32_hi,
     hkey, hcode, size,
 ):
-    # one GB entry per block and orientation still under the limit
+    # one GB entry per block and orientation still under the limit, keyed by max(MINDIST(block
+    # box, MBR of g), curve-box bound(block wedge, range of g)); the latter in float32
+    # (bounds.curve_box32) and first: it is the one that prunes (MINDIST is skipped when it
+    # does), and the search computes one per opened group, block and orientation
     n_blocks = wbox_lo.shape[1]
     for b in range(n_blocks):
         for m in range(2):
-            kb = _block_key2(g, b, m, limit2, mbr_lo, mbr_hi, range_lo, range_hi, wbox_lo, wbox_hi,
-                             wedge32_lo, wedge32_hi)
+            kb = curve_box32(range_lo, range_hi, g, wedge32_lo[m, b], wedge32_hi[m, b])
+            if kb > limit2:
+                continue
+            kb = max(kb, _mindist2(mbr_lo, mbr_hi, g, wbox_lo[m, b], wbox_hi[m, b]))
             if kb <= limit2:
-                size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk), _code(g * n_blocks + b, m, _GB))
+                size = heap_push(hkey, hcode, size, max(math.sqrt(kb), gk),
+                                  _code(g * n_blocks + b, m, _GB))
     return size
 
 
@@ -135,29 +128,19 @@ def _group_curves_key2(range_lo, range_hi, g, lo, hi, t0, t1, limit2):  # pragma
 
 @njit(cache=True, nogil=True)
 def _push_views(  # pragma: no cover - compiled
-    g, b, m, key, limit2, subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, wedge32_lo,
-    wedge32_hi, widths, hkey, hcode, size, stats,
+    g, b, m, key, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo,
+    wseg_hi, widths, hkey, hcode, size,
 ):
-    # a GB entry: the group's subgroups against the block's wedge (the curve-box bound of
-    # each run's range; a group of one run was bounded by its own range already), then the
-    # views of each run under the limit, by Fourier_Dist and LB_PAA
-    first, start, order, sub_lo, sub_hi = subgroups
+    # a GB entry: the group's views against the block, by Fourier_Dist and LB_PAA
     n_blocks = wbox_lo.shape[1]
-    several = first[g + 1] - first[g] > 1
-    for s in range(first[g], first[g + 1]):
-        sb = curve_box32(sub_lo, sub_hi, s, wedge32_lo[m, b], wedge32_hi[m, b]) if several else 0.0
-        if sb > limit2:
+    for row in range(group_start[g], group_start[g] + group_count[g]):
+        fd = fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
+        if fd > limit2:
             continue
-        stats[1] += start[s + 1] - start[s]
-        for j in range(start[s], start[s + 1]):
-            row = order[j]
-            fd = fourier_dist2(coords, row, wbox_lo[m, b], wbox_hi[m, b])
-            if fd > limit2:
-                continue
-            pd = lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
-            if pd <= limit2:
-                size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd, sb)), key),
-                                  _code(row * n_blocks + b, m, _VB))
+        pd = lb_paa2(means, row, wseg_lo[m, b], wseg_hi[m, b], widths, limit2)
+        if pd <= limit2:
+            size = heap_push(hkey, hcode, size, max(math.sqrt(max(fd, pd)), key),
+                              _code(row * n_blocks + b, m, _VB))
     return size
 
 
@@ -181,7 +164,7 @@ def _push_curves(  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _group_block(  # pragma: no cover - compiled
     fresh, g, b, m, top, limit2, block_start, block_end, range_lo, range_hi, env_lo, env_hi,
-    subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, wedge32_lo, wedge32_hi, widths,
+    group_start, group_count, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi, widths,
     hkey, hcode, size, stats,
 ):
     # a GB entry (``fresh``) of a block of several curves: the group against each of them,
@@ -195,8 +178,9 @@ def _group_block(  # pragma: no cover - compiled
         if math.sqrt(kt) > top:
             n_blocks = wbox_lo.shape[1]
             return heap_push(hkey, hcode, size, math.sqrt(kt), _code(g * n_blocks + b, m, _GBC))
-    return _push_views(g, b, m, top, limit2, subgroups, coords, means, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
-                       wedge32_lo, wedge32_hi, widths, hkey, hcode, size, stats)
+    stats[1] += group_count[g]
+    return _push_views(g, b, m, top, limit2, group_start, group_count, coords, means, wbox_lo, wbox_hi,
+                       wseg_lo, wseg_hi, widths, hkey, hcode, size)
 
 
 @njit(cache=True, nogil=True)
@@ -261,7 +245,7 @@ def _stack_kernel(  # pragma: no cover - compiled
     Q, r, env_lo, env_hi, box_lo, box_hi, seg_lo, seg_hi, widths,
     block_start, block_end, wedge_lo, wedge_hi, wedge32_lo, wedge32_hi, wbox_lo, wbox_hi, wseg_lo, wseg_hi,
     order, keys, start_at, ready, stop_key,
-    group_start, group_count, group_owner, row_owner, curves, coords, means, subgroups,
+    group_start, group_count, group_owner, row_owner, curves, coords, means,
     mbr_lo, mbr_hi, range_lo, range_hi,
     bound, exact, exact_row, exact_mirrored, exact_curve, k, cap, stats, hkey, hcode, hsize, kth,
 ):
@@ -320,9 +304,8 @@ def _stack_kernel(  # pragma: no cover - compiled
             continue
         if kind == _GB or kind == _GBC:
             size = _group_block(kind == _GB, row, b, m, top, limit * limit, block_start, block_end, range_lo,
-                                range_hi, env_lo, env_hi, subgroups, coords, means, wbox_lo,
-                                wbox_hi, wseg_lo, wseg_hi, wedge32_lo, wedge32_hi, widths, hkey, hcode, size,
-                                stats)
+                                range_hi, env_lo, env_hi, group_start, group_count, coords, means, wbox_lo,
+                                wbox_hi, wseg_lo, wseg_hi, widths, hkey, hcode, size, stats)
         elif kind != _VC:
             size = _view_block(kind == _VB, row, b, m, top, limit * limit, block_start, block_end, curves,
                                wedge_lo, wedge_hi, env_lo, env_hi, n_curves, hkey, hcode, size, stats)
@@ -335,16 +318,14 @@ def _stack_kernel(  # pragma: no cover - compiled
 
 
 def refine_stack(
-    query, order, keys, start_at, ready, stop_key, source_groups, rows, subgroups, groups, state, k, cap,
-    stats,
+    query, order, keys, start_at, ready, stop_key, source_groups, rows, groups, state, k, cap, stats,
 ) -> tuple[int, int]:
     """One call of the compiled refinement for a :class:`~viewdb.search.shifts.CurveQuery`;
     returns ``(next group position, status)`` with the statuses of
     :func:`~viewdb.search.refine.refine_groups` and :data:`FULL`.
 
     ``source_groups`` is ``(group_start, group_count, group_owner, row_owner)``, ``rows``
-    the source's ``(curves, coords, means)``, ``subgroups`` its ``(first, start, order,
-    lo, hi)`` (:mod:`.subgroups`), ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
+    the source's ``(curves, coords, means)``, ``groups`` its ``(mbr_lo, mbr_hi, curve_lo,
     curve_hi)`` and ``state`` ``(bound, exact, exact_row, exact_mirrored, exact_curve,
     heap keys, heap codes, heap size, kth)``, all updated in place; ``kth[0]`` is an upper
     bound of the k-th distance that the threads sharing one search (:mod:`.knn`) lower as
@@ -355,7 +336,7 @@ def refine_stack(
         q.curves, q.band, q.env_lo, q.env_hi, q.box_lo, q.box_hi, q.seg_lo, q.seg_hi, q.widths,
         q.block_start, q.block_end, q.wedge_lo, q.wedge_hi, q.wedge32_lo, q.wedge32_hi, q.wbox_lo, q.wbox_hi,
         q.wseg_lo, q.wseg_hi, order, keys, start_at, ready, stop_key,
-        *source_groups, *rows, tuple(subgroups), *groups, *state[:5], k, cap, stats, *state[5:],
+        *source_groups, *rows, *groups, *state[:5], k, cap, stats, *state[5:],
     )
     return int(i), int(status)
 

@@ -44,10 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = [
-    "ARRAYS", "LATER_ARRAYS", "map_tier_file", "new_generation", "tier_file_path", "tier_key",
-    "write_tier_file",
-]
+__all__ = ["ARRAYS", "map_tier_file", "new_generation", "tier_file_path", "tier_key", "write_tier_file"]
 
 MAGIC = b"VDBTIER2"
 _LENGTH = struct.Struct("<I")
@@ -58,12 +55,7 @@ ARRAYS = {
     "ids": "<i8", "object_ids": "<i8", "group_owner": "<i8", "group_count": "<i8",
     "views": "<i8", "lo": "<f8", "hi": "<f8", "curve_lo": "<f4", "curve_hi": "<f4",
     "curves": "<f4", "coords": "<f8", "means": "<f8",
-    "sub_order": "<i8", "sub_lo": "<f4", "sub_hi": "<f4",
 }
-
-#: Arrays a file of the earlier layout lacks (the groups' subgroups,
-#: :mod:`viewdb.search.subgroups`): such a file is still mapped, and its reader computes them.
-LATER_ARRAYS = ("sub_order", "sub_lo", "sub_hi")
 
 
 def tier_file_path(db: str | Path, tier: str) -> Path:
@@ -149,8 +141,7 @@ def write_tier_file(
 
 def map_tier_file(path: Path, key: str, tier: str) -> dict[str, NDArray] | None:
     """The arrays of the tier file at ``path`` if it exists, is whole and was written for
-    ``key`` and ``tier`` (every one of :data:`ARRAYS`, or those of the earlier layout, without
-    :data:`LATER_ARRAYS`); else None. The arrays are a private (copy-on-write) mapping of
+    ``key`` and ``tier``; else None. The arrays are a private (copy-on-write) mapping of
     the file: writable as NumPy arrays, never written back."""
     try:
         with open(path, "rb") as f:
@@ -164,7 +155,7 @@ def map_tier_file(path: Path, key: str, tier: str) -> dict[str, NDArray] | None:
             start = -(-(len(MAGIC) + _LENGTH.size + length) // _ALIGN) * _ALIGN
             size = os.fstat(f.fileno()).st_size
             layout = header["arrays"]
-            if set(layout) not in (set(ARRAYS), set(ARRAYS) - set(LATER_ARRAYS)):
+            if set(layout) != set(ARRAYS):
                 return None
             ends = [start + off + np.dtype(dt).itemsize * int(np.prod(shape))
                     for dt, shape, off in layout.values()]

@@ -37,7 +37,6 @@ from ..search.grouping import (
     tier_members,
 )
 from ..search.knn import QueryBoxes, TierArrays
-from ..search.subgroups import Subgroups, fill_subgroups, subgroup_layout
 from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
 from .tier_file import map_tier_file, new_generation, tier_file_path, tier_key, write_tier_file
@@ -241,31 +240,15 @@ class StoredTier:
         self.row_owner = np.repeat(self.group_owner, self.group_count)
         samples = self._curve_lo.shape[1] if self.n_groups else 0
         self._edges = paa_edges(max(samples, 1))
-        first, start = subgroup_layout(self.group_start, self.group_count)
         if mapped is None:
             # curves and coordinates of every view, filled in group by group as searches need them
             self._curves = np.empty((len(self._views), samples), dtype=np.float32)
             self._coords = np.empty((len(self._views), DIMENSION), dtype=np.float64)
             self._means = np.empty((len(self._views), len(self._edges) - 1), dtype=np.float64)
-            runs = len(start) - 1
-            self._subgroups = (first, start, np.zeros(len(self._views), dtype=np.int64),
-                               np.empty((runs, samples), dtype=np.float32),
-                               np.empty((runs, samples), dtype=np.float32))
             self._loaded = np.zeros(self.n_groups, dtype=np.bool_)
         else:
             self._curves, self._coords, self._means = mapped["curves"], mapped["coords"], mapped["means"]
             self._loaded = np.ones(self.n_groups, dtype=np.bool_)
-            if "sub_order" in mapped:
-                self._subgroups = (first, start, mapped["sub_order"], mapped["sub_lo"], mapped["sub_hi"])
-            else:  # a file of the earlier layout: the subgroups are computed here, once
-                runs = len(start) - 1
-                self._subgroups = (first, start, np.zeros(len(self._views), dtype=np.int64),
-                                   np.empty((runs, samples), dtype=np.float32),
-                                   np.empty((runs, samples), dtype=np.float32))
-                fill_subgroups(np.arange(self.n_groups, dtype=np.int64), self._curves, self._means,
-                               self.group_start, self.group_count, *self._subgroups)
-        #: whether the arrays are a tier file's of the current layout (else it may be written)
-        self.file_current = mapped is not None and "sub_order" in mapped
         #: per view row: its quantisation error norms (L2, L-infinity); zero for exact curves
         self.errors = np.zeros((len(self._views), 2), dtype=np.float64)
         if mapped is None:
@@ -299,8 +282,7 @@ class StoredTier:
         return {"ids": self._ids, "object_ids": self._object_ids, "group_owner": self.group_owner,
                 "group_count": self.group_count, "views": self._views, "lo": self._lo,
                 "hi": self._hi, "curve_lo": self._curve_lo, "curve_hi": self._curve_hi,
-                "curves": self._curves, "coords": self._coords, "means": self._means,
-                "sub_order": self._subgroups[2], "sub_lo": self._subgroups[3], "sub_hi": self._subgroups[4]}
+                "curves": self._curves, "coords": self._coords, "means": self._means}
 
     def close(self) -> None:
         self.index.discard()
@@ -371,14 +353,7 @@ class StoredTier:
             rows = at[start : start + _BLOCK]
             self._coords[rows] = indexed_coordinates(block)
             self._means[rows] = paa_means(block, self._edges)
-        fill_subgroups(groups, self._curves, self._means, self.group_start, self.group_count,
-                       *self._subgroups)
         self._loaded[groups] = True
-
-    def subgroups(self) -> Subgroups:
-        """Every group's subgroups (:mod:`~viewdb.search.subgroups`), filled in for the
-        groups :meth:`rows` has read."""
-        return self._subgroups
     def group_boxes(
         self,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float32], NDArray[np.float32]]:
@@ -519,15 +494,15 @@ class TierReader:
         return tier
 
     def _open_tier(self, name: str) -> StoredTier:
-        """Tier ``name`` from its tier file if it has a valid one; else from its groups.
-        Either way short of a valid file of the current layout, the file is written if this
-        reader writes files and the folder allows."""
+        """Tier ``name`` from its tier file if it has a valid one; else from its groups,
+        writing the file if this reader writes files and the folder allows."""
         if name not in TIERS:
             raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {name!r}")
         path, key = tier_file_path(self.path, name), tier_key(self.conn, name)
-        tier = StoredTier(self.conn, name, map_tier_file(path, key, name))
-        if tier.file_current:
-            return tier
+        mapped = map_tier_file(path, key, name)
+        if mapped is not None:
+            return StoredTier(self.conn, name, mapped)
+        tier = StoredTier(self.conn, name)
         if self.write_files and tier.n_groups and not tier.quantised:
             try:
                 mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666
