@@ -27,21 +27,9 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.photos import seed_photos
+from viewdb.bench.queries import turned_stacks
 from viewdb.config import SearchConfig
-from viewdb.recognition.pipeline import segment_query
 from viewdb.search.knn import knn_stack
-
-
-def stacks(db: viewdb.ViewDB, photos: list[np.ndarray]) -> list[np.ndarray]:
-    """Each photo's 12 turned query curves, ``(12, N)``, as the search receives them."""
-    samples = db.config.features.curve_samples
-    out = []
-    for photo in photos:
-        try:
-            out.append(np.stack([c for _, c in segment_query(photo, samples, 12).curves]))
-        except viewdb.ViewDBError:
-            continue
-    return out
 
 
 def whole_queries(db: viewdb.ViewDB, photos: list[np.ndarray], counts: list[int], k: int,
@@ -82,7 +70,7 @@ def main() -> None:
     counts = [int(t) for t in args.threads.split(",")]
     with viewdb.open(args.db, read_only=True) as db:
         photos = [photo for _, photo in seed_photos(db, args.seeds, args.photos)]
-        queries = stacks(db, photos)
+        queries = turned_stacks(db, photos)
         catalogue = db._catalogue
         band = 6
         block = SearchConfig().stack_block

@@ -54,21 +54,14 @@ json.dump(out, sys.stdout)
 """
 
 
-def turned_stacks(db_path: str, seeds: str, count: int) -> np.ndarray:
-    """Each photo's 12 turned query curves, as the query's search receives them."""
+def photo_stacks(db_path: str, seeds: str, count: int) -> np.ndarray:
+    """Each photo's 12 turned query curves (:func:`viewdb.bench.queries.turned_stacks`)."""
     import viewdb
     from viewdb.bench.photos import seed_photos
-    from viewdb.recognition.pipeline import segment_query
+    from viewdb.bench.queries import turned_stacks
 
     db = viewdb.open(db_path, read_only=True)
-    samples = db.config.features.curve_samples
-    out = []
-    for _, photo in seed_photos(db, seeds, count):
-        try:
-            out.append(np.stack([c for _, c in segment_query(photo, samples, 12).curves]))
-        except viewdb.ViewDBError:
-            continue
-    return np.stack(out)
+    return np.stack(turned_stacks(db, [photo for _, photo in seed_photos(db, seeds, count)]))
 
 
 def run_tree(tree: Path, db: str, stacks: str, k: int, threads: str) -> dict[int, list]:
@@ -92,7 +85,7 @@ def main() -> None:
     trees = {"baseline": args.baseline.resolve(), "this": here}
     with tempfile.TemporaryDirectory() as tmp:
         stacks = os.path.join(tmp, "stacks.npz")
-        np.savez(stacks, stacks=turned_stacks(args.db, args.seeds, args.photos))
+        np.savez(stacks, stacks=photo_stacks(args.db, args.seeds, args.photos))
         runs: dict[str, list[dict[int, list]]] = {name: [] for name in trees}
         for i in range(args.rounds):
             for name in trees if i % 2 == 0 else list(trees)[::-1]:

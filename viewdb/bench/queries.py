@@ -26,9 +26,10 @@ from numpy.typing import NDArray
 from ..api import ViewDB
 from ..catalogue.features import distance_curve
 from ..errors import FeatureError, ViewDBError
+from ..recognition.pipeline import segment_query
 from .photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 
-__all__ = ["GridQuery", "PhotoQuery", "grid_queries", "photo_queries"]
+__all__ = ["GridQuery", "PhotoQuery", "grid_queries", "photo_queries", "turned_stacks"]
 
 #: Draws allowed per query before giving up (a view without a silhouette is redrawn).
 MAX_DRAWS = 50
@@ -117,4 +118,17 @@ def photo_queries(
     tmp = index.with_suffix(".partial")
     tmp.write_text(json.dumps([q.spec.to_dict() for q in out], indent=1))
     os.replace(tmp, index)  # the set is complete only once its index exists
+    return out
+
+
+def turned_stacks(db: ViewDB, photos: list[NDArray[np.uint8]], turns: int = 12) -> list[NDArray[np.float64]]:
+    """Each photo's ``turns`` in-plane turned query curves, ``(turns, N)``, as a query's
+    search receives them; a photo that cannot be segmented is left out."""
+    samples = db.config.features.curve_samples
+    out = []
+    for photo in photos:
+        try:
+            out.append(np.stack([c for _, c in segment_query(photo, samples, turns).curves]))
+        except ViewDBError:
+            continue
     return out

@@ -31,6 +31,7 @@ __all__ = [
     "ObjectDescription",
     "PerspectiveView",
     "ViewDescription",
+    "appearance_scope",
     "appearance_views",
     "classify_object",
     "describe_appearance",
@@ -244,9 +245,14 @@ def recorded_views(config: BuildConfig, stored: list[tuple[float, float]]
     ``stored`` (:func:`appearance_views`; the whole grid with
     :attr:`~viewdb.config.AppearanceConfig.every_view`), and the scope the file marks the
     object with (:data:`EVERY_VIEW`, or None)."""
-    if config.appearance.every_view:
-        return appearance_views(stored, config.appearance, grid_views(config.gap)), EVERY_VIEW
-    return appearance_views(stored, config.appearance), None
+    grid = grid_views(config.gap) if config.appearance.every_view else ()
+    return appearance_views(stored, config.appearance, grid), appearance_scope(config)
+
+
+def appearance_scope(config: BuildConfig) -> str | None:
+    """The scope a file marks an object's appearance records with when ``config`` made them
+    (:data:`EVERY_VIEW` with :attr:`~viewdb.config.AppearanceConfig.every_view`, else None)."""
+    return EVERY_VIEW if config.appearance.every_view else None
 
 
 def lacking_views(

@@ -31,12 +31,12 @@ from .appearance import Appearance
 from .describe import (
     ObjectDescription,
     PerspectiveView,
+    appearance_scope,
     describe_appearance,
     describe_object,
     describe_perspective,
     lacking_views,
     perspective_grid,
-    recorded_views,
 )
 from .mesh import LoadOptions, file_hash, load_mesh
 
@@ -173,7 +173,7 @@ def _describe(
     start = time.perf_counter()
     if job.upgrade == {"appearance"} and job.stored and not job.records:
         # every view it should have a record of has one: only its scope is written
-        return Upgrade(job.name, None, [], time.perf_counter() - start, recorded_views(config, job.stored)[1])
+        return Upgrade(job.name, None, [], time.perf_counter() - start, appearance_scope(config))
     mesh = load_mesh(job.path, job.name, job.digest, options)
     if job.upgrade:
         perspective = (describe_perspective(mesh, config, on_view=on_view)
