@@ -2,7 +2,7 @@
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]
-                                           [--unverified] [--rotations 12]
+                                           [--unverified] [--iou-rerank] [--rotations 12]
                                            [--shifts all|step=S|roll=DEG]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
@@ -17,7 +17,9 @@ each photo with its exact silhouette (rendered depth > 0) as the mask, to separa
 segmentation errors from recognition errors; ``--outline`` also queries without the colour
 and shape re-rankings (:mod:`viewdb.recognition.colour`,
 :mod:`viewdb.recognition.verify`), ranking by outline alone as the paper does, and
-``--unverified`` without the shape re-ranking only. With ``--pose-photos N`` the
+``--unverified`` without the shape re-ranking only; ``--iou-rerank`` also queries with the
+camera's intrinsics and ``rerank=True`` (the k results posed by perspective silhouette fits
+and re-ranked by their IoU, what real photos with intrinsics can ask for). With ``--pose-photos N`` the
 first N photos of **textured, asymmetric** objects (symmetry type with no generator; a
 texture image on the mesh) also get the pose of their top result when it is the right
 object (``server`` plan), and the report gives the median viewing-direction error (angle
@@ -47,15 +49,20 @@ def direction(azimuth: float, elevation: float) -> np.ndarray:
     return np.array([math.sin(h) * math.cos(v), math.sin(v), math.cos(h) * math.cos(v)])
 
 
+def photo_intrinsics(spec: PhotoSpec) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` of the camera that took the photo (OpenCV pixel centres on
+    integers)."""
+    f = spec.image_size / 2.0 / math.tan(math.radians(spec.fov) / 2.0)
+    c = (spec.image_size - 1) / 2.0
+    return f, f, c, c
+
+
 def pnp_pose(db, photo: np.ndarray, spec: PhotoSpec) -> tuple[float, float, str, str, float]:
     """The top result's pose with the photo's intrinsics (OpenCV frame, mesh units):
     ``(rotation error deg, translation error % of the camera distance, method, why not,
     seconds)``, NaN errors when the top result is wrong or has no pose."""
-    size = spec.image_size
-    f = size / 2.0 / math.tan(math.radians(spec.fov) / 2.0)
-    c = (size - 1) / 2.0  # OpenCV pixel centres on integers
     start = time.perf_counter()
-    result = db.query(photo, k=1, plan="server", intrinsics=(f, f, c, c))
+    result = db.query(photo, k=1, plan="server", intrinsics=photo_intrinsics(spec))
     seconds = time.perf_counter() - start
     top = result.results[0] if result.results else None
     if top is None or top.object != spec.object or top.pose is None:
@@ -102,6 +109,9 @@ def main() -> None:
                              "paper's way)")
     parser.add_argument("--unverified", action="store_true",
                         help="also query without the shape re-ranking (outline and colour)")
+    parser.add_argument("--iou-rerank", action="store_true",
+                        help="also query with the camera's intrinsics and rerank=True: the k results "
+                             "re-ranked by the IoU of their perspective silhouette fits (with pose)")
     args = parser.parse_args()
     plans = args.plans.split(",")
     search = shift_options(args.shifts)
@@ -109,7 +119,8 @@ def main() -> None:
     names = [o.name for o in db.objects()]
     runs = (plans + ([f"{p}+mask" for p in plans] if args.true_mask else [])
             + ([f"{p}+outline" for p in plans] if args.outline else [])
-            + ([f"{p}+unverified" for p in plans] if args.unverified else []))
+            + ([f"{p}+unverified" for p in plans] if args.unverified else [])
+            + ([f"{p}+iou" for p in plans] if args.iou_rerank else []))
     ranks = {p: [] for p in runs}
     times = {p: [] for p in runs}
     pose_rows = []
@@ -125,10 +136,11 @@ def main() -> None:
             plan = run.split("+")[0]
             start = time.perf_counter()
             try:
-                result = db.query(photo, k=args.k, plan=plan, pose=False, rotations=args.rotations,
+                iou = {"intrinsics": photo_intrinsics(spec), "rerank": True} if run.endswith("+iou") else {}
+                result = db.query(photo, k=args.k, plan=plan, pose=bool(iou), rotations=args.rotations,
                                   mask=exact if run.endswith("+mask") else None,
                                   colour=not run.endswith("+outline"),
-                                  verify=not run.endswith(("+outline", "+unverified")), **search)
+                                  verify=not run.endswith(("+outline", "+unverified")), **iou, **search)
                 found = [m.object for m in result.results]
                 rank = found.index(name) + 1 if name in found else 0
             except viewdb.ViewDBError as exc:
@@ -168,7 +180,8 @@ def main() -> None:
         cmc = " ".join(f"{np.mean((r >= 1) & (r <= j)) * 100:.1f}%" for j in range(1, args.k + 1))
         turns = f"{args.rotations} turns" if args.shifts is None else f"shifts {args.shifts}"
         print(f"{run:14s} CMC rank 1..{args.k}: {cmc}; median query {np.median(times[run]) * 1e3:.0f} ms "
-              f"(segmentation + {turns}{STAGES[run.split('+')[-1]]}, no pose)")
+              f"(segmentation + {turns}{STAGES[run.split('+')[-1]]}"
+              f"{', poses' if run.endswith('+iou') else ', no pose'})")
     if pose_rows:
         ok = [row for row in pose_rows if not math.isnan(row[1])]
         print(f"pose, textured asymmetric objects: {len(ok)}/{len(pose_rows)} top-1 right with a pose; "
@@ -186,7 +199,8 @@ def main() -> None:
 
 
 #: What a run's query does after the search, by the run's suffix.
-STAGES = {"outline": "", "unverified": " + colour", "mask": " + colour + shape fit"}
+STAGES = {"outline": "", "unverified": " + colour", "mask": " + colour + shape fit",
+          "iou": " + colour + shape fit + IoU fits"}
 STAGES.update({p: " + colour + shape fit" for p in ("server", "cs1", "cs2")})
 
 
