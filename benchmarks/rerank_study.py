@@ -46,6 +46,7 @@ from viewdb.recognition.colour import colour_distance, colour_signature, has_col
 from viewdb.recognition.pipeline import segment_photo
 from viewdb.recognition.verify import physical_view, rerank_by_fit
 from viewdb.search.plans import Candidate
+from viewdb.storage.catalogue import StoredCatalogue
 
 #: The shape fits ``--fits`` can compare.
 FITS = ("view", "outline", "perspective")
@@ -60,18 +61,19 @@ def ints(text: str) -> list[int]:
     return [int(x) for x in text.split(",")]
 
 
-def outline_fit(db: viewdb.ViewDB, query: QueryView, match: Candidate, perspective: bool) -> float | None:
+def outline_fit(
+    catalogue: StoredCatalogue, query: QueryView, match: Candidate, perspective: bool
+) -> float | None:
     """How well the match's silhouette explains the query's outline (its internal edges
     left out): the grid view's (:func:`physical_view`) or, with ``perspective``, the
     perspective silhouette the search matched, mirrored when the match was."""
-    catalogue = db.server_tier().catalogue
     azimuth, elevation = physical_view(match)
     try:
         grid = appearance_view(catalogue, match.object, azimuth, elevation, POSE)
         mask = grid.mask
         if perspective and match.camera_distance is not None:
             renderer = get_renderer(catalogue.config.render)
-            seen = renderer.perspective_mask(db.mesh(match.object), match.azimuth, match.elevation,
+            seen = renderer.perspective_mask(catalogue.mesh(match.object), match.azimuth, match.elevation,
                                              match.camera_distance)
             mask = np.ascontiguousarray(seen[:, ::-1] if match.mirrored else seen)
         view = CandidateView(azimuth, elevation, False, grid.keypoints, grid.descriptors, grid.points3d,
@@ -102,7 +104,7 @@ def measure(
         reranked = time.perf_counter()  # what the query's re-rankings take; the other fits are extra
         for source in fits_wanted:
             if source != "view":
-                fits[source] = [outline_fit(db, view, m, source == "perspective") for m in found]
+                fits[source] = [outline_fit(tier.catalogue, view, m, source == "perspective") for m in found]
         out.append({
             "seed": seed, "index": i, "object": spec.object, "coloured": has_colour(view.color),
             "search_ms": (searched - start) * 1e3, "rerank_ms": (reranked - searched) * 1e3,

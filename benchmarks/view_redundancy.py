@@ -21,18 +21,21 @@ import time
 
 import numpy as np
 
+import viewdb
 from viewdb.catalogue.features import mirror_curve
+from viewdb.storage.catalogue import StoredCatalogue
 from viewdb.storage.codecs import decode_array
 
 
-def object_curves(conn: sqlite3.Connection, object_id: int) -> tuple[np.ndarray, dict[float, np.ndarray]]:
+def object_curves(
+    catalogue: StoredCatalogue, conn: sqlite3.Connection, name: str
+) -> tuple[np.ndarray, dict[float, np.ndarray]]:
     """The object's orthographic curves with their mirrors, and its perspective curves by distance."""
-    ortho = np.stack([decode_array(b, np.float32, (None,)).astype(np.float64) for (b,) in conn.execute(
-        "SELECT samples FROM curves JOIN views ON views.id = curves.view_id WHERE object_id = ?",
-        (object_id,))])
+    ortho = np.stack(list(catalogue.stored_curves(name).values())).astype(np.float64)
     by_distance: dict[float, list[np.ndarray]] = {}
     for distance, blob in conn.execute(
-            "SELECT distance, samples FROM perspective_views WHERE object_id = ?", (object_id,)):
+            "SELECT distance, samples FROM perspective_views JOIN objects ON objects.id = object_id"
+            " WHERE objects.name = ?", (name,)):
         by_distance.setdefault(float(distance), []).append(
             decode_array(blob, np.float32, (None,)).astype(np.float64))
     return (np.concatenate([ortho, mirror_curve(ortho)]),
@@ -62,18 +65,20 @@ def main() -> None:
     parser.add_argument("--tolerances", default="0.01,0.02,0.04")
     args = parser.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
+    catalogue = viewdb.open(args.db, read_only=True).server_tier().catalogue
+    # an object's perspective curves all at once: no API reads them so
     conn = sqlite3.connect(f"file:{args.db}?mode=ro", uri=True)
-    ids = [int(r[0]) for r in conn.execute("SELECT id FROM objects ORDER BY id")]
-    if 0 < args.objects < len(ids):
-        ids = sorted(np.random.default_rng(args.seed).choice(ids, args.objects, replace=False).tolist())
+    names = [o.name for o in catalogue.objects()]
+    if 0 < args.objects < len(names):
+        names = list(np.random.default_rng(args.seed).choice(names, args.objects, replace=False))
     start = time.perf_counter()
     total, found = 0, dict.fromkeys(tolerances, 0)
-    for object_id in ids:
-        ortho, perspective = object_curves(conn, object_id)
+    for name in names:
+        ortho, perspective = object_curves(catalogue, conn, str(name))
         total += sum(len(c) for c in perspective.values())
         for t in tolerances:
             found[t] += repeats(ortho, perspective, t)
-    print(f"{args.db}: {len(ids)} objects, {total} perspective views "
+    print(f"{args.db}: {len(names)} objects, {total} perspective views "
           f"({time.perf_counter() - start:.0f} s)")
     for t in tolerances:
         print(f"within {t:g} of a view kept before: {found[t]} ({found[t] / max(total, 1) * 100:.1f} %)")
