@@ -29,7 +29,8 @@ photo) go to ``--overlays`` (default ``DIR/overlays``); the table to
 ``DIR/real_photos.md`` and ``.json``.
 
 Symmetry-aware rotation error. The meshes are untextured, so a pose can only be known up
-to the mesh's own shape symmetries. These are found from the mesh (:func:`symmetries`):
+to the mesh's own shape symmetries. These are found from the mesh
+(:func:`viewdb.bench.groundtruth.symmetries`):
 rotations about the bounding-box centre, about its principal axes, that map the surface
 onto itself within 2 % of its diameter (mean nearest-neighbour distance between 10,000
 surface samples and their turned copy, both ways; the samples' own spacing is about 1 %). If
@@ -45,20 +46,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
-import trimesh
-from scipy.spatial import cKDTree
 
 import viewdb
-from viewdb.pose.frames import rotation_angle
+from viewdb.bench.groundtruth import TWINS, load_model, pose_errors
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The shared data: ``../shared`` beside the checkout, or ``$VIEWDB_SHARED``.
@@ -67,99 +64,9 @@ REAL = SHARED / "real"
 YCB = REAL / "ycb_video_2frames"
 MODELS = SHARED / "models"
 
-#: The catalogue's other copy of each YCB-Video object (same YCB scan, another source).
-TWINS = {
-    "002_master_chef_can": ("ycb_master_chef_can",),
-    "004_sugar_box": ("ocrtoc_sugar_box",),
-    "009_gelatin_box": ("ocrtoc_gelatin_box",),
-    "010_potted_meat_can": ("ycb_potted_meat_can",),
-    "019_pitcher_base": ("ocrtoc_pitcher",),
-    "025_mug": ("ocrtoc_mug",),
-    "061_foam_brick": ("ycb_foam_brick",),
-}
-
 #: The cases without ground truth: mesh, intrinsics (from each case's notes.md), and per
 #: photo the box drawn around the object.
 BOXES = ROOT / "benchmarks" / "data" / "real_boxes.json"
-
-
-# ---------------------------------------------------------------------- symmetry
-@dataclass(frozen=True)
-class Symmetry:
-    """A mesh's shape symmetries about its bounding-box centre (object frame)."""
-
-    centre: np.ndarray
-    #: Finite rotations (3×3) including the identity.
-    group: tuple[np.ndarray, ...]
-    #: Unit axis of a continuous symmetry, or None.
-    axis: np.ndarray | None
-    #: With ``axis``: a half turn across it is a symmetry too (the axis may flip).
-    flip: bool
-
-    def describe(self) -> str:
-        if self.axis is not None:
-            return "continuous axis" + (" + flip" if self.flip else "")
-        return "none" if len(self.group) == 1 else f"{len(self.group)} rotations"
-
-
-def _turn(axis: np.ndarray, degrees: float) -> np.ndarray:
-    r, _ = cv2.Rodrigues(np.asarray(axis, np.float64) * math.radians(degrees))
-    return r
-
-
-def symmetries(path: Path, tolerance: float = 0.02, samples: int = 10000) -> Symmetry:
-    """The rotations about the bounding-box centre and principal axes that map the mesh's
-    surface onto itself within ``tolerance`` × its diameter (module doc)."""
-    mesh = trimesh.load(str(path), force="mesh", process=False)
-    lo, hi = mesh.bounds
-    centre = (lo + hi) / 2.0
-    pts, _ = trimesh.sample.sample_surface(mesh, samples, seed=0)
-    x = np.asarray(pts) - centre
-    diameter = 2.0 * float(np.linalg.norm(x, axis=1).max())
-    tree = cKDTree(x)
-    _, vecs = np.linalg.eigh(np.cov(x.T))
-    axes = [vecs[:, i] for i in range(3)]
-
-    def fits(r: np.ndarray) -> bool:
-        y = x @ r.T
-        d1, _ = tree.query(y)
-        d2, _ = cKDTree(y).query(x)
-        return (d1.mean() + d2.mean()) / 2.0 < tolerance * diameter
-
-    for a in axes:
-        if all(fits(_turn(a, deg)) for deg in (20, 45, 90, 135, 180, 250, 310)):
-            flip = any(fits(_turn(b, 180.0)) for b in axes if abs(float(b @ a)) < 0.5)
-            return Symmetry(centre, (np.eye(3),), a, flip)
-    group = [np.eye(3)]
-    for a in axes:
-        for deg in (90.0, 120.0, 180.0):
-            r = _turn(a, deg)
-            if fits(r):
-                group.append(r)
-    closed = list(group)
-    for _ in range(2):  # close under composition
-        for p in list(closed):
-            for q in list(closed):
-                c = p @ q
-                if all(rotation_angle(c, e) > 1.0 for e in closed):
-                    closed.append(c)
-    return Symmetry(centre, tuple(closed), None, False)
-
-
-def pose_errors(sym: Symmetry, r_est: np.ndarray, t_est: np.ndarray, r_gt: np.ndarray,
-                t_gt: np.ndarray) -> dict[str, float]:
-    """Rotation error (degrees; symmetry-aware and plain) and translation error (mm)."""
-    if sym.axis is not None:
-        c = float(np.clip((r_est @ sym.axis) @ (r_gt @ sym.axis), -1.0, 1.0))
-        angle = math.degrees(math.acos(c))
-        rot = min(angle, 180.0 - angle) if sym.flip else angle
-    else:
-        rot = min(rotation_angle(r_est @ s, r_gt) for s in sym.group)
-    centre_est = r_est @ sym.centre + t_est
-    centre_gt = r_gt @ sym.centre + t_gt
-    return {"rotation_deg": rot, "rotation_plain_deg": rotation_angle(r_est, r_gt),
-            "translation_mm": 1000.0 * float(np.linalg.norm(centre_est - centre_gt)),
-            "translation_plain_mm": 1000.0 * float(np.linalg.norm(t_est - t_gt))}
 
 
 # ---------------------------------------------------------------------- the run
@@ -222,7 +129,7 @@ def run_ycb(db: viewdb.ViewDB, k: int, plan: str, overlays: Path, objects: list[
         for obj, entry in zip(chosen, result.objects, strict=True):
             name = obj["name"]
             same = (name, *TWINS.get(name, ()))
-            sym = symmetries(YCB / obj["mesh"])
+            sym = load_model(YCB / obj["mesh"]).symmetry
             r_gt, t_gt = np.asarray(obj["R"]), np.asarray(obj["t"])
             truth = labels == int(obj["class_index"])
             cut = entry.region.mask

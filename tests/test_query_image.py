@@ -449,6 +449,14 @@ def test_too_small_an_object_is_refused():
         segment(load_image(np.full((20, 20, 3), 9, np.uint8)), mask[:20, :20])
 
 
+def test_a_small_mask_in_a_large_photo_is_the_object():
+    """A mask says where the object is: 0.05 % of a 1920 x 1080 photo is not refused."""
+    mask = np.zeros((1080, 1920), bool)
+    mask[500:532, 900:932] = True
+    seg = segment(load_image(np.full((1080, 1920, 3), 120, np.uint8)), mask)
+    assert np.array_equal(seg.mask, mask) and seg.method == "mask"
+
+
 # ---------------------------------------------------------------------------- loading
 
 

@@ -249,6 +249,53 @@ def test_a_box_whose_colours_fail_is_cut_on_texture():
     assert iou(cut.mask, truth) > 0.9
 
 
+def _busy_photo(seed):
+    """A photo of random colour tiles with an object of other random tiles in it: its
+    colours are the background's, as a neighbour's are in clutter. The object's mask and
+    its tight box."""
+    rng = np.random.default_rng(seed)
+    h, w = 240, 320
+
+    def tiles():
+        return cv2.resize(rng.integers(0, 256, (h // 4, w // 4, 3)).astype(np.uint8), (w, h),
+                          interpolation=cv2.INTER_NEAREST)
+
+    photo, truth = tiles(), np.zeros((h, w), np.uint8)
+    cv2.ellipse(truth, (160, 120), (30, 45), 0, 0, 360, 1, -1)
+    truth = truth.astype(bool)
+    photo[truth] = tiles()[truth]
+    return load_image(photo), truth, true_box(truth)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_box_in_clutter_is_answered_from_its_middle(seed):
+    """GrabCut gives a busy box wholly to the background (no object found); cut again
+    with the box's middle surely object, the object is found."""
+    image, truth, box = _busy_photo(seed)
+    with pytest.raises(viewdb.ImageError, match="no object found"):
+        find_regions(image, Prompts.of(boxes=[box]), config=SegmentationConfig(box_core=0.0))
+    cut, = find_regions(image, Prompts.of(boxes=[box]))
+    assert iou(cut.mask, truth) > 0.65
+
+
+def test_a_small_object_in_a_large_photo_is_answered_from_its_box():
+    """A box's object is small in a 1920 x 1080 photo (0.05 % of it): the box says where
+    it is, so its size in the photo does not matter."""
+    photo, _ = table_photo([], (1920, 1080), [])
+    truth = np.zeros(photo.shape[:2], np.uint8)
+    cv2.circle(truth, (900, 500), 14, 1, -1)
+    truth = truth.astype(bool)
+    photo[truth] = (200, 40, 40)
+    cut, = find_regions(load_image(photo), Prompts.of(boxes=[true_box(truth)]))
+    assert iou(cut.mask, truth) > 0.8
+
+
+def test_a_uniform_box_holds_no_object():
+    photo, _ = table_photo([], (640, 320), [])
+    with pytest.raises(viewdb.ImageError, match="no object found: the box is uniform"):
+        find_regions(load_image(photo), Prompts.of(boxes=[[100, 100, 200, 180]]))
+
+
 def test_box_gap_is_the_widest_side_gap():
     from viewdb.recognition.regions import box_gap
 

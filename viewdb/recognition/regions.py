@@ -25,7 +25,12 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   drawn tight around its object: when the colour cut leaves more than
   ``box_texture_gap`` of the box's width or height between the object and a side, the
   box is cut again on :func:`texture_image` (a white printed face on a white table), and
-  that cut is kept if it reaches the sides more nearly. The region's curve
+  that cut is kept if it reaches the sides more nearly. In clutter GrabCut can give the
+  whole box to the background: a cut that still fails (covers less than
+  ``box_min_cover`` of the box, or stops short of a side) is made again with a centred
+  ellipse of ``box_core`` of the box surely object. A box is never refused for its
+  object's size in the photo; a box whose colours hardly vary (``box_min_spread``) holds
+  no object. The region's curve
   is that of the cut-out with its holes filled; its pose is fitted to the cut-out with
   the holes the cut left in it (:attr:`Region.pose_mask`: the background seen through
   a handle, which the mesh's silhouette shows too).
@@ -58,7 +63,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -258,13 +263,14 @@ def _box_pixels(box: Box, shape: tuple[int, int]) -> tuple[int, int, int, int]:
 
 def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
                  seed: tuple[int, int] | None = None, others: Sequence[Box] = (),
-                 margin: float | None = None, texture: bool = False) -> NDArray[np.bool_]:
+                 margin: float | None = None, texture: bool = False, core: float = 0.0) -> NDArray[np.bool_]:
     """GrabCut from a box: outside background, inside probably object (module doc), and
     a disc around ``seed`` (x, y) surely object; the pixels of the ``others`` boxes
     outside it painted over from their surroundings (``box_others_unknown``); the object
     pixels inside the box, at the photo's size; ``margin``: the crop's (default
     ``box_margin``); ``texture``: cut on :func:`texture_image` of the crop, not its
-    colours."""
+    colours; ``core``: a centred ellipse spanning this share of the box's width and
+    height surely object too (``box_core``)."""
     h, w = rgb.shape[:2]
     x1, y1, x2, y2 = _box_pixels(box, (h, w))
     share = cfg.box_margin if margin is None else margin
@@ -276,6 +282,10 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     if seed is not None:
         radius = max(2, round(cfg.point_seed * min(x2 - x1, y2 - y1)))
         cv2.circle(init, (seed[0] - cx1, seed[1] - cy1), radius, cv2.GC_FGD, -1)
+    if core > 0:
+        axes = (max(1, round(core * (x2 - x1) / 2)), max(1, round(core * (y2 - y1) / 2)))
+        cv2.ellipse(init, (round((x1 + x2 - 1) / 2) - cx1, round((y1 + y2 - 1) / 2) - cy1), axes, 0, 0, 360,
+                    cv2.GC_FGD, -1)
     unknown = None
     if cfg.box_others_unknown:
         unknown = _others_outside(others, (x1, y1, x2, y2), (h, w), (cx1, cy1, cx2, cy2), init)
@@ -393,7 +403,12 @@ def segment_box(image: LoadedImage, box: Box, cfg: SegmentationConfig, others: S
 def _cut_box(image: LoadedImage, box: Box, cfg: SegmentationConfig, others: Sequence[Box] = ()
              ) -> tuple[Segmentation, NDArray[np.bool_]]:
     """:func:`segment_box`, and the same region with the holes the cut left in it (the
-    background seen through a handle), which the pose is fitted to."""
+    background seen through a handle), which the pose is fitted to. A box whose colours
+    hardly vary (``box_min_spread``) holds no object."""
+    spread = colour_spread(image.rgb, _box_pixels(box, image.rgb.shape[:2]))
+    if spread < cfg.box_min_spread:
+        raise ImageError(f"{box}: no object found: the box is uniform (colour spread {spread:.1f}, "
+                         f"an object needs {cfg.box_min_spread:g})", image.path)
     if cfg.box_method == "grabcut":
         raw, whole = _tight_cut(image, box, cfg, others)
     else:
@@ -407,24 +422,55 @@ def _tight_cut(image: LoadedImage, box: Box, cfg: SegmentationConfig, others: Se
                ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """GrabCut's cut of a box and its largest region filled: on colour, or on texture when
     the colour cut stops more than ``box_texture_gap`` short of a side of the box and the
-    texture cut comes nearer (module doc)."""
+    texture cut comes nearer; when the cut kept still fails (:func:`_failed`), cut again
+    with the box's middle surely object (``box_core``; module doc)."""
     raw = _grabcut_box(image.rgb, box, cfg, others=others)
     whole = largest_filled(raw)
-    if cfg.box_texture_gap >= 1.0:
-        return raw, whole
     pixels = _box_pixels(box, image.rgb.shape[:2])
-    gap = box_gap(whole, pixels) if whole.any() else 1.0
-    if gap <= cfg.box_texture_gap:
-        return raw, whole
-    raw_texture = _grabcut_box(image.rgb, box, cfg, others=others, texture=True)
-    whole_texture = largest_filled(raw_texture)
-    if whole_texture.any() and box_gap(whole_texture, pixels) < gap:
-        return raw_texture, whole_texture
+    if cfg.box_texture_gap < 1.0:
+        gap = box_gap(whole, pixels) if whole.any() else 1.0
+        if gap > cfg.box_texture_gap:
+            raw_texture = _grabcut_box(image.rgb, box, cfg, others=others, texture=True)
+            whole_texture = largest_filled(raw_texture)
+            if whole_texture.any() and box_gap(whole_texture, pixels) < gap:
+                raw, whole = raw_texture, whole_texture
+    if cfg.box_core > 0 and _failed(whole, pixels, cfg):
+        raw = _grabcut_box(image.rgb, box, cfg, others=others, core=cfg.box_core)
+        whole = largest_filled(raw)
     return raw, whole
+
+
+def _failed(whole: NDArray[np.bool_], box: tuple[int, int, int, int], cfg: SegmentationConfig) -> bool:
+    """Whether a box's cut failed: it covers less than ``box_min_cover`` of the box, or
+    stops more than ``box_texture_gap`` short of one of its sides."""
+    x1, y1, x2, y2 = box
+    area = np.count_nonzero(whole)
+    return (area == 0 or area < cfg.box_min_cover * (x2 - x1) * (y2 - y1)
+            or box_gap(whole, box) > cfg.box_texture_gap)
+
+
+def colour_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int]) -> float:
+    """The spread of a box's colours (its pixels, :func:`_box_pixels`): the root of the
+    trace of their CIE Lab covariance after a blur of one pixel (``box_min_spread``)."""
+    x1, y1, x2, y2 = box
+    h, w = rgb.shape[:2]
+    pad = 3
+    crop = rgb[max(0, y1 - pad):min(h, y2 + pad), max(0, x1 - pad):min(w, x2 + pad)]
+    lab = cv2.GaussianBlur(cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_RGB2LAB).astype(np.float32),
+                           (0, 0), 1.0)
+    inner = lab[y1 - max(0, y1 - pad):, x1 - max(0, x1 - pad):][:y2 - y1, :x2 - x1].reshape(-1, 3)
+    if len(inner) < 2:
+        return 0.0
+    return float(np.sqrt(max(0.0, float(np.trace(np.cov(inner.T))))))
 
 
 def _checked(mask: NDArray[np.bool_], method: str, prompt: Prompt | None, image: LoadedImage,
              cfg: SegmentationConfig) -> Segmentation:
+    """A region's segmentation, or a one-line error naming its prompt. A box says where
+    its object is, so how small it is in the photo does not matter; only an empty cut is
+    refused."""
+    if isinstance(prompt, Box):
+        cfg = replace(cfg, min_object_fraction=0.0, min_object_pixels=1)
     try:
         fraction = check_object(mask, method, image.path, cfg)
     except ImageError as exc:
@@ -525,7 +571,8 @@ def _with_others(image: LoadedImage, found: list[tuple[Segmentation, Prompt | No
         union |= mask
     regions = []
     for i, ((seg, prompt), mask) in enumerate(zip(found, separated, strict=True)):
-        if mask is not seg.mask and np.count_nonzero(mask) != np.count_nonzero(seg.mask):
+        if mask is not seg.mask and np.count_nonzero(mask) != np.count_nonzero(seg.mask) and (
+                mask.any() or not isinstance(prompt, Box)):  # a box's object is never given away whole
             kept = largest_filled(mask)
             seg = _checked(kept, seg.method, prompt, image, cfg)
         others = union & ~seg.mask

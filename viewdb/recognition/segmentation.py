@@ -85,7 +85,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -185,7 +185,10 @@ def segment(
         raw, used = _colour_segmentation(image.rgb, used, cfg,
                                           plain_as_border=method == "auto" and cfg.plain_border)
     final = largest_filled(raw)
-    fraction = check_object(final, used, name, cfg)
+    # a mask says where the object is: how small a share of the photo it covers does not
+    # matter (a far object in a large photo), only that it has pixels enough for a curve
+    checks = replace(cfg, min_object_fraction=0.0) if used == "mask" else cfg
+    fraction = check_object(final, used, name, checks)
     return Segmentation(final, used, fraction, name)
 
 
