@@ -41,6 +41,7 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 import viewdb
@@ -113,7 +114,7 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
     wall = time.perf_counter() - start
     if result is not None and overlays is not None:
         overlays.mkdir(parents=True, exist_ok=True)
-        result.overlay().save(overlays / f"{set_name}_{frame.name}.png")
+        cv2.imwrite(str(overlays / f"{set_name}_{frame.name}.png"), result.overlay()[:, :, ::-1])
     rows = []
     for i, (inst, (whole, visible)) in enumerate(zip(frame.instances, masks, strict=True)):
         exact = inst.mesh.stem

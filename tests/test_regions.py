@@ -138,6 +138,34 @@ def test_the_objects_share_one_decode_and_answer_as_single_queries(scene_db, sce
                 [(m.object, m.distance) for m in entry.results]
 
 
+def test_a_box_prompted_object_is_re_ranked_from_a_deeper_pool(scene_db, scene):
+    """An object cut from a box is searched deeper (``prompt_pool``): its answer is that of
+    a query with its cut-out as the mask and that pool."""
+    from viewdb.config import RecognitionConfig
+    from viewdb.recognition.options import QueryOptions
+
+    photo, _, masks = scene
+    with viewdb.open(scene_db, create=False) as db:
+        boxed = db.query(photo, k=2, boxes=[true_box(masks[1])], pose=False).objects[0]
+        cut = boxed.region.mask
+        deep = db.query(photo, mask=cut, options=QueryOptions(
+            k=2, pose=False, recognition=RecognitionConfig(pool=RecognitionConfig().prompt_pool)))
+        shallow = db.query(photo, mask=cut, options=QueryOptions(k=2, pose=False))
+    assert [(m.object, m.score) for m in boxed.results] == [(m.object, m.score) for m in deep.results]
+    assert shallow.results[0].object == deep.results[0].object == "mug"
+
+
+@pytest.mark.parametrize("prompted, colour, verify, k, expected", [
+    (True, True, True, 2, 40), (False, True, True, 2, 5), (True, False, False, 2, 2),
+    (False, False, True, 7, 7), (True, True, False, 50, 50),
+])
+def test_how_many_objects_the_plan_finds_before_the_re_rankings(prompted, colour, verify, k, expected):
+    from viewdb.recognition.options import QueryOptions
+    from viewdb.recognition.pipeline import pool_size
+
+    assert pool_size(QueryOptions(k=k, verify=verify), prompted, colour) == expected
+
+
 def test_overlapping_claims_go_to_the_smaller_object():
     a = np.zeros((20, 20), bool)
     a[2:15, 2:15] = True

@@ -812,6 +812,16 @@ class RecognitionConfig:
     #: Objects the plan finds (at least k) before the colour and shape re-rankings keep
     #: the best k.
     pool: int = 5
+    #: An object cut from a prompt (a box or a point) in a cluttered photo has a less sure
+    #: outline than a mask's, an alpha channel's or one on a plain background: its own
+    #: mesh is often beyond the outline's best 5 while its colours and inside still tell
+    #: it apart. So the plan finds at least this many objects for it before the colour and
+    #: shape re-rankings keep the best k. Measured with benchmarks/real_clutter.py on the
+    #: 230-object file (docs/results/real-clutter.md): 50 LM-O objects at least half
+    #: visible in 8 photos, right object first 3 / 5 of 50 and in the top 5 6 / 13 with
+    #: pools of 5 / 20 (without the shape fit: 5 / 15 at 20, 7 / 18 at 40); the 7
+    #: YCB-Video objects first 3 of 7 with 5, 4 of 7 with 40 (without the fit: 3 of 7).
+    prompt_pool: int = 40
     #: An occluder's pixels inside the silhouette's convex hull make a completed query
     #: shape only when they are at least this share of the silhouette's area
     #: (:func:`viewdb.recognition.shapes.completed_mask`).
@@ -842,8 +852,8 @@ class RecognitionConfig:
         if self.turn_search not in TURN_SEARCHES:
             raise ValueError(f"turn_search must be one of {', '.join(TURN_SEARCHES)}, "
                              f"got {self.turn_search!r}")
-        if self.pool < 1:
-            raise ValueError(f"pool must be at least 1, got {self.pool}")
+        if self.pool < 1 or self.prompt_pool < 1:
+            raise ValueError(f"pool and prompt_pool must be at least 1, got {self.pool}, {self.prompt_pool}")
         if not 0.0 <= self.hidden_min_share <= 1.0:
             raise ValueError(f"hidden_min_share must be in [0, 1], got {self.hidden_min_share}")
         if not 0.0 <= self.roll_tolerance <= 180.0:

@@ -56,7 +56,8 @@ from .shapes import completed_mask, pose_mask, rotated_curves
 from .verify import physical_view, rerank_by_fit
 
 __all__ = [
-    "QueryShape", "region_shape", "run_query", "run_regions", "segment_photo", "segment_query", "shape_of",
+    "QueryShape", "pool_size", "region_shape", "run_query", "run_regions", "segment_photo", "segment_query",
+    "shape_of",
 ]
 
 #: A pool entry: an object's best candidate and the in-plane angle of the curve that found it.
@@ -297,14 +298,26 @@ def _matches(
     return [replace(m, rank=i) for i, m in enumerate(matches, 1)]
 
 
+def pool_size(options: QueryOptions, prompted: bool, recolour: bool) -> int:
+    """How many objects the plan finds before the re-rankings keep the best k: k when
+    nothing re-ranks them, else at least ``recognition.pool``, or
+    ``recognition.prompt_pool`` for an object cut from a prompt."""
+    if not (recolour or options.verify):
+        return options.k
+    recognition = options.recognition
+    return max(options.k, recognition.prompt_pool if prompted else recognition.pool)
+
+
 def _recognise(
     shape: QueryShape, options: QueryOptions, server: ServerTier, client: ClientTier | None,
-    traffic: _Traffic,
+    traffic: _Traffic, prompted: bool = False,
 ) -> tuple[list[QueryMatch], dict[str, float]]:
-    """Stages 3–5 for one segmented object: its matches and each stage's time (ms)."""
+    """Stages 3–5 for one segmented object: its matches and each stage's time (ms).
+    ``prompted``: the object was cut from a prompt (a box, a point), so its outline is
+    less sure and the pool is deeper (``recognition.prompt_pool``)."""
     start = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
-    pool = max(options.k, options.recognition.pool) if recolour or options.verify else options.k
+    pool = pool_size(options, prompted, recolour)
     ranked, client_ms, server_ms = _search(shape, options, pool, server, client, traffic)
     searched = time.perf_counter()
     colours: Scores = {}
@@ -388,7 +401,7 @@ def run_regions(
     for region in regions:
         t0 = time.perf_counter()
         shape = region_shape(loaded, region, samples, options)
-        matches, timing = _recognise(shape, options, server, client, traffic)
+        matches, timing = _recognise(shape, options, server, client, traffic, region.prompt is not None)
         timing["segment"] = (time.perf_counter() - t0) * 1e3 - timing["total"]  # its curves
         timing["total"] += timing["segment"]
         for key, value in timing.items():
