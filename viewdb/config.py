@@ -788,6 +788,47 @@ class RayIngestConfig:
 
 
 @dataclass(frozen=True)
+class FastConfig:
+    """The ``fast`` plan (:mod:`viewdb.search.fast`): a shortlist of objects from an
+    approximate nearest-neighbour index over a turn-invariant embedding of every stored
+    view, searched exactly. The first four settings make the index file (a file made with
+    others is rebuilt); the rest are query-time."""
+
+    #: DFT magnitudes kept per curve (coefficients 1..m; :mod:`viewdb.search.embedding`).
+    coefficients: int = 16
+    #: The HNSW graph's edges per node (USearch's ``connectivity``).
+    connectivity: int = 16
+    #: Candidates kept while a node is inserted (USearch's ``expansion_add``).
+    expansion_add: int = 64
+    #: Threads that build the index at ingest (0: every core).
+    build_threads: int = 0
+    #: Candidates kept while the graph is searched (USearch's ``expansion_search``; at
+    #: least the views asked for).
+    expansion_search: int = 64
+    #: Views asked of the index per shortlisted object and query curve: enough that the
+    #: nearest views name ``shortlist`` distinct objects (asked again for more otherwise).
+    views_per_object: int = 4
+    #: Objects shortlisted (the knob; :attr:`RecognitionConfig.fast_shortlist` is the
+    #: query's default).
+    shortlist: int = 20
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.coefficients <= 64:
+            raise ValueError(f"coefficients must be in [1, 64], got {self.coefficients}")
+        if not 2 <= self.connectivity <= 256:
+            raise ValueError(f"connectivity must be in [2, 256], got {self.connectivity}")
+        for name in ("expansion_add", "expansion_search", "views_per_object", "shortlist"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.build_threads < 0:
+            raise ValueError(f"build_threads must be at least 0, got {self.build_threads}")
+
+    def index_key(self) -> str:
+        """What makes an index file: a file made with other settings is not used."""
+        return f"dft{self.coefficients}-m{self.connectivity}-ef{self.expansion_add}"
+
+
+@dataclass(frozen=True)
 class RecognitionConfig:
     """Tunables of the query pipeline (:mod:`viewdb.recognition.pipeline`)."""
 
@@ -815,8 +856,13 @@ class RecognitionConfig:
     #: photo's object ranks lower there than on the full tier
     #: (docs/results/synthetic-photos.md#cs2).
     cs2_shortlist: int = 100
+    #: The ``fast`` plan's shortlist: objects its approximate index finds, searched exactly
+    #: (at least k; :mod:`viewdb.search.fast`, docs/fast-plan.md).
+    fast_shortlist: int = FastConfig().shortlist
 
     def __post_init__(self) -> None:
+        if not 1 <= self.fast_shortlist <= 100_000:
+            raise ValueError(f"fast_shortlist must be in [1, 100000], got {self.fast_shortlist}")
         if self.cs2 not in CS2_SEARCHES:
             raise ValueError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {self.cs2!r}")
         if not 1 <= self.cs2_shortlist <= 100:
