@@ -18,7 +18,7 @@ from viewdb.catalogue.features import mirror_curve
 from viewdb.config import FastConfig, RecognitionConfig
 from viewdb.search.bounds import dtw
 from viewdb.search.embedding import embed_curves
-from viewdb.search.fast import build_fast_index, fast_knn, shortlist_objects
+from viewdb.search.fast import build_fast_index, fast_knn, merged_queries, shortlist_objects
 from viewdb.search.knn import TierArrays, brute_force_knn, knn_stack
 from viewdb.search.plans import PLANS, RefineRequest
 from viewdb.search.subset import SubsetSource
@@ -108,7 +108,7 @@ def test_fast_is_the_brute_force_over_its_shortlist(seed, k, shortlist, band):
     index = build_fast_index(arrays, config)
     curves = np.stack([np.roll(arrays.curves[rng.integers(len(arrays.curves))], int(rng.integers(32)))
                        + rng.normal(0, 0.05, 32) for _ in range(3)])
-    listed, _ = shortlist_objects(curves, index, max(shortlist, k), 12)
+    listed, _ = shortlist_objects(curves, index, max(shortlist, k), arrays)
     assert len(listed) == min(max(shortlist, k), 12) == len(set(listed.tolist()))
     found, stats = fast_knn(curves, arrays, index, k, band, max(shortlist, k))
     _same(found, _stack_brute(curves, arrays, k, band, set(listed.tolist())))
@@ -120,18 +120,33 @@ def test_fast_is_the_brute_force_over_its_shortlist(seed, k, shortlist, band):
         _same(found, _stack_brute(curves, arrays, k, band))
 
 
-def test_the_shortlist_ranks_objects_by_their_nearest_view_in_the_embedding():
+@pytest.mark.parametrize("exact_share", [0.0, 1.0])
+def test_the_shortlist_ranks_objects_by_their_nearest_view_in_the_embedding(exact_share):
     rng = np.random.default_rng(5)
     arrays = _random_tier(rng, 10, 4)
-    config = FastConfig(coefficients=8)
-    index = build_fast_index(arrays, config)
+    index = build_fast_index(arrays, FastConfig(coefficients=8, exact_share=exact_share, views_per_object=1))
+    index.cache.clear()  # the exact ranking embeds the views again
     q = arrays.curves[17][None, :]
-    listed, _ = shortlist_objects(q, index, 10, 10)
-    e, every = embed_curves(q, 8), embed_curves(arrays._curves, 8)
-    nearest = [np.min(((every[arrays.row_owner == o] - e) ** 2).sum(axis=1)) for o in range(10)]
-    # a small catalogue's HNSW search is exact
-    assert listed.tolist() == np.argsort(nearest, kind="stable").tolist()
-    assert listed[0] == arrays.owner[17]
+    for size in (3, 10):
+        listed, asked = shortlist_objects(q, index, size, arrays)
+        if size == 10:  # 10 views name fewer than 10 objects: asked again (a share of 1), or ranked exactly
+            assert (asked > 10) == (exact_share == 1.0) and (asked == 0) == (exact_share == 0.0)
+        e, every = embed_curves(q, 8), embed_curves(arrays._curves, 8)
+        nearest = [np.min(((every[arrays.row_owner == o] - e) ** 2).sum(axis=1)) for o in range(10)]
+        # a small catalogue's HNSW search is exact
+        assert listed.tolist() == np.argsort(nearest, kind="stable").tolist()[:size]
+        assert listed[0] == arrays.owner[17]
+
+
+def test_a_photos_turns_ask_the_index_once_and_other_outlines_apart():
+    rng = np.random.default_rng(8)
+    a, b = rng.random(16).astype(np.float32), rng.random(16).astype(np.float32) + 1
+    turns = np.stack([a + rng.normal(0, 0.002, 16) for _ in range(12)] + [b + rng.normal(0, 0.002, 16)
+                                                                           for _ in range(12)]).astype(np.float32)
+    merged = merged_queries(turns, 0.03)
+    assert merged.shape == (2, 16)
+    np.testing.assert_allclose(merged[0], turns[:12].mean(axis=0), rtol=1e-5)
+    assert merged_queries(turns, 0.0).shape == (24, 16)
 
 
 def test_without_an_index_fast_is_the_exact_search():

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,7 +30,8 @@ from .embedding import embed_curves
 from .knn import Neighbour, SearchStats, TierSource, knn_stack
 from .subset import SubsetSource, groups_by_object
 
-__all__ = ["FastIndex", "build_fast_index", "fast_knn", "shortlist_objects"]
+__all__ = ["FastIndex", "build_fast_index", "embed_all", "fast_knn", "merged_queries", "rank_exactly",
+           "shortlist_objects"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,22 @@ class FastIndex:
     row_owner: NDArray[np.int64]
     by_object: tuple[NDArray[np.int64], NDArray[np.int64]]
     config: FastConfig
+    #: every view's embedding, in row order, and the rows ordered by object (computed on
+    #: first need: :func:`rank_exactly`), shared by the copies :meth:`dataclasses.replace` makes
+    cache: dict[str, NDArray] = field(default_factory=dict, compare=False, repr=False)
+
+    def embeddings(
+        self, source: TierSource,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.int64]]:
+        """Every view's embedding (rows of ``source``), the rows ordered by object and where
+        each object's run starts in that order (``n_objects + 1`` entries)."""
+        if "vectors" not in self.cache:
+            self.cache["vectors"] = embed_all(source, self.config.coefficients)
+        if "order" not in self.cache:
+            order = np.argsort(self.row_owner, kind="stable").astype(np.int64)
+            self.cache["order"] = order
+            self.cache["starts"] = np.searchsorted(self.row_owner[order], np.arange(source.n_objects + 1))
+        return self.cache["vectors"], self.cache["order"], self.cache["starts"]
 
     @classmethod
     def of(cls, index: ViewIndex, source: TierSource, config: FastConfig) -> FastIndex:
@@ -56,31 +73,57 @@ class FastIndex:
 _EMBED_BLOCK = 65536
 
 
-def build_fast_index(source: TierSource, config: FastConfig) -> FastIndex:
-    """The ``fast`` index of every view of ``source`` (its rows, every group read)."""
+def embed_all(source: TierSource, coefficients: int) -> NDArray[np.float32]:
+    """The embedding of every view of ``source``, in row order (every group read)."""
     curves = source.rows(np.arange(source.n_groups, dtype=np.int64))[0]
     rows = len(source.row_owner)
-    vectors = np.empty((rows, config.coefficients), dtype=np.float32)
+    vectors = np.empty((rows, coefficients), dtype=np.float32)
     for start in range(0, rows, _EMBED_BLOCK):
-        vectors[start : start + _EMBED_BLOCK] = embed_curves(curves[start : start + _EMBED_BLOCK],
-                                                             config.coefficients)
+        block = curves[start : start + _EMBED_BLOCK]
+        vectors[start : start + len(block)] = embed_curves(block, coefficients)
+    return vectors
+
+
+def build_fast_index(source: TierSource, config: FastConfig) -> FastIndex:
+    """The ``fast`` index of every view of ``source`` (its rows, every group read)."""
+    vectors = embed_all(source, config.coefficients)
     index = ViewIndex.build(vectors, config.connectivity, config.expansion_add, config.build_threads)
-    return FastIndex.of(index, source, config)
+    built = FastIndex.of(index, source, config)
+    built.cache["vectors"] = vectors
+    return built
+
+
+def merged_queries(vectors: NDArray[np.float32], radius: float) -> NDArray[np.float32]:
+    """The query embeddings to ask the index with: the rows of ``vectors`` gathered greedily
+    (each joins the first gathering whose first row lies within ``radius``, else starts
+    one), each gathering by its mean (a photo's in-plane turns embed alike, its completed
+    outline elsewhere)."""
+    firsts: list[int] = []
+    members: list[list[int]] = []
+    for i, v in enumerate(vectors):
+        near = [j for j, f in enumerate(firsts) if float(np.sum((vectors[f] - v) ** 2)) <= radius * radius]
+        if near:
+            members[near[0]].append(i)
+        else:
+            firsts.append(i)
+            members.append([i])
+    return np.stack([vectors[m].mean(axis=0) for m in members]).astype(np.float32)
 
 
 def shortlist_objects(
-    curves: NDArray[np.floating], index: FastIndex, size: int, n_objects: int,
+    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource,
 ) -> tuple[NDArray[np.int64], int]:
-    """The ``size`` objects (indices, best first) whose nearest indexed view is nearest any
-    of ``curves`` ``(T, N)`` in the embedding, and how many views the index was asked for
-    per curve. The index is asked again, for twice as many, until its views name ``size``
-    objects or it has no more."""
+    """The ``size`` objects (indices of ``source``, best first) whose nearest indexed view is
+    nearest any of ``curves`` ``(T, N)`` in the embedding (the curves' embeddings merged,
+    :func:`merged_queries`), and how many views the index was asked for per query (0:
+    ranked exactly). The index is asked again, for twice as many, until its views name
+    ``size`` objects; past :attr:`~viewdb.config.FastConfig.exact_share` of its views
+    (a shortlist of most objects), every view is compared instead (:func:`rank_exactly`)."""
     config = index.config
-    q = embed_curves(curves, config.coefficients)
-    q = np.unique(q, axis=0)  # the same curve twice is asked once
-    size = min(size, n_objects)
+    q = merged_queries(embed_curves(curves, config.coefficients), config.merge_radius)
+    size = min(size, source.n_objects)
     count = max(size * config.views_per_object, 1)
-    while True:
+    while count <= max(config.exact_share * index.index.size, size * config.views_per_object):
         keys, distances = index.index.nearest(q, count, config.expansion_search)
         valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
         owners = index.row_owner[keys[valid]]
@@ -89,7 +132,19 @@ def shortlist_objects(
         ranked = owners[order][np.sort(first)]
         if len(ranked) >= size or count >= index.index.size:
             return ranked[:size].astype(np.int64), count
-        count = min(2 * count, index.index.size)
+        count = 2 * count
+    return rank_exactly(q, index, source)[:size], 0
+
+
+def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSource) -> NDArray[np.int64]:
+    """Every object of ``source`` that has views, by its nearest view's embedding to any of
+    ``queries``, nearest first (ties by object index)."""
+    vectors, order, starts = index.embeddings(source)
+    norms = np.einsum("ij,ij->i", vectors, vectors)
+    d = np.min(norms[None, :] - 2.0 * (queries @ vectors.T), axis=0)[order]
+    held = np.flatnonzero(starts[1:] > starts[:-1])
+    best = np.minimum.reduceat(d, starts[held]) if len(held) else np.zeros(0)
+    return held[np.argsort(best, kind="stable")].astype(np.int64)
 
 
 def fast_knn(
@@ -111,7 +166,7 @@ def fast_knn(
         stats.extra.update(shortlisted=float(source.n_objects), fast_index=float(index is not None))
         return found, stats
     start = time.perf_counter()
-    objects, _ = shortlist_objects(stack, index, max(shortlist, k), source.n_objects)
+    objects, _ = shortlist_objects(stack, index, max(shortlist, k), source)
     subset = SubsetSource(source, objects, index.by_object)
     ann_ms = (time.perf_counter() - start) * 1e3
     listed = set(objects.tolist())
