@@ -5,6 +5,7 @@ and file size.
     python benchmarks/fast_plan.py DB [--seeds 1-6] [--photos 40] [--shortlists 5,10,20,40]
                                       [--whole 20] [-k 5]
     python benchmarks/fast_plan.py --synthetic 10000 [--views 24] [--queries 100] [--keep DIR]
+                                   [--noise 0.03] [--build-only]
 
 **Photos** (a catalogue file ``DB``, opened read-only): the synthetic photos of
 ``benchmarks/photo_accuracy.py`` (:func:`viewdb.bench.photos.seed_photos`, same seeds, same
@@ -28,7 +29,8 @@ written), and its size is given per view.
 **Synthetic** (``--synthetic N``): the catalogue of ``benchmarks/scale.py`` (N objects of
 ``--views`` perturbed real curves each, written through the library's own writer; kept in
 ``--keep``), its tier files and ``fast`` index written as an ingest writes them (timed),
-and scale.py's queries (a stored curve plus noise, k = 5, band 6) answered by ``server``
+and scale.py's queries (a stored curve plus noise of sd ``--noise``, 0.03 as there; k = 5,
+band 6) answered by ``server``
 and by ``fast`` per shortlist size, alternately: p50/p95 of each, the agreement figures
 above, the index's bytes per view and the process's resident set.
 """
@@ -201,18 +203,20 @@ def synthetic_run(args: argparse.Namespace, shortlists: list[int]) -> None:
         start = time.perf_counter()
         db.write_tier_files()
         print(f"tier files and fast index written in {time.perf_counter() - start:.1f} s", flush=True)
+    if args.build_only:
+        return
     rng = np.random.default_rng(args.seed + 1)
     with viewdb.open(full, read_only=True) as db:
         index = ensure_index(db)
         arrays, _ = db.search_tier("full")
         picks = rng.integers(len(arrays.curves), size=args.queries)
         samples = arrays.curves.shape[1]
-        queries = [np.clip(arrays.curves[i] + rng.normal(0, 0.03, samples), 0, None) for i in picks]
+        queries = [np.clip(arrays.curves[i] + rng.normal(0, args.noise, samples), 0, None) for i in picks]
         del arrays
         print(f"{full.name}: {args.synthetic:,} objects x {args.views} views = {index['views']:,} views; "
               f"{describe(index)}; database {full.stat().st_size / 1e6:.0f} MB", flush=True)
         print_table(compare(queries, db.server_tier(), args.k, shortlists), args.k, shortlists,
-                    "queries: a stored curve plus noise")
+                    f"queries: a stored curve plus noise of sd {args.noise:g}")
         print(f"resident set {rss_mb():.0f} MB")
 
 
@@ -229,6 +233,8 @@ def main() -> None:
     parser.add_argument("--queries", type=int, default=100)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--keep", type=Path, help="folder for the synthetic catalogue")
+    parser.add_argument("--noise", type=float, default=0.03, help="synthetic queries' noise (scale.py: 0.03)")
+    parser.add_argument("--build-only", action="store_true", help="build the synthetic catalogue and stop")
     args = parser.parse_args()
     shortlists = [int(s) for s in args.shortlists.split(",") if s]
     args.whole = [int(s) for s in args.whole.split(",") if s]

@@ -798,8 +798,10 @@ class FastConfig:
     coefficients: int = 16
     #: The HNSW graph's edges per node (USearch's ``connectivity``).
     connectivity: int = 16
-    #: Candidates kept while a node is inserted (USearch's ``expansion_add``).
-    expansion_add: int = 64
+    #: Candidates kept while a node is inserted (USearch's ``expansion_add``): 32 built
+    #: the 60-object file's index (145,164 views) in 1.8 s against 6.8 s at 64, with 98.4
+    #: against 99.5 % of a query's 160 nearest views found.
+    expansion_add: int = 32
     #: Threads that build the index at ingest (0: every core).
     build_threads: int = 0
     #: Candidates kept while the graph is searched (USearch's ``expansion_search``; at
