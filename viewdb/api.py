@@ -207,7 +207,8 @@ class ViewDB:
 
     def write_tier_files(self) -> None:
         """Write the tiers' search arrays next to the file, ready to map for the next fresh
-        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends. A file
+        process (:mod:`viewdb.storage.tier_file`), and the ``fast`` plan's index
+        (:mod:`viewdb.storage.ann_file`); an ingest does it when it ends. A file
         written before index generations gets one first, which makes checking its tier
         files quick."""
         if not self.read_only:
