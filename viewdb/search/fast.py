@@ -18,6 +18,7 @@ without an index (none built, a stale one) is the exact search of every object.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -157,8 +158,6 @@ def fast_knn(
     shortlist of every object, the exact search of every object. Returns the results,
     with the exact search's counters and the shortlist's in ``stats.extra``
     (``shortlisted``, ``ann_ms``, ``fast_index``: 1 if the index was used)."""
-    import time
-
     stack = np.ascontiguousarray(np.atleast_2d(curves), dtype=np.float64)
     block = SearchConfig().stack_block
     if index is None or shortlist >= source.n_objects:
