@@ -398,7 +398,10 @@ def query(
                                   dir_okay=False)
     ] = None,
     k: Annotated[int, typer.Option("-k", help="How many objects.", min=1, max=100)] = 5,
-    plan: Annotated[str, typer.Option(help="server, cs1 or cs2.")] = "server",
+    plan: Annotated[str, typer.Option(help="server, cs1, cs2 or fast.")] = "server",
+    fast_shortlist: Annotated[int | None, typer.Option(
+        help="With --plan fast: objects the approximate index shortlists, each searched exactly "
+             "(default 20).", min=1, max=100000)] = None,
     client: Annotated[
         Path | None, typer.Option(help="Client file for the client half of cs1/cs2 (default: --db).",
                                   dir_okay=False)
@@ -472,8 +475,10 @@ def query(
     server for the rest (and the pose). --box, --point (each repeatable) and --all
     recognise several objects of one photo; the JSON then lists them in "objects".
     """
-    if plan not in ("server", "cs1", "cs2"):
-        raise typer.BadParameter("must be server, cs1 or cs2", param_hint="--plan")
+    if plan not in ("server", "cs1", "cs2", "fast"):
+        raise typer.BadParameter("must be server, cs1, cs2 or fast", param_hint="--plan")
+    if fast_shortlist is not None and plan != "fast":
+        raise typer.BadParameter("goes with --plan fast", param_hint="--fast-shortlist")
     if (label_map is None) != (label is None):
         raise typer.BadParameter("--label-map and --label go together", param_hint="--label")
     if label_map is not None and mask is not None:
@@ -496,7 +501,8 @@ def query(
             result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
                                 rotations=rotations, pose=not no_pose, intrinsics=cam,
                                 label_map=label_map, label=label, colour=not no_colour,
-                                verify=not no_verify, pose_top=pose_top, roll=roll, **prompts)
+                                verify=not no_verify, pose_top=pose_top, roll=roll,
+                                fast_shortlist=fast_shortlist, **prompts)
     elif db is None:
         raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
     else:
@@ -507,7 +513,7 @@ def query(
                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
                                    label_map=label_map, label=label, rerank=rerank,
                                    colour=not no_colour, verify=not no_verify, pose_top=pose_top,
-                                   roll=roll, **prompts)
+                                   roll=roll, fast_shortlist=fast_shortlist, **prompts)
                 if overlay is not None:
                     _write_png(overlay, result.overlay())
             finally:

@@ -28,6 +28,7 @@ from viewdb.http import models
 from viewdb.http.wire import ColourReply, FitReply, PoseReply, PoseRequest, decode_query, encode_query
 from viewdb.pose.estimate import QueryView
 from viewdb.search.plans import MAX_K
+from viewdb.storage.ann_file import ann_file_path
 from viewdb_cli.main import main
 
 TOKEN = "s3cret-token"
@@ -41,6 +42,8 @@ def files(tiered_db, tmp_path_factory):
     folder = tmp_path_factory.mktemp("http")
     served = folder / "served.db"
     shutil.copy(tiered_db, served)
+    # and the fast plan's index, which the ingest wrote next to it (a copy is the same file)
+    shutil.copy(ann_file_path(tiered_db, "full"), ann_file_path(served, "full"))
     client = folder / "client.db"
     with viewdb.open(tiered_db, create=False) as db:
         db.export_client(client)
@@ -111,12 +114,18 @@ def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files,
     with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
         for curve in _curves(full, rng, 24):
             k, band = int(rng.integers(1, 6)), int(rng.integers(0, 10))
-            for plan, cs2 in (("server", "shortlist"), ("cs1", "shortlist"), ("cs2", "shortlist"), ("cs2", "walk")):
+            for plan, cs2 in (("server", "shortlist"), ("cs1", "shortlist"), ("cs2", "shortlist"), ("cs2", "walk"),
+                              ("fast", "shortlist")):
                 shortlist = int(rng.integers(1, 8))
-                local = full.recognise(curve, k, band=band, plan=plan, client=client, cs2=cs2, shortlist=shortlist)
-                there = client.recognise(curve, k, band=band, plan=plan, server=remote, cs2=cs2, shortlist=shortlist)
+                local = full.recognise(curve, k, band=band, plan=plan, client=client, cs2=cs2, shortlist=shortlist,
+                                       fast_shortlist=shortlist)
+                there = client.recognise(curve, k, band=band, plan=plan, server=remote, cs2=cs2, shortlist=shortlist,
+                                         fast_shortlist=shortlist)
                 assert there.results == local.results, (plan, k, band)
-                if plan != "server":
+                if plan == "fast":  # the server's own index shortlisted
+                    assert there.server_stats["fast_index"] == 1.0
+                    assert there.server_stats["shortlisted"] == min(max(shortlist, k), len(full.objects()))
+                if plan not in ("server", "fast"):
                     assert there.client_results == local.client_results
                     assert there.bytes_sent > 0 and there.bytes_received > 0
 

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
+from viewdb.search.knn import brute_force_knn
 from viewdb.search.plans import Candidate, RefineRequest
 from viewdb.search.shifts import ShiftWindow
 from viewdb.shards.gather import scatter_gather, top_k
@@ -172,6 +173,28 @@ def test_sharded_search_equals_the_single_file_exactly(tiered_db, splits, seed, 
         single, _ = db.server_tier().refine(request)
     sharded = sharded_refine(splits[count][1], request, first)
     assert _rows(sharded.results) == _rows(single.results)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(COUNTS), st.integers(1, 4), st.integers(1, 7))
+def test_the_fast_plan_over_shards_reports_true_distances(tiered_db, splits, seed, count, k, shortlist):
+    """Each shard shortlists from its own index; every distance is the object's exact one,
+    and a shortlist of every object is the single file's exact answer."""
+    rng = np.random.default_rng(seed)
+    with viewdb.open(tiered_db, read_only=True) as db:
+        arrays, _ = db.search_tier("full")
+        q = np.clip(arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.03, 128), 0, None)
+        exact = {nb.object: nb.distance for nb in brute_force_knn(q, arrays, len(arrays.names), 6)}
+        single, _ = db.server_tier().refine(RefineRequest(q, 6, k, []))
+    sharded = sharded_refine(splits[count][1], RefineRequest(q, 6, k, [], fast=shortlist))
+    for c in sharded.results:
+        assert c.distance == pytest.approx(exact[c.object], abs=1e-9)
+    if shortlist >= len(arrays.names):
+        assert _rows(sharded.results) == _rows(single.results)
+    for s in splits[count][1]:  # each shard's own index, written by the split, answered
+        if s.versions:
+            reply = s.refine(RefineRequest(q, 6, k, [], fast=shortlist).to_dict(), np.inf)
+            assert reply["stats"]["fast_index"] == 1.0
 
 
 def test_later_rounds_are_pruned_by_the_first(tiered_db, splits):

@@ -246,7 +246,7 @@ def test_bad_input_gets_a_one_line_error_and_the_server_stays_up(server, demo_ph
         (post_photo(server.url, bad_files["notes"]), 422, "notes.txt: not an image file"),
         (post_photo(server.url, bad_files["wall"]), 422, "wall.png: no object found"),
         (post_photo(server.url, bad_files["huge"]), 413, "over this endpoint's limit of 300,000"),
-        (post_photo(server.url, demo_photo, plan="cs9"), 422, "plan must be server, cs1 or cs2"),
+        (post_photo(server.url, demo_photo, plan="cs9"), 422, "plan must be server, cs1, cs2 or fast"),
         (post_photo(server.url, demo_photo, k="0"), 422, "k must be between 1 and 10"),
         (post_photo(server.url, demo_photo, k="many"), 422, "k must be a whole number"),
         (request(server.url, "POST", "/query", b"{}", token=TOKEN), 422, "no photo"),

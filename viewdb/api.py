@@ -207,7 +207,8 @@ class ViewDB:
 
     def write_tier_files(self) -> None:
         """Write the tiers' search arrays next to the file, ready to map for the next fresh
-        process (:mod:`viewdb.storage.tier_file`); an ingest does it when it ends. A file
+        process (:mod:`viewdb.storage.tier_file`), and the ``fast`` plan's index
+        (:mod:`viewdb.storage.ann_file`); an ingest does it when it ends. A file
         written before index generations gets one first, which makes checking its tier
         files quick."""
         if not self.read_only:
@@ -251,6 +252,7 @@ class ViewDB:
         points: Sequence[str | Sequence[float] | Point] | None = None,
         every: bool = False,
         max_objects: int | None = None,
+        fast_shortlist: int | None = None,
     ) -> QueryResult:
         """Which k objects a photo (path or array) shows, and their poses
         (:mod:`viewdb.recognition.pipeline`).
@@ -258,7 +260,9 @@ class ViewDB:
         The object is segmented (alpha channel, ``mask``, ``label_map`` + ``label``, or
         automatically from the background); its silhouette, also turned in the image plane
         by ``rotations`` evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``,
-        ``cs2``; the client half runs on ``client``, default this file); a photo with colour
+        ``cs2``, ``fast``; the client half runs on ``client``, default this file; ``fast``
+        searches exactly the ``fast_shortlist`` objects its approximate index finds,
+        default :attr:`~viewdb.config.RecognitionConfig.fast_shortlist`); a photo with colour
         re-ranks the plan's best objects by colour (``colour``), and all by how well each
         matched view fits the photo's shape (``verify``; ``colour=False, verify=False``
         ranks by outline alone, as the paper does); the best ``pose_top`` (default the top one; None: all k)
@@ -285,9 +289,12 @@ class ViewDB:
         server; the answer is the one the full file gives locally.
         """
         if options is None:
+            recognition = (RecognitionConfig() if fast_shortlist is None
+                           else RecognitionConfig(fast_shortlist=fast_shortlist))
             options = QueryOptions(k=k, plan=plan, band=band, rotations=rotations, pose=pose,
                                    pose_top=pose_top, intrinsics=intrinsics, rerank=rerank,
-                                   colour=colour, verify=verify, shifts=shifts, roll=roll)
+                                   colour=colour, verify=verify, shifts=shifts, roll=roll,
+                                   recognition=recognition)
         prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
         result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
@@ -312,10 +319,12 @@ class ViewDB:
         client: ViewDB | None = None, server: ServerTier | None = None,
         prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
         cs2: str = RecognitionConfig().cs2, shortlist: int = RecognitionConfig().cs2_shortlist,
+        fast_shortlist: int = RecognitionConfig().fast_shortlist,
     ) -> Recognition:
-        """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``;
-        :mod:`viewdb.recognition.retrieval`; ``cs2`` searches the client's ``shortlist`` or
-        walks, as :attr:`~viewdb.config.RecognitionConfig.cs2`).
+        """The k objects a distance curve shows, by ``plan`` (``server``, ``cs1``, ``cs2``,
+        ``fast``; :mod:`viewdb.recognition.retrieval`; ``cs2`` searches the client's
+        ``shortlist`` or walks, as :attr:`~viewdb.config.RecognitionConfig.cs2`; ``fast``
+        the ``fast_shortlist`` objects its approximate index finds, exactly).
 
         ``client`` is the file the client half runs on (a client file from
         :meth:`export_client`, or any full file); default this file. With ``server`` (e.g.
@@ -331,7 +340,7 @@ class ViewDB:
         """
         q = self._catalogue.query_curve(curve, k, "full" if server is None else "sparse")
         return recognise_curve(q, k, band, plan, *self._tiers(plan, client, server), prior, shifts,
-                               cs2=cs2, shortlist=shortlist)
+                               cs2=cs2, shortlist=shortlist, fast_shortlist=fast_shortlist)
 
     def _tiers(
         self, plan: str, client: ViewDB | None, server: ServerTier | None
@@ -343,7 +352,8 @@ class ViewDB:
                 raise QueryError("give either a client file or a server, not both")
             return server, ClientTier(self._catalogue)
         side = self if client is None else client
-        return LocalServerTier(self._catalogue, count_bytes=plan != "server"), ClientTier(side._catalogue)
+        return (LocalServerTier(self._catalogue, count_bytes=plan not in ("server", "fast")),
+                ClientTier(side._catalogue))
 
     def server_tier(self) -> LocalServerTier:
         """This full file as a server tier (what ``viewdb serve`` answers from): the server

@@ -806,6 +806,62 @@ class RayIngestConfig:
 
 
 @dataclass(frozen=True)
+class FastConfig:
+    """The ``fast`` plan (:mod:`viewdb.search.fast`): a shortlist of objects from an
+    approximate nearest-neighbour index over a turn-invariant embedding of every stored
+    view, searched exactly. The first four settings make the index file (a file made with
+    others is rebuilt); the rest are query-time."""
+
+    #: DFT magnitudes kept per curve (coefficients 1..m; :mod:`viewdb.search.embedding`).
+    coefficients: int = 16
+    #: The HNSW graph's edges per node (USearch's ``connectivity``).
+    connectivity: int = 16
+    #: Candidates kept while a node is inserted (USearch's ``expansion_add``): 32 built
+    #: the 60-object file's index (145,164 views) in 1.8 s against 6.8 s at 64, with 98.4
+    #: against 99.5 % of a query's 160 nearest views found.
+    expansion_add: int = 32
+    #: Threads that build the index at ingest (0: every core).
+    build_threads: int = 0
+    #: Candidates kept while the graph is searched (USearch's ``expansion_search``; at
+    #: least the views asked for).
+    expansion_search: int = 64
+    #: Views asked of the index per shortlisted object and query: enough that the nearest
+    #: views name ``shortlist`` distinct objects (asked again, for twice as many, otherwise).
+    views_per_object: int = 8
+    #: The query's curves (its in-plane turns) whose embeddings lie within this distance
+    #: of each other ask the index once, by their mean: a photo's 12 turns embed alike
+    #: (0.009 apart at the median, 0.024 at most, on 80 synthetic photos) and their mean
+    #: shortlists as well as each turn on its own, at one twelfth of the asking.
+    merge_radius: float = 0.03
+    #: A shortlist the index would need more than this share of its views for (most of a
+    #: small catalogue's objects) is ranked exactly instead: every view's embedding
+    #: compared, which then costs less than the graph search.
+    exact_share: float = 0.02
+    #: Objects shortlisted (the knob; :attr:`RecognitionConfig.fast_shortlist` is the
+    #: query's default).
+    shortlist: int = 20
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.coefficients <= 64:
+            raise ValueError(f"coefficients must be in [1, 64], got {self.coefficients}")
+        if not 2 <= self.connectivity <= 256:
+            raise ValueError(f"connectivity must be in [2, 256], got {self.connectivity}")
+        if not 0.0 <= self.exact_share <= 1.0:
+            raise ValueError(f"exact_share must be in [0, 1], got {self.exact_share}")
+        if not self.merge_radius >= 0:
+            raise ValueError(f"merge_radius must be at least 0, got {self.merge_radius}")
+        for name in ("expansion_add", "expansion_search", "views_per_object", "shortlist"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.build_threads < 0:
+            raise ValueError(f"build_threads must be at least 0, got {self.build_threads}")
+
+    def index_key(self) -> str:
+        """What makes an index file: a file made with other settings is not used."""
+        return f"dft{self.coefficients}-m{self.connectivity}-ef{self.expansion_add}"
+
+
+@dataclass(frozen=True)
 class RecognitionConfig:
     """Tunables of the query pipeline (:mod:`viewdb.recognition.pipeline`)."""
 
@@ -843,8 +899,13 @@ class RecognitionConfig:
     #: photo's object ranks lower there than on the full tier
     #: (docs/results/synthetic-photos.md#cs2).
     cs2_shortlist: int = 100
+    #: The ``fast`` plan's shortlist: objects its approximate index finds, searched exactly
+    #: (at least k; :mod:`viewdb.search.fast`, docs/fast-plan.md).
+    fast_shortlist: int = FastConfig().shortlist
 
     def __post_init__(self) -> None:
+        if not 1 <= self.fast_shortlist <= 100_000:
+            raise ValueError(f"fast_shortlist must be in [1, 100000], got {self.fast_shortlist}")
         if self.cs2 not in CS2_SEARCHES:
             raise ValueError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {self.cs2!r}")
         if not 1 <= self.cs2_shortlist <= 100:

@@ -98,7 +98,7 @@ def warm_up(progress: Callable[[str], None] | None = None) -> KernelReport:
             view = db.render("warm_l", 37.0, 22.0)
             photo = np.full((*view.mask.shape, 3), 200, np.uint8)
             photo[view.mask] = view.color[view.mask]
-            for plan in ("server", "cs1", "cs2"):
+            for plan in ("server", "cs1", "cs2", "fast"):
                 for pose in (False, True):
                     say(f"querying (plan {plan}, {'with' if pose else 'without'} pose)")
                     db.query(photo, plan=plan, pose=pose, k=2)

@@ -5,7 +5,9 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 
 ``POST /refine``  CS1's server half (Algorithm 3); with no client candidates, the
                   ``server`` plan's exact k-NN; with ``shortlist``, CS2's (the exact
-                  k-NN over the client's shortlisted objects)
+                  k-NN over the client's shortlisted objects); with ``fast``, the
+                  ``fast`` plan's (the exact k-NN over the objects the server's
+                  approximate index shortlists)
 ``POST /walk``    CS2's server half by the paper's neighbour walk (Algorithm 4)
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)

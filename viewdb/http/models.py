@@ -96,7 +96,8 @@ class _CurveRequest(_Strict):
 class RefineRequestModel(_CurveRequest):
     """CS1: the query's distance curve (or a stack of curves) and the client's top-k on its
     sparse tier (an empty ``client`` list gives the ``server`` plan: exact k-NN on the full
-    tier). CS2: the same with ``shortlist``, the client's shortlist as ``client``."""
+    tier). CS2: the same with ``shortlist``, the client's shortlist as ``client``. The
+    ``fast`` plan: ``fast``, the size of the server's approximate shortlist."""
 
     curve: list[Sample] | None = Field(  # type: ignore[assignment]
         default=None, min_length=8,
@@ -113,6 +114,11 @@ class RefineRequestModel(_CurveRequest):
     shortlist: bool = Field(
         default=False, description="CS2: search only the objects the client candidates name "
                                    "(the answer is exact among them); absent or false: every object")
+    fast: int | None = Field(
+        default=None, ge=1, le=100_000,
+        description="the fast plan: search only this many objects, those the server's approximate "
+                    "index shortlists (the answer is exact among them; every distance a true one); "
+                    "absent: every object (not with shortlist)")
 
 
 class WalkRequestModel(_CurveRequest):
@@ -213,7 +219,7 @@ class WebQueryFormModel(BaseModel):
 
     photo: bytes = Field(description="the photo (any format the query accepts: JPEG, PNG, WebP, ...)",
                          json_schema_extra={"format": "binary"})
-    plan: str = Field(default="server", description="server, cs1 or cs2")
+    plan: str = Field(default="server", description="server, cs1, cs2 or fast")
     k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
     pose_top: int | None = Field(default=None, ge=0, description="how many of the best results to pose "
                                                                  "(default all k: the page shows each pose)")

@@ -67,7 +67,7 @@ Runner = Callable[[Callable[[ViewDB], T]], Awaitable[tuple[T, float]]]
 
 #: The page's files (package data).
 STATIC = Path(__file__).resolve().parent / "static"
-PLANS = ("server", "cs1", "cs2")
+PLANS = ("server", "cs1", "cs2", "fast")
 
 #: The page loads nothing from elsewhere and runs no inline script.
 _PAGE_HEADERS = {
@@ -304,7 +304,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
                 raise HTTPException(422, "no photo: send the image as the multipart form field 'photo'")
             plan = str(form.get("plan") or "server")
             if plan not in PLANS:
-                raise HTTPException(422, f"plan must be server, cs1 or cs2, got {plan[:40]!r}")
+                raise HTTPException(422, f"plan must be server, cs1, cs2 or fast, got {plan[:40]!r}")
             k = _int_field(form, "k", 3, 1, config.max_k)
             pose_top = _int_field(form, "pose_top", k, 0, config.max_k)
             prompts = _prompt_fields(form)

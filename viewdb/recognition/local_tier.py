@@ -87,7 +87,9 @@ class LocalServerTier:
         with self.catalogue.tier_reader().snapshot() as reader:
             # the versions tell which client candidates bound (none to tell without them)
             versions = reader.object_versions() if request.client else None
-            found, stats = refine(reader.tier("full"), replace(request, curve=q, curves=curves), versions)
+            index = reader.fast_index("full") if request.fast is not None else None
+            found, stats = refine(reader.tier("full"), replace(request, curve=q, curves=curves), versions,
+                                  fast_index=index)
             angles = reader.view_projections([n.view for n in found])
         return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None,
                                                     stacked=request.curves is not None),

@@ -29,7 +29,8 @@ class QueryOptions:
 
     #: How many objects the answer has.
     k: int = 5
-    #: ``server``, ``cs1`` (exact, client-bounded) or ``cs2`` (heuristic walk).
+    #: ``server``, ``cs1`` (exact, client-bounded), ``cs2`` (heuristic) or ``fast``
+    #: (approximate shortlist, exact distances; ``recognition.fast_shortlist``).
     plan: str = "server"
     #: Sakoe–Chiba band of the DTW distance, in samples. 5 ranks the 240 synthetic photos
     #: as well in less time but puts a real photo's sugar box third

@@ -199,7 +199,8 @@ def _search(
 
 def _cs2(options: QueryOptions) -> dict[str, Any]:
     """How the ``cs2`` plan searches (:func:`~viewdb.recognition.retrieval.recognise_curve`)."""
-    return {"cs2": options.recognition.cs2, "shortlist": options.recognition.cs2_shortlist}
+    return {"cs2": options.recognition.cs2, "shortlist": options.recognition.cs2_shortlist,
+            "fast_shortlist": options.recognition.fast_shortlist}
 
 
 def _stacked(shape: QueryShape, options: QueryOptions) -> bool:

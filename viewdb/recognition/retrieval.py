@@ -5,12 +5,14 @@ client tier's k-NN on its sparse tier bounds the server's exact refinement (Algo
 the same answer as ``server``). ``cs2`` (heuristic): the client's shortlist, its nearest
 ``shortlist`` objects on the sparse tier, bounds the server's exact search over those
 objects alone (``cs2="shortlist"``, the default), or the server walks the grid from the
-client's views (``cs2="walk"``, Algorithm 4). A query searches several curves (in-plane turns, a
-completed silhouette): ``server`` and ``cs1`` in one search over the stack of them (a
-``(T, N)`` curve: each view's distance is the smallest over the rows, each result's
-``curve_index`` the row that matched), or one search per curve, where :func:`merge` keeps
-each object's best and each search is bounded by the objects found so far (``prior``),
-which leaves the merged answer unchanged. Both give the same answer.
+client's views (``cs2="walk"``, Algorithm 4). ``fast`` (approximate): the server tier's
+exact search over the objects its approximate index shortlists
+(:mod:`viewdb.search.fast`). A query searches several curves (in-plane turns, a
+completed silhouette): ``server``, ``cs1`` and ``fast`` in one search over the stack of
+them (a ``(T, N)`` curve: each view's distance is the smallest over the rows, each
+result's ``curve_index`` the row that matched), or one search per curve, where
+:func:`merge` keeps each object's best and each search is bounded by the objects found
+so far (``prior``), which leaves the merged answer unchanged. Both give the same answer.
 """
 
 from __future__ import annotations
@@ -65,6 +67,7 @@ def recognise_curve(
     curve: NDArray[np.floating], k: int, band: int, plan: str, server: ServerTier,
     client: ClientTier | None, prior: Sequence[Candidate] = (), shifts: ShiftWindow | None = None,
     *, cs2: str = RecognitionConfig().cs2, shortlist: int = RecognitionConfig().cs2_shortlist,
+    fast_shortlist: int = RecognitionConfig().fast_shortlist,
 ) -> Recognition:
     """The k objects ``curve`` shows by ``plan`` (module doc). ``client`` runs the client
     half of ``cs1``/``cs2`` (unused by ``server``). ``prior``: the best objects already
@@ -75,12 +78,14 @@ def recognise_curve(
     the smallest distance over its rows.
 
     ``cs2``: how that plan's server half searches: ``"shortlist"``, exactly over the
-    client's nearest ``shortlist`` objects (and those of ``prior``), or ``"walk"``."""
+    client's nearest ``shortlist`` objects (and those of ``prior``), or ``"walk"``.
+    ``fast``: the server tier searches exactly the ``fast_shortlist`` objects its
+    approximate index finds (:mod:`viewdb.search.fast`); no client half."""
     if plan not in PLANS:
         raise QueryError(f"plan must be one of {', '.join(PLANS)}, got {plan!r}")
     if cs2 not in CS2_SEARCHES:
         raise QueryError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {cs2!r}")
-    if plan != "server" and client is None:
+    if plan not in ("server", "fast") and client is None:
         raise QueryError(f"the {plan} plan needs a client tier")
     q = np.asarray(curve, dtype=np.float64)
     walks = plan == "cs2" and cs2 == "walk"
@@ -89,15 +94,16 @@ def recognise_curve(
     listed = plan == "cs2" and not walks
     asked = max(k, min(shortlist, MAX_K)) if listed else k
     start = time.perf_counter()
-    mine = [] if client is None or plan == "server" else client.candidates(q, asked, band, shifts)
+    mine = [] if client is None or plan in ("server", "fast") else client.candidates(q, asked, band, shifts)
     client_ms = (time.perf_counter() - start) * 1e3
     if walks:
         assert client is not None
         reply, exchange = server.walk(WalkRequest(q, band, k, client.client_gap, mine))
     else:
         bounds = best_of(mine, prior, MAX_K if listed else k)
-        request = (RefineRequest.of_stack(q, band, k, bounds, listed) if q.ndim == 2
-                   else RefineRequest(q, band, k, bounds, shifts, shortlist=listed))
+        fast = max(fast_shortlist, k) if plan == "fast" else None
+        request = (RefineRequest.of_stack(q, band, k, bounds, listed, fast) if q.ndim == 2
+                   else RefineRequest(q, band, k, bounds, shifts, shortlist=listed, fast=fast))
         reply, exchange = server.refine(request)
     return Recognition(plan, reply.results, mine, client_ms, exchange.server_ms, reply.stats,
                        exchange.sent, exchange.received, max(exchange.wall_ms - exchange.server_ms, 0.0),

@@ -117,9 +117,12 @@ class SearchStats:
     dtw: int = 0
     expansions: int = 0
     seconds: float = 0.0
+    #: Further counters of a plan's own (the ``fast`` plan's shortlist), reported beside.
+    extra: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, float]:
-        return dict(self.__dict__)
+        out = {k: v for k, v in self.__dict__.items() if k != "extra"}
+        return {**out, **self.extra}
 
 
 @dataclass(frozen=True)

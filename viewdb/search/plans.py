@@ -1,6 +1,6 @@
 """Query plans and the narrow interface between a client and a server (paper III.B–III.D).
 
-Three plans answer "which k objects does this distance curve show":
+Four plans answer "which k objects does this distance curve show":
 
 ``server``
     Algorithm 2 on the full tier alone (the paper's S1/S4).
@@ -21,6 +21,13 @@ Three plans answer "which k objects does this distance curve show":
     keeps the best (:func:`walk`). Fewer distances computed; it may miss the best view
     or object.
 
+``fast``
+    Approximate: the server shortlists the objects whose views lie nearest the query in
+    a turn-invariant embedding, by an approximate nearest-neighbour index built at ingest
+    (``RefineRequest.fast``, the shortlist's size; :mod:`viewdb.search.fast`), and
+    searches those objects exactly. Every distance it reports is a view's exact one;
+    an object the index does not shortlist is missed.
+
 Everything a client sends or receives is a plain dataclass with ``to_dict``/``from_dict``
 (JSON-able), so putting HTTP between the halves is only transport.
 """
@@ -29,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,8 +46,9 @@ from ..catalogue.features import mirror_curve
 from ..config import LIMITS, SearchConfig, finite
 from ..errors import QueryError
 from .bounds import dtw
+from .fast import FastIndex, fast_knn
 from .knn import Neighbour, SearchStats, TierSource, knn, knn_stack
-from .shifts import ShiftWindow, shifted
+from .shifts import ShiftWindow, shifted, shifted_curves
 
 __all__ = [
     "MAX_CURVES",
@@ -54,7 +62,7 @@ __all__ = [
     "walk",
 ]
 
-PLANS = ("server", "cs1", "cs2")
+PLANS = ("server", "cs1", "cs2", "fast")
 
 
 def json_number(x: Any, what: str, low: float = -math.inf, high: float = math.inf) -> float:
@@ -202,6 +210,8 @@ MAX_SAMPLES = 4096
 #: Most curves a request's stack may hold (e.g. 12 in-plane turns of a silhouette and of
 #: its completed outline need 24).
 MAX_CURVES = 72
+#: Largest shortlist a ``fast`` request may ask for (objects).
+MAX_FAST = 100_000
 
 
 def _shifts(data: Any) -> ShiftWindow | None:
@@ -241,7 +251,11 @@ class RefineRequest:
     goes without ``shifts``.
 
     ``shortlist`` (CS2): the server searches only the objects the ``client`` candidates
-    name, and the answer is exact among them; without it, every object it holds (CS1)."""
+    name, and the answer is exact among them; without it, every object it holds (CS1).
+
+    ``fast`` (the ``fast`` plan): the server searches only the ``fast`` objects its
+    approximate index shortlists (:mod:`viewdb.search.fast`), exactly; on the wire
+    ``"fast": N``. A server that predates it ignores the key and answers exactly."""
 
     curve: NDArray[np.float64] = field(repr=False)
     band: int
@@ -250,21 +264,26 @@ class RefineRequest:
     shifts: ShiftWindow | None = None
     curves: NDArray[np.float64] | None = field(default=None, repr=False)
     shortlist: bool = False
+    fast: int | None = None
 
     def __post_init__(self) -> None:
         if self.curves is not None and self.shifts is not None:
             raise QueryError("a request searches either a stack of curves or shifts of one curve, not both")
+        if self.fast is not None and self.shortlist:
+            raise QueryError("a request is either a cs2 shortlist or fast, not both")
+        if self.fast is not None and not 1 <= self.fast <= MAX_FAST:
+            raise QueryError(f"fast must be in [1, {MAX_FAST}], got {self.fast}")
 
     @classmethod
     def of_stack(
         cls, curves: NDArray[np.floating], band: int, k: int, client: list[Candidate],
-        shortlist: bool = False,
+        shortlist: bool = False, fast: int | None = None,
     ) -> RefineRequest:
         """A request searching the smallest distance over the rows of ``curves``."""
         stack = np.ascontiguousarray(curves, dtype=np.float64)
         if stack.ndim != 2 or not 1 <= len(stack) <= MAX_CURVES:
             raise QueryError(f"a stack must hold 1 to {MAX_CURVES} curves, got shape {stack.shape}")
-        return cls(stack[0], band, k, client, curves=stack, shortlist=shortlist)
+        return cls(stack[0], band, k, client, curves=stack, shortlist=shortlist, fast=fast)
 
     @property
     def stack(self) -> NDArray[np.float64]:
@@ -281,6 +300,8 @@ class RefineRequest:
             out["shifts"] = self.shifts.to_dict()
         if self.shortlist:
             out["shortlist"] = True
+        if self.fast is not None:
+            out["fast"] = self.fast
         return out
 
     @classmethod
@@ -296,11 +317,16 @@ class RefineRequest:
             shortlist = data.get("shortlist", False)
             if not isinstance(shortlist, bool):
                 raise QueryError(f"shortlist must be true or false, got {shortlist!r}"[:120])
+            fast = data.get("fast")
+            if fast is not None:
+                fast = _int(fast, "fast", 1, MAX_FAST)
             if "curves" in data:
                 if shifts is not None:
                     raise QueryError("a request with curves must not have shifts")
-                return cls.of_stack(curves_from_json(data["curves"], samples), band, k, client, shortlist)
-            return cls(curve_from_json(data["curve"], samples), band, k, client, shifts, shortlist=shortlist)
+                stack = curves_from_json(data["curves"], samples)
+                return cls.of_stack(stack, band, k, client, shortlist, fast)
+            return cls(curve_from_json(data["curve"], samples), band, k, client, shifts, shortlist=shortlist,
+                       fast=fast)
         except KeyError as exc:
             raise QueryError(f"request lacks {exc.args[0]!r}") from exc
 
@@ -372,7 +398,7 @@ def usable_client(
 
 def refine(
     source: TierSource, request: RefineRequest, versions: Mapping[str, str] | None = None,
-    upper: float = math.inf,
+    upper: float = math.inf, fast_index: FastIndex | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """CS1's server half (Algorithm 3): exact k-NN on ``source`` (the full tier) bounded by
     the client's k-th distance and its per-object distances.
@@ -393,7 +419,11 @@ def refine(
 
     ``request.shortlist`` (CS2): only the objects the client candidates name are
     searched (whether or not their distances bound: a stale candidate's object is still
-    searched), and the answer is exact among them."""
+    searched), and the answer is exact among them.
+
+    ``request.fast`` (the ``fast`` plan): only the objects ``fast_index`` shortlists
+    (:func:`~viewdb.search.fast.fast_knn`), exactly; without an index (none valid for the
+    source), every object, exactly."""
     client = usable_client(request, lambda name: source.object_index(name) is not None, versions)
     if len(client) >= request.k:
         upper = min(upper, client[request.k - 1].distance)
@@ -402,6 +432,8 @@ def refine(
         index = source.object_index(c.object)
         if index is not None:
             known[index] = min(c.distance, known.get(index, math.inf))
+    if request.fast is not None:
+        return _fast(source, request, fast_index, upper, known)
     only = None
     if request.shortlist:
         only = np.zeros(source.n_objects, dtype=np.bool_)
@@ -414,6 +446,22 @@ def refine(
                          block=SearchConfig().stack_block, only=only)
     return knn(request.curve, source, request.k, request.band, upper=upper, known=known,
                shifts=request.shifts, only=only)
+
+
+def _fast(
+    source: TierSource, request: RefineRequest, index: FastIndex | None, upper: float,
+    known: Mapping[int, float],
+) -> tuple[list[Neighbour], SearchStats]:
+    """:func:`refine` of a ``fast`` request: the stack, or the shifts of the curve as a
+    stack (each result's ``shift`` then the start sample that matched)."""
+    assert request.fast is not None
+    if request.shifts is None:
+        return fast_knn(request.stack, source, index, request.k, request.band, request.fast,
+                        upper=upper, known=known)
+    starts = request.shifts.shifts(len(request.curve))
+    found, stats = fast_knn(shifted_curves(np.asarray(request.curve, np.float64), starts), source, index,
+                            request.k, request.band, request.fast, upper=upper, known=known)
+    return [replace(nb, shift=int(starts[nb.shift])) for nb in found], stats
 
 
 def next_gap(gap: float, server_gap: float) -> float:

@@ -129,7 +129,8 @@ def split_catalogue(
     progress: Callable[[int, int], None] | None = None,
 ) -> Manifest:
     """Split the full viewdb file ``source`` by object into ``shards`` files under ``out``
-    (which must not exist or be empty), with a manifest; ``progress(done, shards)``."""
+    (which must not exist or be empty), with a manifest, each with its tier files and
+    ``fast`` index; ``progress(done, shards)``."""
     source, out = Path(source), Path(out)
     if not 1 <= shards <= MAX_SHARDS:
         raise ViewDBError(f"--shards must be in [1, {MAX_SHARDS}], got {shards}")
@@ -144,6 +145,7 @@ def split_catalogue(
             keep = [n for n in names if shard_of(n, shards) == i]
             target = partial / shard_file(i)
             _write_shard(source, target, set(keep))
+            _write_derived(target)
             files.append(out / target.name)
             counts.append(len(keep))
             if progress is not None:
@@ -196,6 +198,15 @@ def _write_shard(source: Path, target: Path, keep: set[str]) -> None:
         raise
     finally:
         conn.close()
+
+
+def _write_derived(target: Path) -> None:
+    """The shard's tier files and its ``fast`` index, next to it, as an ingest ends
+    (a shard is opened read-only, and never writes them itself)."""
+    from ..api import open as open_db
+
+    with open_db(target, create=False) as db:
+        db.write_tier_files()
 
 
 def _rebuild_tier(conn: sqlite3.Connection, tier: str) -> None:

@@ -80,7 +80,8 @@ class Shard:
             source = reader.tier("full")
             if source.n_groups == 0:
                 return ServerReply([], {}).to_dict()
-            found, stats = refine(source, parsed, reader.object_versions(), upper)
+            index = reader.fast_index("full") if parsed.fast is not None else None
+            found, stats = refine(source, parsed, reader.object_versions(), upper, index)
             angles = reader.view_projections([n.view for n in found])
         return ServerReply(neighbours_to_candidates(found, angles, shifted=parsed.shifts is not None,
                                                     stacked=parsed.curves is not None),

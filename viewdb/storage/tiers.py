@@ -20,15 +20,17 @@ import stat
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import BuildConfig, SearchConfig
+from ..config import BuildConfig, FastConfig, SearchConfig
 from ..errors import QueryError, StorageError
 from ..search.bounds import paa_edges, paa_means, rounded32
+from ..search.fast import FastIndex
 from ..search.grouping import (
     DIMENSION,
     group_points,
@@ -37,6 +39,7 @@ from ..search.grouping import (
     tier_members,
 )
 from ..search.knn import QueryBoxes, TierArrays
+from .ann_file import open_fast_index
 from .codecs import decode_array, decode_many, encode_array, encode_quantised, quantised_blobs
 from .spatial import FourierIndex, raw_connection
 from .tier_file import map_tier_file, new_generation, tier_file_path, tier_key, write_tier_file
@@ -225,6 +228,8 @@ class StoredTier:
         self.tier = tier
         #: whether the arrays are a tier file's (else decoded from the groups)
         self.mapped = mapped is not None
+        #: the tier's key (:func:`~viewdb.storage.tier_file.tier_key`) when a reader opened it
+        self.key = ""
         self.index = FourierIndex.open(conn, tier)
         columns = _group_columns(conn, tier) if mapped is None else mapped
         self._ids = columns["ids"]
@@ -437,6 +442,8 @@ class TierReader:
             raise StorageError(f"cannot open for reading: {exc}", self.path) from exc
         self._lock = threading.Lock()
         self._tiers: dict[str, StoredTier] = {}
+        #: the ``fast`` indexes of the opened tiers (None: none valid, none written)
+        self._fast: dict[tuple[str, str], FastIndex | None] = {}
         self._version: int | None = None
         self._versions: dict[str, str] | None = None
         #: this process wrote the file since the last snapshot (:meth:`written`)
@@ -451,6 +458,7 @@ class TierReader:
         for tier in self._tiers.values():
             tier.close()
         self._tiers = {}
+        self._fast = {}
         self._versions = None
 
     @contextmanager
@@ -501,8 +509,11 @@ class TierReader:
         path, key = tier_file_path(self.path, name), tier_key(self.conn, name)
         mapped = map_tier_file(path, key, name)
         if mapped is not None:
-            return StoredTier(self.conn, name, mapped)
+            tier = StoredTier(self.conn, name, mapped)
+            tier.key = key
+            return tier
         tier = StoredTier(self.conn, name)
+        tier.key = key
         if self.write_files and tier.n_groups and not tier.quantised:
             try:
                 mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666
@@ -513,9 +524,28 @@ class TierReader:
 
     def write_tier_files(self) -> None:
         """Open every tier (inside :meth:`snapshot`), writing the files of those without a
-        valid one (``write_files`` readers only)."""
+        valid one (``write_files`` readers only), and the full tier's ``fast`` index
+        (:mod:`~viewdb.storage.ann_file`)."""
         for name in TIERS:
             self.tier(name)
+        self.fast_index("full")
+
+    def fast_index(self, name: str = "full", config: FastConfig | None = None) -> FastIndex | None:
+        """The ``fast`` plan's index of tier ``name`` (inside :meth:`snapshot`): its file's
+        if valid for this version of the database; else built (and its file written) by a
+        reader that writes files; else None, and the plan searches exactly. None too for
+        an empty tier or quantised curves (a client file)."""
+        config = config or FastConfig()
+        slot = (name, config.index_key())
+        if slot not in self._fast:
+            tier = self.tier(name)
+            index = None
+            if tier.n_groups and not tier.quantised:
+                mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666 if self.write_files else 0o644
+                index = open_fast_index(tier, self.path, name, tier.key, config, self.write_files, mode)
+            self._fast[slot] = index
+        found = self._fast[slot]
+        return None if found is None else replace(found, config=config)
 
     def view_angles(self, view_ids: Sequence[int]) -> dict[int, tuple[float, float]]:
         """``view id -> (azimuth, elevation)`` (inside :meth:`snapshot`); a perspective

@@ -1,0 +1,175 @@
+"""The ``fast`` plan's search: an approximate shortlist of objects, then the exact search
+over them.
+
+1. Each query curve's turn- and mirror-free embedding (:mod:`viewdb.search.embedding`) asks
+   the tier's approximate index (:class:`~viewdb.search.ann.ViewIndex`, keyed by row) for
+   its nearest views; each object is ranked by its nearest view over every query curve,
+   and the first ``shortlist`` objects are kept (:func:`shortlist_objects`).
+2. Those objects alone are searched exactly (:func:`~viewdb.search.knn.knn_stack` over a
+   :class:`~viewdb.search.subset.SubsetSource`): the answer is exactly the brute force
+   over the shortlisted objects, each with its best view and its exact DTW distance.
+
+So every distance reported is a true one, and only the shortlist is approximate: when the
+exact answer's k objects are all shortlisted the answer *is* the exact one, and a
+shortlist of every object gives the ``server`` plan's answer (tests hold both). A search
+without an index (none built, a stale one) is the exact search of every object.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import FastConfig, SearchConfig
+from .ann import ViewIndex
+from .embedding import embed_curves
+from .knn import Neighbour, SearchStats, TierSource, knn_stack
+from .subset import SubsetSource, groups_by_object
+
+__all__ = ["FastIndex", "build_fast_index", "embed_all", "fast_knn", "merged_queries", "rank_exactly",
+           "shortlist_objects"]
+
+
+@dataclass(frozen=True)
+class FastIndex:
+    """A tier's approximate index with what the ``fast`` search needs beside it: the
+    object of each key (the tier's ``row_owner``) and the groups of each object
+    (:func:`~viewdb.search.subset.groups_by_object`), and the settings it is asked with."""
+
+    index: ViewIndex
+    row_owner: NDArray[np.int64]
+    by_object: tuple[NDArray[np.int64], NDArray[np.int64]]
+    config: FastConfig
+    #: every view's embedding, in row order, and the rows ordered by object (computed on
+    #: first need: :func:`rank_exactly`), shared by the copies :meth:`dataclasses.replace` makes
+    cache: dict[str, NDArray] = field(default_factory=dict, compare=False, repr=False)
+
+    def embeddings(
+        self, source: TierSource,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.int64]]:
+        """Every view's embedding (rows of ``source``), the rows ordered by object and where
+        each object's run starts in that order (``n_objects + 1`` entries)."""
+        if "vectors" not in self.cache:
+            self.cache["vectors"] = embed_all(source, self.config.coefficients)
+        if "order" not in self.cache:
+            order = np.argsort(self.row_owner, kind="stable").astype(np.int64)
+            self.cache["order"] = order
+            self.cache["starts"] = np.searchsorted(self.row_owner[order], np.arange(source.n_objects + 1))
+        return self.cache["vectors"], self.cache["order"], self.cache["starts"]
+
+    @classmethod
+    def of(cls, index: ViewIndex, source: TierSource, config: FastConfig) -> FastIndex:
+        """``index`` of the rows of ``source``."""
+        if index.size != len(source.row_owner):
+            raise ValueError(f"the index holds {index.size} views, the source {len(source.row_owner)}")
+        return cls(index, np.asarray(source.row_owner, dtype=np.int64), groups_by_object(source), config)
+
+
+#: Curves embedded at a time while an index is built (bounds the memory beside the tier's).
+_EMBED_BLOCK = 65536
+
+
+def embed_all(source: TierSource, coefficients: int) -> NDArray[np.float32]:
+    """The embedding of every view of ``source``, in row order (every group read)."""
+    curves = source.rows(np.arange(source.n_groups, dtype=np.int64))[0]
+    rows = len(source.row_owner)
+    vectors = np.empty((rows, coefficients), dtype=np.float32)
+    for start in range(0, rows, _EMBED_BLOCK):
+        block = curves[start : start + _EMBED_BLOCK]
+        vectors[start : start + len(block)] = embed_curves(block, coefficients)
+    return vectors
+
+
+def build_fast_index(source: TierSource, config: FastConfig) -> FastIndex:
+    """The ``fast`` index of every view of ``source`` (its rows, every group read)."""
+    vectors = embed_all(source, config.coefficients)
+    index = ViewIndex.build(vectors, config.connectivity, config.expansion_add, config.build_threads)
+    built = FastIndex.of(index, source, config)
+    built.cache["vectors"] = vectors
+    return built
+
+
+def merged_queries(vectors: NDArray[np.float32], radius: float) -> NDArray[np.float32]:
+    """The query embeddings to ask the index with: the rows of ``vectors`` gathered greedily
+    (each joins the first gathering whose first row lies within ``radius``, else starts
+    one), each gathering by its mean (a photo's in-plane turns embed alike, its completed
+    outline elsewhere)."""
+    firsts: list[int] = []
+    members: list[list[int]] = []
+    for i, v in enumerate(vectors):
+        near = [j for j, f in enumerate(firsts) if float(np.sum((vectors[f] - v) ** 2)) <= radius * radius]
+        if near:
+            members[near[0]].append(i)
+        else:
+            firsts.append(i)
+            members.append([i])
+    return np.stack([vectors[m].mean(axis=0) for m in members]).astype(np.float32)
+
+
+def shortlist_objects(
+    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource,
+) -> tuple[NDArray[np.int64], int]:
+    """The ``size`` objects (indices of ``source``, best first) whose nearest indexed view is
+    nearest any of ``curves`` ``(T, N)`` in the embedding (the curves' embeddings merged,
+    :func:`merged_queries`), and how many views the index was asked for per query (0:
+    ranked exactly). The index is asked again, for twice as many, until its views name
+    ``size`` objects; past :attr:`~viewdb.config.FastConfig.exact_share` of its views
+    (a shortlist of most objects), every view is compared instead (:func:`rank_exactly`)."""
+    config = index.config
+    q = merged_queries(embed_curves(curves, config.coefficients), config.merge_radius)
+    size = min(size, source.n_objects)
+    count = max(size * config.views_per_object, 1)
+    while count <= max(config.exact_share * index.index.size, size * config.views_per_object):
+        keys, distances = index.index.nearest(q, count, config.expansion_search)
+        valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
+        owners = index.row_owner[keys[valid]]
+        order = np.argsort(distances[valid], kind="stable")
+        _, first = np.unique(owners[order], return_index=True)
+        ranked = owners[order][np.sort(first)]
+        if len(ranked) >= size or count >= index.index.size:
+            return ranked[:size].astype(np.int64), count
+        count = 2 * count
+    return rank_exactly(q, index, source)[:size], 0
+
+
+def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSource) -> NDArray[np.int64]:
+    """Every object of ``source`` that has views, by its nearest view's embedding to any of
+    ``queries``, nearest first (ties by object index)."""
+    vectors, order, starts = index.embeddings(source)
+    norms = np.einsum("ij,ij->i", vectors, vectors)
+    d = np.min(norms[None, :] - 2.0 * (queries @ vectors.T), axis=0)[order]
+    held = np.flatnonzero(starts[1:] > starts[:-1])
+    best = np.minimum.reduceat(d, starts[held]) if len(held) else np.zeros(0)
+    return held[np.argsort(best, kind="stable")].astype(np.int64)
+
+
+def fast_knn(
+    curves: NDArray[np.floating], source: TierSource, index: FastIndex | None, k: int, r: int,
+    shortlist: int, *, upper: float = math.inf, known: Mapping[int, float] | None = None,
+) -> tuple[list[Neighbour], SearchStats]:
+    """The k nearest objects to a stack of curves ``(T, N)`` among the ``shortlist``
+    objects ``index`` finds (module doc), exactly as :func:`~viewdb.search.knn.knn_stack`
+    over those objects; ``upper``/``known`` as there. Without ``index``, or with a
+    shortlist of every object, the exact search of every object. Returns the results,
+    with the exact search's counters and the shortlist's in ``stats.extra``
+    (``shortlisted``, ``ann_ms``, ``fast_index``: 1 if the index was used)."""
+    stack = np.ascontiguousarray(np.atleast_2d(curves), dtype=np.float64)
+    block = SearchConfig().stack_block
+    if index is None or shortlist >= source.n_objects:
+        found, stats = knn_stack(stack, source, k, r, upper=upper, known=known, block=block)
+        stats.extra.update(shortlisted=float(source.n_objects), fast_index=float(index is not None))
+        return found, stats
+    start = time.perf_counter()
+    objects, _ = shortlist_objects(stack, index, max(shortlist, k), source)
+    subset = SubsetSource(source, objects, index.by_object)
+    ann_ms = (time.perf_counter() - start) * 1e3
+    listed = set(objects.tolist())
+    bounds = {o: d for o, d in (known or {}).items() if o in listed}
+    found, stats = knn_stack(stack, subset, k, r, upper=upper, known=bounds, block=block)
+    stats.extra.update(shortlisted=float(len(objects)), ann_ms=ann_ms, fast_index=1.0)
+    return found, stats
