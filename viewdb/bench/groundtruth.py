@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from ..camera import GL_TO_CV
 from ..catalogue.gl import pyrender_module
+from ..catalogue.render import render_depth
 from ..pose.frames import rotation_angle
 
 __all__ = [
@@ -251,25 +252,25 @@ def visible_masks(frame: Frame) -> list[tuple[NDArray[np.bool_], NDArray[np.bool
     """Per instance of ``frame``: its whole mask and its visible part (not behind another
     annotated object's surface by more than a millimetre, and within the annotated box of
     its visible part, which accounts for the clutter that is not annotated), rendered
-    from the poses."""
+    from the poses through viewdb's own offscreen renderer (a square as wide as the
+    photo's longer side, cropped to the photo)."""
     pyrender = pyrender_module()
     fx, fy, cx, cy = frame.intrinsics
-    renderer = pyrender.OffscreenRenderer(frame.width, frame.height)
-    try:
-        depths = []
-        for inst in frame.instances:
-            model = load_model(inst.mesh)
-            scene = pyrender.Scene()
-            pose = np.eye(4)
-            pose[:3, :3] = GL_TO_CV @ inst.R
-            pose[:3, 3] = GL_TO_CV @ inst.t
-            mesh = pyrender.Mesh.from_trimesh(trimesh.Trimesh(model.vertices, model.faces, process=False))
-            scene.add(mesh, pose=pose)
-            scene.add(pyrender.IntrinsicsCamera(fx, fy, cx, cy, znear=0.01, zfar=100.0), pose=np.eye(4))
-            depth = renderer.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY)
-            depths.append(np.asarray(depth, np.float64))
-    finally:
-        renderer.delete()
+    side = max(frame.width, frame.height)
+    depths = []
+    for inst in frame.instances:
+        model = load_model(inst.mesh)
+        scene = pyrender.Scene()
+        pose = np.eye(4)
+        pose[:3, :3] = GL_TO_CV @ inst.R
+        pose[:3, 3] = GL_TO_CV @ inst.t
+        scene.add(pyrender.Mesh.from_trimesh(trimesh.Trimesh(model.vertices, model.faces, process=False)),
+                  pose=pose)
+        # the principal point as given: the masks then span BOP's boxes to the pixel
+        camera = pyrender.IntrinsicsCamera(fx, fy, cx, cy, znear=0.01, zfar=100.0)
+        scene.add(camera, pose=np.eye(4))
+        depth = render_depth(scene, side, inst.name)
+        depths.append(np.asarray(depth[:frame.height, :frame.width], np.float64))
     stack = np.stack([np.where(d > 0, d, np.inf) for d in depths])
     nearest = stack.min(axis=0)
     out = []
