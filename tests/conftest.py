@@ -29,6 +29,17 @@ def sample(stem: str) -> Path:
     raise FileNotFoundError(f"no sample model {stem!r} in {SAMPLES}")
 
 
+def copy_db(src: Path, dst: Path) -> Path:
+    """A copy of the SQLite file ``src`` at ``dst`` (SQLite's online backup), ``dst``."""
+    import sqlite3
+
+    a, b = sqlite3.connect(src), sqlite3.connect(dst)
+    a.backup(b)
+    a.close()
+    b.close()
+    return dst
+
+
 def sample_files() -> list[Path]:
     return sorted(p for p in SAMPLES.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
 

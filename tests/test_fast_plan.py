@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from tests.conftest import mixed_query_curves, sample
+from tests.conftest import copy_db, mixed_query_curves, sample
 from viewdb.catalogue.features import mirror_curve
 from viewdb.config import FastConfig, RecognitionConfig
 from viewdb.search.bounds import dtw
@@ -211,12 +211,7 @@ def test_a_fast_request_goes_over_the_wire_and_bad_ones_are_refused():
 # ---------------------------------------------------------------- the index file
 
 
-def _copy(src, dst):
-    a, b = sqlite3.connect(src), sqlite3.connect(dst)
-    a.backup(b)
-    a.close()
-    b.close()
-    return dst
+_copy = copy_db
 
 
 def _key(path, config=None):

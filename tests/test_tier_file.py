@@ -10,20 +10,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from tests.conftest import sample
+from tests.conftest import copy_db, sample
 from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.search.shifts import ShiftWindow
 from viewdb.storage.codecs import decode_array
 from viewdb.storage.tier_file import ARRAYS, map_tier_file, tier_file_path, tier_key
 from viewdb.storage.tiers import TIERS, StoredTier
 
-
-def _copy(src, dst):
-    a, b = sqlite3.connect(src), sqlite3.connect(dst)
-    a.backup(b)
-    a.close()
-    b.close()
-    return dst
+_copy = copy_db
 
 
 def _copy_with_tier_files(src, dst):

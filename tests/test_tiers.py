@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import viewdb
-from tests.conftest import sample
+from tests.conftest import copy_db, sample
 from viewdb.catalogue.describe import perspective_grid
 from viewdb.catalogue.features import distance_curve, mirror_curve
 from viewdb.search.knn import brute_force_knn
@@ -56,12 +56,7 @@ def test_full_tier_is_every_stored_view_and_sparse_the_client_grid(tiered_db):
                     assert np.sqrt(np.mean((rendered - target) ** 2)) < 0.05
 
 
-def _copy(src, dst):
-    a, b = sqlite3.connect(src), sqlite3.connect(dst)
-    a.backup(b)
-    a.close()
-    b.close()
-    return dst
+_copy = copy_db
 
 
 def test_replacing_and_adding_objects_keeps_the_r_trees_in_step(tiered_db, tmp_path):

@@ -29,6 +29,7 @@ from ..config import FastConfig
 from ..search.ann import ViewIndex
 from ..search.fast import FastIndex, build_fast_index
 from ..search.knn import TierSource
+from .tier_file import read_cache_header
 
 __all__ = ["ann_file_path", "map_ann_file", "open_fast_index", "write_ann_file"]
 
@@ -74,15 +75,13 @@ def map_ann_file(path: Path, key: str, tier: str, rows: int) -> ViewIndex | None
     (a read-only mapping of the file)."""
     try:
         with open(path, "rb") as f:
-            head = f.read(len(MAGIC) + _LENGTH.size)
-            if len(head) < len(MAGIC) + _LENGTH.size or head[: len(MAGIC)] != MAGIC:
+            read = read_cache_header(f, MAGIC, key, tier)
+            if read is None:
                 return None
-            (length,) = _LENGTH.unpack(head[len(MAGIC):])
-            header = json.loads(f.read(length))
-            if (header.get("key") != key or header.get("tier") != tier or header.get("rows") != rows
-                    or not isinstance(header.get("bytes"), int)):
+            header, start = read
+            if header.get("rows") != rows or not isinstance(header.get("bytes"), int):
                 return None
-            start, size = _start(length), int(header["bytes"])
+            size = int(header["bytes"])
             if size <= 0 or os.fstat(f.fileno()).st_size != start + size:
                 return None
             mapped = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)

@@ -40,6 +40,7 @@ import tempfile
 import uuid
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -139,20 +140,32 @@ def write_tier_file(
         raise
 
 
+def read_cache_header(f: BinaryIO, magic: bytes, key: str, tier: str) -> tuple[Any, int] | None:
+    """The JSON header of a cache file beside a database (a tier file, a ``fast``
+    index), read from ``f`` at its start: ``magic``, a little-endian u32 length, the
+    header; and where its payload starts (aligned to 64 bytes). None when the file is
+    not one, or was written for another ``key`` or ``tier``; ValueError when its header
+    is not JSON, AttributeError when it is not an object."""
+    head = f.read(len(magic) + _LENGTH.size)
+    if len(head) < len(magic) + _LENGTH.size or head[: len(magic)] != magic:
+        return None
+    (length,) = _LENGTH.unpack(head[len(magic):])
+    header = json.loads(f.read(length))
+    if header.get("key") != key or header.get("tier") != tier:
+        return None
+    return header, -(-(len(magic) + _LENGTH.size + length) // _ALIGN) * _ALIGN
+
+
 def map_tier_file(path: Path, key: str, tier: str) -> dict[str, NDArray] | None:
     """The arrays of the tier file at ``path`` if it exists, is whole and was written for
     ``key`` and ``tier``; else None. The arrays are a private (copy-on-write) mapping of
     the file: writable as NumPy arrays, never written back."""
     try:
         with open(path, "rb") as f:
-            head = f.read(len(MAGIC) + _LENGTH.size)
-            if len(head) < len(MAGIC) + _LENGTH.size or head[: len(MAGIC)] != MAGIC:
+            read = read_cache_header(f, MAGIC, key, tier)
+            if read is None:
                 return None
-            (length,) = _LENGTH.unpack(head[len(MAGIC):])
-            header = json.loads(f.read(length))
-            if header.get("key") != key or header.get("tier") != tier:
-                return None
-            start = -(-(len(MAGIC) + _LENGTH.size + length) // _ALIGN) * _ALIGN
+            header, start = read
             size = os.fstat(f.fileno()).st_size
             layout = header["arrays"]
             if set(layout) != set(ARRAYS):
@@ -162,7 +175,7 @@ def map_tier_file(path: Path, key: str, tier: str) -> dict[str, NDArray] | None:
             if max(ends, default=start) > size or size == 0:
                 return None
             mapped = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_COPY)
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
     out = {}
     for name, (dtype, shape, off) in layout.items():
