@@ -454,11 +454,11 @@ def colour_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int]) -> flo
     trace of their CIE Lab covariance after a blur of one pixel (``box_min_spread``)."""
     x1, y1, x2, y2 = box
     h, w = rgb.shape[:2]
-    pad = 3
-    crop = rgb[max(0, y1 - pad):min(h, y2 + pad), max(0, x1 - pad):min(w, x2 + pad)]
+    top, left = max(0, y1 - 3), max(0, x1 - 3)  # a margin for the blur
+    crop = rgb[top:min(h, y2 + 3), left:min(w, x2 + 3)]
     lab = cv2.GaussianBlur(cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_RGB2LAB).astype(np.float32),
                            (0, 0), 1.0)
-    inner = lab[y1 - max(0, y1 - pad):, x1 - max(0, x1 - pad):][:y2 - y1, :x2 - x1].reshape(-1, 3)
+    inner = lab[y1 - top:y2 - top, x1 - left:x2 - left].reshape(-1, 3)
     if len(inner) < 2:
         return 0.0
     return float(np.sqrt(max(0.0, float(np.trace(np.cov(inner.T))))))

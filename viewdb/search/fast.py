@@ -29,7 +29,7 @@ from ..config import FastConfig, SearchConfig
 from .ann import ViewIndex
 from .embedding import embed_curves
 from .knn import Neighbour, SearchStats, TierSource, knn_stack
-from .subset import SubsetSource, groups_by_object
+from .subset import SubsetSource, groups_by_object, runs_by_owner
 
 __all__ = ["FastIndex", "build_fast_index", "embed_all", "fast_knn", "merged_queries", "rank_exactly",
            "shortlist_objects"]
@@ -57,9 +57,7 @@ class FastIndex:
         if "vectors" not in self.cache:
             self.cache["vectors"] = embed_all(source, self.config.coefficients)
         if "order" not in self.cache:
-            order = np.argsort(self.row_owner, kind="stable").astype(np.int64)
-            self.cache["order"] = order
-            self.cache["starts"] = np.searchsorted(self.row_owner[order], np.arange(source.n_objects + 1))
+            self.cache["order"], self.cache["starts"] = runs_by_owner(self.row_owner, source.n_objects)
         return self.cache["vectors"], self.cache["order"], self.cache["starts"]
 
     @classmethod

@@ -21,16 +21,21 @@ from numpy.typing import NDArray
 
 from .knn import QueryBoxes, TierSource
 
-__all__ = ["SubsetSource", "groups_by_object"]
+__all__ = ["SubsetSource", "groups_by_object", "runs_by_owner"]
+
+
+def runs_by_owner(owner: NDArray[np.integer], n_objects: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The indices of ``owner`` ordered by their object (``order``) and where each object's
+    run starts in that order (``starts``, ``n_objects + 1`` entries): object ``o``'s
+    entries are ``order[starts[o]:starts[o + 1]]``, ascending."""
+    order = np.argsort(owner, kind="stable").astype(np.int64)
+    starts = np.searchsorted(np.asarray(owner)[order], np.arange(n_objects + 1)).astype(np.int64)
+    return order, starts
 
 
 def groups_by_object(source: TierSource) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """The source's groups ordered by their object (``order``) and where each object's
-    run starts in that order (``starts``, ``n_objects + 1`` entries): object ``o``'s groups
-    are ``order[starts[o]:starts[o + 1]]``, ascending."""
-    order = np.argsort(source.group_owner, kind="stable").astype(np.int64)
-    starts = np.searchsorted(source.group_owner[order], np.arange(source.n_objects + 1)).astype(np.int64)
-    return order, starts
+    """The source's groups by object (:func:`runs_by_owner` of ``group_owner``)."""
+    return runs_by_owner(source.group_owner, source.n_objects)
 
 
 class SubsetSource:

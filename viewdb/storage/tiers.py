@@ -508,19 +508,19 @@ class TierReader:
             raise ValueError(f"tier must be one of {', '.join(TIERS)}, got {name!r}")
         path, key = tier_file_path(self.path, name), tier_key(self.conn, name)
         mapped = map_tier_file(path, key, name)
-        if mapped is not None:
-            tier = StoredTier(self.conn, name, mapped)
-            tier.key = key
-            return tier
-        tier = StoredTier(self.conn, name)
+        tier = StoredTier(self.conn, name, mapped)
         tier.key = key
-        if self.write_files and tier.n_groups and not tier.quantised:
+        if mapped is None and self.write_files and tier.n_groups and not tier.quantised:
             try:
-                mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666
-                write_tier_file(path, key, name, tier.file_arrays(), mode)
+                write_tier_file(path, key, name, tier.file_arrays(), self._cache_mode())
             except OSError:
                 pass  # a folder this process may not write: the tier is read as before
         return tier
+
+    def _cache_mode(self) -> int:
+        """The permissions of the files written beside the database (tier files, ``fast``
+        indexes): its own, less any execute bit. Raises OSError if it cannot be read."""
+        return stat.S_IMODE(self.path.stat().st_mode) & 0o666
 
     def write_tier_files(self) -> None:
         """Open every tier (inside :meth:`snapshot`), writing the files of those without a
@@ -541,7 +541,7 @@ class TierReader:
             tier = self.tier(name)
             index = None
             if tier.n_groups and not tier.quantised:
-                mode = stat.S_IMODE(self.path.stat().st_mode) & 0o666 if self.write_files else 0o644
+                mode = self._cache_mode() if self.write_files else 0o644
                 index = open_fast_index(tier, self.path, name, tier.key, config, self.write_files, mode)
             self._fast[slot] = index
         found = self._fast[slot]
