@@ -92,8 +92,8 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .recognition.results import ObjectResult, QueryMatch, QueryResult
     from .recognition.retrieval import Recognition
     from .recognition.server_tier import Exchange, ServerTier
-    from .search.knn import SearchStats, TierArrays
     from .search.colour_index import ColourMatch
+    from .search.knn import SearchStats, TierArrays
     from .search.plans import Candidate
     from .search.shifts import ShiftWindow
     from .storage.catalogue import SearchHit
