@@ -187,3 +187,19 @@ def test_a_server_that_predates_the_channel_names_no_object():
     finally:
         httpd.shutdown()
         httpd.server_close()
+
+
+def test_a_catalogue_without_colour_takes_the_outline_s_deeper_path(tmp_path):
+    """No coloured mesh in the file: the channel names nothing, so a box in a photo with
+    colour is searched as deep as ``prompt_pool`` and re-ranked by shape fit."""
+    from tests.conftest import sample
+
+    path = tmp_path / "grey.db"
+    with viewdb.open(path, gap=60, image_size=96) as db:
+        assert not db.ingest([sample("l_bracket"), sample("box_long"), sample("cone")]).failed
+    with viewdb.open(path, read_only=True) as db:
+        assert len(db._catalogue.colour_index()) == 0
+        img, mask = composite_photo(db.render("l_bracket", 47, 22), turn=30, scale=0.8, background=190)
+        img[mask] = (200, 40, 30)  # a red part: a photo with colour
+        answer = db.query(img, boxes=[_box(mask)], k=2, pose=False).objects[0].results
+        assert all(m.shape_fit is not None for m in answer)

@@ -159,15 +159,16 @@ def test_a_box_prompted_object_without_colour_is_re_ranked_from_a_deeper_pool(sc
     assert shallow.results[0].object == deep.results[0].object == "mug"
 
 
-@pytest.mark.parametrize("prompted, colour, verify, k, expected", [
-    (True, True, True, 2, 5), (True, False, True, 2, 40), (False, True, True, 2, 5),
-    (True, False, False, 2, 2), (False, False, True, 7, 7), (True, True, False, 50, 50),
+@pytest.mark.parametrize("prompted, colour, channel, verify, k, expected", [
+    (True, True, True, True, 2, 5), (True, True, False, True, 2, 40), (True, False, False, True, 2, 40),
+    (False, True, False, True, 2, 5), (True, False, False, False, 2, 2), (False, False, False, True, 7, 7),
+    (True, True, True, False, 50, 50),
 ])
-def test_how_many_objects_the_plan_finds_before_the_re_rankings(prompted, colour, verify, k, expected):
+def test_how_many_objects_the_plan_finds_before_the_re_rankings(prompted, colour, channel, verify, k, expected):
     from viewdb.recognition.options import QueryOptions
     from viewdb.recognition.pipeline import pool_size
 
-    assert pool_size(QueryOptions(k=k, verify=verify), prompted, colour) == expected
+    assert pool_size(QueryOptions(k=k, verify=verify), prompted, colour, channel) == expected
 
 
 def test_overlapping_claims_go_to_the_smaller_object():

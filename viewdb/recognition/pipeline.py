@@ -41,6 +41,7 @@ from ..catalogue.features import distance_curve, sample_bearings
 from ..config import RecognitionConfig, SegmentationConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
+from ..search.colour_index import ColourMatch
 from ..search.plans import MAX_CURVES, Candidate, RefineRequest
 from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
@@ -286,22 +287,29 @@ def _search_objects(
     return merge(per_curve, k)
 
 
-def _by_colour_channel(
-    pooled: list[Pooled], shape: QueryShape, options: QueryOptions, server: ServerTier, traffic: _Traffic,
-) -> tuple[list[Pooled], Scores] | None:
-    """Stage 4 for an object cut from a prompt: the outline's pool and the colour
-    channel's objects (:mod:`viewdb.search.colour_index`), each searched exactly, ranked
-    by colour distance plus ``prompt_outline_weight`` × log(outline distance / the best
-    one's) (:attr:`~viewdb.config.RecognitionConfig.colour_pool`). An object whose mesh
-    has no colour counts ``uncoloured_distance``; a coloured one the channel did not
-    name, the larger of that and the channel's last distance. None when the catalogue
-    has no coloured object."""
-    recognition = options.recognition
+def _colour_matches(
+    shape: QueryShape, options: QueryOptions, server: ServerTier, traffic: _Traffic,
+) -> tuple[NDArray[np.float32], list[ColourMatch]]:
+    """The cut-out's colour signature and the colour channel's objects for it
+    (:attr:`~viewdb.config.RecognitionConfig.colour_pool`; none when the catalogue has
+    no coloured object, or the server predates the channel)."""
     query = colour_signature(shape.view.color, shape.view.mask)
-    matches, exchange = server.colour_ranking(query, recognition.colour_pool)
+    matches, exchange = server.colour_ranking(query, options.recognition.colour_pool)
     traffic.exchanged(exchange)
-    if not matches:
-        return None
+    return query, matches
+
+
+def _by_colour_channel(
+    pooled: list[Pooled], shape: QueryShape, options: QueryOptions, query: NDArray[np.float32],
+    matches: list[ColourMatch], server: ServerTier, traffic: _Traffic,
+) -> tuple[list[Pooled], Scores]:
+    """Stage 4 for an object cut from a prompt: the outline's pool and the colour
+    channel's ``matches`` (:mod:`viewdb.search.colour_index`) for its signature
+    ``query``, each searched exactly, ranked by colour distance plus
+    ``prompt_outline_weight`` × log(outline distance / the best one's). An object whose
+    mesh has no colour counts ``uncoloured_distance``; a coloured one the channel did not
+    name, the larger of that and the channel's last distance."""
+    recognition = options.recognition
     pooled = pooled + _search_objects(shape, options, [m.object for m in matches
                                                        if m.object not in {c.object for c, _ in pooled}],
                                       server, traffic)
@@ -373,16 +381,15 @@ def _matches(
     return [replace(m, rank=i) for i, m in enumerate(matches, 1)]
 
 
-def pool_size(options: QueryOptions, prompted: bool, recolour: bool) -> int:
+def pool_size(options: QueryOptions, prompted: bool, recolour: bool, channel: bool = False) -> int:
     """How many objects the plan finds before the re-rankings keep the best k: k when
     nothing re-ranks them, else at least ``recognition.pool``, or
     ``recognition.prompt_pool`` for an object cut from a prompt that the colour channel
-    does not rank (:func:`_colour_channel`)."""
+    does not rank (``channel``: it does, :func:`_by_colour_channel`)."""
     if not (recolour or options.verify):
         return options.k
     recognition = options.recognition
-    deeper = prompted and not _colour_channel(options, prompted, recolour)
-    return max(options.k, recognition.prompt_pool if deeper else recognition.pool)
+    return max(options.k, recognition.prompt_pool if prompted and not channel else recognition.pool)
 
 
 def _colour_channel(options: QueryOptions, prompted: bool, recolour: bool) -> bool:
@@ -397,29 +404,35 @@ def _recognise(
 ) -> tuple[list[QueryMatch], dict[str, float]]:
     """Stages 3–5 for one segmented object: its matches and each stage's time (ms).
     ``prompted``: the object was cut from a prompt (a box, a point), so its outline is
-    less sure and the pool is deeper (``recognition.prompt_pool``)."""
+    less sure: in a photo with colour it is ranked by its colours first (the colour
+    channel, :func:`_by_colour_channel`), else the pool is deeper
+    (``recognition.prompt_pool``)."""
     start = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
-    pool = pool_size(options, prompted, recolour)
+    query, named = (_colour_matches(shape, options, server, traffic)
+                    if _colour_channel(options, prompted, recolour) else (None, []))
+    asked = time.perf_counter()
+    pool = pool_size(options, prompted, recolour, channel=bool(named))
     ranked, client_ms, server_ms = _search(shape, options, pool, server, client, traffic)
     searched = time.perf_counter()
     colours: Scores = {}
-    channel = (_by_colour_channel(ranked, shape, options, server, traffic)
-               if ranked and _colour_channel(options, prompted, recolour) else None)
-    if channel is not None:
-        ranked, colours = channel
+    channel = bool(named) and bool(ranked)
+    if channel:
+        assert query is not None
+        ranked, colours = _by_colour_channel(ranked, shape, options, query, named, server, traffic)
     elif recolour and ranked:
         ranked, colours = _by_colour(ranked, shape, server, traffic)
     coloured = time.perf_counter()
     fitted: Scores = {}
-    if options.verify and len(ranked) > 1 and channel is None:
+    if options.verify and len(ranked) > 1 and not channel:
         ranked, fitted = _by_fit(ranked, shape, colours, server, traffic)
     ranked = ranked[:options.k]
     recognised = time.perf_counter()
     poses = _pose(ranked, shape, options, server, traffic)
     matches = _matches(ranked, poses, colours, fitted, options.rerank_by_iou)
     end = time.perf_counter()
-    return matches, {"client": client_ms, "server": server_ms, "colour": (coloured - searched) * 1e3,
+    colour_ms = (coloured - searched + asked - start) * 1e3
+    return matches, {"client": client_ms, "server": server_ms, "colour": colour_ms,
                      "verify": (recognised - coloured) * 1e3, "pose": (end - recognised) * 1e3,
                      "total": (end - start) * 1e3}
 

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import camera_direction, grid_views, normalise_angle
-from ..catalogue.appearance import Appearance, appearance_of, carries_colour, turned_view
+from ..catalogue.appearance import BINS, Appearance, appearance_of, carries_colour, turned_view
 from ..catalogue.describe import describe_view
 from ..catalogue.features import mirror_curve
 from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
@@ -160,8 +160,8 @@ class StoredCatalogue:
                         names.append(name)
                         views.append((azimuth, elevation))
                         signatures.append(signature)
-            self._colour_index = ColourIndex(names, np.asarray(views, np.float64).reshape(-1, 2),
-                                             np.asarray(signatures, np.float64).reshape(len(names), -1))
+            rows = np.asarray(signatures, np.float64).reshape(len(names), BINS * BINS)
+            self._colour_index = ColourIndex(names, np.asarray(views, np.float64).reshape(-1, 2), rows)
         return self._colour_index
 
     def derived(self, kind: str, key: tuple[Any, ...], make: Callable[[], _V], limit: int) -> _V:
