@@ -97,8 +97,14 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .storage.catalogue import SearchHit
     from .storage.integrity import CheckReport
 
+    __version__: str
+
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # the installed distribution's, as pyproject.toml gives it
+        from importlib.metadata import version
+
+        return version("viewdb")
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'viewdb' has no attribute {name!r}")
@@ -110,8 +116,6 @@ def __getattr__(name: str) -> Any:
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
 
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Appearance",

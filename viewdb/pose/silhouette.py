@@ -51,7 +51,7 @@ from ..catalogue.coverage import MeshTriangles, overlap, overlap_kernel
 from ..catalogue.pinhole import Window
 from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
-from ..search.jit import njit
+from ..jit import njit
 from ..typed import Intrinsics
 from .frames import GL_TO_CV, view_rotation
 from .shape_pose import align_shape, outline_of

@@ -70,7 +70,7 @@ from numpy.typing import NDArray
 from ..errors import QueryError
 from .bounds import envelope_box, fourier_coordinates, outward32, paa_edges
 from .grouping import INDEXED_COEFFICIENTS, indexed_rows
-from .jit import njit
+from ..jit import njit
 
 __all__ = ["CurveQuery", "ShiftWindow", "shift_turn", "shifted", "shifted_curves", "turn_window"]
 

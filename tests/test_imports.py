@@ -1,15 +1,11 @@
-"""The package's shape: no import cycles among viewdb's modules, and a public surface
-(``viewdb.__all__``) that is sorted and names every viewdb type a public method returns."""
+"""viewdb's imports: no cycles among its modules, and every import keeps to the floors that
+``docs/architecture.md`` draws (a module imports from its own floor and those below)."""
 
 from __future__ import annotations
 
 import ast
-import inspect
-import types
-import typing
+import re
 from pathlib import Path
-
-import pytest
 
 import viewdb
 
@@ -114,59 +110,56 @@ def test_no_import_cycle_among_viewdb_modules():
     assert _cycles(_graph()) == []
 
 
-def test_all_is_sorted_and_names_exist():
-    assert viewdb.__all__ == sorted(viewdb.__all__)
-    assert len(set(viewdb.__all__)) == len(viewdb.__all__)
-    for name in viewdb.__all__:
-        assert hasattr(viewdb, name), name
+ARCHITECTURE = ROOT.parent / "docs" / "architecture.md"
+FLOOR_LINE = re.compile(r"^\d+\. (.+)$")
 
 
-def _viewdb_types(hint: object) -> set[type]:
-    """The viewdb classes a type hint mentions (through unions, lists, tuples, dicts)."""
-    out: set[type] = set()
-    if isinstance(hint, type) and hint.__module__.startswith("viewdb"):
-        out.add(hint)
-    for arg in typing.get_args(hint):
-        out |= _viewdb_types(arg)
-    return out
+def _floors(text: str) -> dict[str, int]:
+    """Each unit of ``viewdb`` (a subpackage, a top-level module, or ``__init__``) and its
+    floor, from the numbered list under the ``## Floors`` heading of the architecture page."""
+    section = text.split("## Floors", 1)[1].split("\n## ", 1)[0]
+    floors: dict[str, int] = {}
+    level = 0
+    for line in section.splitlines():
+        match = FLOOR_LINE.match(line.strip())
+        if match:
+            floors.update(dict.fromkeys(re.findall(r"`([^`]+)`", match.group(1)), level))
+            level += 1
+    return floors
 
 
-def _public_callables() -> list[tuple[str, object]]:
-    found: list[tuple[str, object]] = []
-    for name in viewdb.__all__:
-        obj = getattr(viewdb, name)
-        if isinstance(obj, types.FunctionType):
-            found.append((name, obj))
-        elif isinstance(obj, type) and obj.__module__.startswith("viewdb"):
-            for attr, member in vars(obj).items():
-                if attr.startswith("_") and attr != "__call__":
-                    continue
-                if isinstance(member, property):
-                    member = member.fget
-                if isinstance(member, (types.FunctionType, classmethod, staticmethod)):
-                    found.append((f"{name}.{attr}", getattr(member, "__func__", member)))
-    return found
+def _unit(module: str) -> str:
+    """``viewdb.search.knn`` -> ``search``; ``viewdb.api`` -> ``api``; ``viewdb`` -> ``__init__``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
 
 
-@pytest.mark.parametrize("qualname,func", _public_callables(), ids=lambda x: x if isinstance(x, str) else "")
-def test_every_viewdb_type_a_public_callable_returns_is_exported(qualname, func):
-    module = inspect.getmodule(func)
-    namespace = dict(vars(module)) if module else {}
-    try:
-        hints = typing.get_type_hints(func, globalns=namespace)
-    except NameError as exc:  # an annotation that names an import under TYPE_CHECKING
-        pytest.fail(f"{qualname}: cannot resolve its return annotation ({exc})")
-    import viewdb.http
-
-    exported = set(viewdb.__all__) | set(viewdb.http.__all__)  # wire messages live under viewdb.http
-    missing = {t.__name__ for t in _viewdb_types(hints.get("return"))} - exported
-    assert not missing, f"{qualname} returns {sorted(missing)}, which viewdb.__all__ lacks"
+def _climbing(graph: dict[str, set[str]], floors: dict[str, int]) -> list[str]:
+    """Every import in ``graph`` that reaches a floor above its own module's."""
+    return sorted(f"{a} -> {b}" for a, targets in graph.items() for b in targets
+                  if floors[_unit(b)] > floors[_unit(a)])
 
 
-def test_the_plans_wire_messages_live_under_viewdb_http():
-    import viewdb.http
+def test_the_floors_are_read_from_the_page_in_order():
+    floors = _floors("intro\n## Floors\n\ntext `x`\n\n1. `a`, `b`\n2. `c`\n3. `d`\n\n## Next\n4. `e`\n")
+    assert floors == {"a": 0, "b": 0, "c": 1, "d": 2}
 
-    for name in ("RefineRequest", "WalkRequest", "ServerReply", "PoseRequest", "RemoteServer"):
-        assert name in viewdb.http.__all__
-    for name in ("RefineRequest", "WalkRequest", "ServerReply", "PoseRequest"):
-        assert name not in viewdb.__all__
+
+def test_an_import_that_climbs_a_floor_is_found():
+    floors = {"errors": 0, "search": 1, "api": 2, "__init__": 3}
+    graph = {"viewdb.search.knn": {"viewdb.errors", "viewdb.search.bounds", "viewdb.api"},
+             "viewdb.api": {"viewdb.search.knn"}, "viewdb.errors": set(), "viewdb": {"viewdb.api"}}
+    assert _climbing(graph, floors) == ["viewdb.search.knn -> viewdb.api"]
+
+
+def test_every_unit_of_the_package_has_a_floor_on_the_page():
+    floors = _floors(ARCHITECTURE.read_text(encoding="utf-8"))
+    units = {_unit(m) for m in _graph()}
+    assert units == set(floors), (f"not on the page: {sorted(units - set(floors))}; "
+                                  f"on the page but not in viewdb/: {sorted(set(floors) - units)}")
+
+
+def test_no_import_climbs_above_its_floor():
+    floors = _floors(ARCHITECTURE.read_text(encoding="utf-8"))
+    offenders = _climbing(_graph(), floors)
+    assert not offenders, "imports above their floor (docs/architecture.md, Floors):\n" + "\n".join(offenders)
