@@ -163,3 +163,33 @@ def test_no_import_climbs_above_its_floor():
     floors = _floors(ARCHITECTURE.read_text(encoding="utf-8"))
     offenders = _climbing(_graph(), floors)
     assert not offenders, "imports above their floor (docs/architecture.md, Floors):\n" + "\n".join(offenders)
+
+
+BENCHMARKS = ROOT.parent / "benchmarks"
+
+
+def _leans_on_tests(source: str) -> list[str]:
+    """What in a benchmark's ``source`` reaches into the tests or edits ``sys.path``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [f"import {a.name}" for a in node.names if a.name.split(".")[0] == "tests"]
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "tests":
+            found.append(f"from {node.module} import ...")
+        elif (isinstance(node, ast.Attribute) and node.attr == "path" and isinstance(node.value, ast.Name)
+              and node.value.id == "sys"):
+            found.append(f"line {node.lineno}: sys.path")
+    return found
+
+
+def test_the_benchmark_scan_finds_test_imports_and_path_edits():
+    source = "import sys\nsys.path.insert(0, '..')\nfrom tests.serving import X\nimport tests.conftest\nimport os\n"
+    assert sorted(_leans_on_tests(source)) == ["from tests.serving import ...", "import tests.conftest",
+                                               "line 2: sys.path"]
+    assert _leans_on_tests("from support.serving import ServerProcess\nimport sys\nsys.argv\n") == []
+
+
+def test_benchmarks_stand_on_their_own():
+    offenders = {str(p.relative_to(BENCHMARKS)): found for p in sorted(BENCHMARKS.rglob("*.py"))
+                 if (found := _leans_on_tests(p.read_text(encoding="utf-8")))}
+    assert not offenders, f"benchmarks that lean on tests/ or edit sys.path: {offenders}"
