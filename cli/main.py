@@ -233,7 +233,7 @@ def ingest(
             bar.update(task, total=p.views_total, completed=p.views_done,
                        description=f"ingest {p.files_done}/{p.files_total} files{rate}")
             if p.outcome is not None and p.outcome.status == "failed":
-                _say(f"viewdb: {p.outcome.error}", err)
+                _say(f"viewdb: {as_flags(str(p.outcome.error))}", err)
 
         report = target.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
                                max_faces=max_faces or None,
@@ -871,6 +871,41 @@ def bench(
     _say("wrote " + ", ".join(str(p) for p in run.files.values()))
 
 
+#: How the library's errors name a Python parameter (in backticks), and what the command
+#: line user typed instead; the longer forms first.
+PARAMETER_FLAGS = {
+    "(`read_only` False)": "(e.g. viewdb info --db FILE)",
+    "`allow_missing_textures`=True": "--allow-missing-textures",
+    "split_catalogue's `out`": "viewdb shard --out",
+    "`client_gap`": "--client-gap",
+    "`count`": "--shard-count",
+    "`db`": "--db",
+    "`folder`": "--shards",
+    "`gap`": "--gap",
+    "`gaps`": "--gaps",
+    "`image_size`": "--image-size",
+    "`jobs`": "--jobs",
+    "`k`": "--k",
+    "`max_faces`": "--max-faces",
+    "`out`": "--out",
+    "`perspective`": "--perspective",
+    "`perspective_gap`": "--perspective-gap",
+    "`queries`": "--queries",
+    "`server`": "--server",
+    "`shards`": "--shards",
+    "`subset`": "--subset",
+    "`workers`": "--workers",
+}
+
+
+def as_flags(message: str) -> str:
+    """A library error's ``message`` as a command line user reads it: each parameter it
+    names (:data:`PARAMETER_FLAGS`) as the flag they gave."""
+    for name, flag in PARAMETER_FLAGS.items():
+        message = message.replace(name, flag)
+    return message
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit code (the console script calls this)."""
     if not (sys.argv[1:] if argv is None else argv):
@@ -891,7 +926,7 @@ def main(argv: list[str] | None = None) -> int:
     except viewdb.ViewDBError as exc:
         if _STATE["debug"]:
             raise
-        _say(f"viewdb: {exc}", err)
+        _say(f"viewdb: {as_flags(str(exc))}", err)
         return 1
     code = code if isinstance(code, int) else 0
     if code == 130:  # typer turns KeyboardInterrupt into Exit(130), returned or raised

@@ -151,7 +151,7 @@ def load_mesh(
             if faces > options.max_faces:
                 raise MeshError(
                     f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
-                    "decimate it first or raise the cap (--max-faces)", path,
+                    "decimate it first or raise the cap (`max_faces`)", path,
                 )
         digest = content_hash or file_hash(path)
         return _normalise(loaded, name or path.stem, str(path), digest, path)
@@ -221,7 +221,7 @@ def _check_references(path: Path, options: LoadOptions) -> None:
         raise MeshError(
             f"names texture file {missing[0]!r}, which does not exist"
             + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else "")
-            + "; restore it, or ingest untextured with --allow-missing-textures",
+            + "; restore it, or ingest untextured with `allow_missing_textures`=True",
             path,
         )
 

@@ -58,8 +58,8 @@ class LocalServerTier:
     def _full_tier_only(self) -> None:
         if self.catalogue.role == "client":
             raise QueryError(
-                "is a client database (no full tier): give the full database as --db, or a "
-                "server", self.catalogue.path,
+                "is a client database (no full tier): query the full database (`db`), "
+                "or give a `server`", self.catalogue.path,
             )
 
     def _exchange(self, call: Callable[[], T], request: Any = None,
