@@ -12,6 +12,8 @@ import math
 import re
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -333,6 +335,24 @@ def info(
 
 
 @app.command()
+def warm() -> None:
+    """Compile the search kernels now, not in the first query (numba keeps them): a
+    throw-away catalogue is built and queried with every plan (needs viewdb[ingest])."""
+    from viewdb.warm import compiling, warm_up
+
+    _say("viewdb warm: compiling the search kernels (a minute or more, once per install)", err)
+    heard: list[str] = []
+
+    def on_compile(kernel: str) -> None:
+        heard.append(kernel)
+        _say(f"viewdb warm: compiling {len(heard)}: {kernel}", err)
+
+    with compiling(on_compile):
+        report = warm_up(progress=lambda step: _say(f"viewdb warm: {step}", err))
+    _say(f"search kernels ready ({report.compiled} compiled, {report.cached} from the cache)")
+
+
+@app.command()
 def check(db: DbOption) -> None:
     """Verify a database: schema version, SQLite integrity, rows and blobs. Exit 0 or 1."""
     with _open_read(db) as vdb:
@@ -490,39 +510,62 @@ def query(
     prompts = _prompts(box, point, every, max_objects, mask, label, label_map)
     if overlay is not None:
         _check_overlay(overlay, server)
-    if server is not None:
-        if client is None or db is not None:
-            raise typer.BadParameter("with --server give --client FILE (and no --db)",
-                                     param_hint="--server")
-        if rerank:
-            raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
-        with _open_read(client) as side, \
-                viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
-            result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
-                                rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                label_map=label_map, label=label, colour=not no_colour,
-                                verify=not no_verify, pose_top=pose_top, roll=roll,
-                                fast_shortlist=fast_shortlist, **prompts)
-    elif db is None:
-        raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
-    else:
-        with _open_read(db) as vdb:
-            side = _open_read(client) if client is not None else None
-            try:
-                result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
-                                   rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                   label_map=label_map, label=label, rerank=rerank,
-                                   colour=not no_colour, verify=not no_verify, pose_top=pose_top,
-                                   roll=roll, fast_shortlist=fast_shortlist, **prompts)
-                if overlay is not None:
-                    _write_png(overlay, result.overlay())
-            finally:
-                if side is not None:
-                    side.close()
+    with _announcing_compiles():
+        if server is not None:
+            if client is None or db is not None:
+                raise typer.BadParameter("with --server give --client FILE (and no --db)",
+                                         param_hint="--server")
+            if rerank:
+                raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
+            with _open_read(client) as side, \
+                    viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
+                result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
+                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                    label_map=label_map, label=label, colour=not no_colour,
+                                    verify=not no_verify, pose_top=pose_top, roll=roll,
+                                    fast_shortlist=fast_shortlist, **prompts)
+        elif db is None:
+            raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
+        else:
+            with _open_read(db) as vdb:
+                side = _open_read(client) if client is not None else None
+                try:
+                    result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
+                                       rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                       label_map=label_map, label=label, rerank=rerank,
+                                       colour=not no_colour, verify=not no_verify, pose_top=pose_top,
+                                       roll=roll, fast_shortlist=fast_shortlist, **prompts)
+                    if overlay is not None:
+                        _write_png(overlay, result.overlay())
+                finally:
+                    if side is not None:
+                        side.close()
     if as_json:
         _echo_json(result.to_dict())
         return
     _print_result(result)
+
+
+@contextmanager
+def _announcing_compiles() -> Iterator[None]:
+    """On a terminal, say so when a search kernel compiles (the first query after an
+    install, unless ``viewdb warm`` ran): a wait of a minute or more, otherwise silent."""
+    if not err.is_terminal:
+        yield
+        return
+    from viewdb.warm import compiling
+
+    heard: list[str] = []
+
+    def on_compile(kernel: str) -> None:
+        if not heard:
+            _say("viewdb: compiling the search kernels on first use (once; `viewdb warm` does it "
+                 "ahead)", err)
+        heard.append(kernel)
+        _say(f"viewdb: compiling {len(heard)}: {kernel}", err)
+
+    with compiling(on_compile):
+        yield
 
 
 def _prompts(box: list[str] | None, point: list[str] | None, every: bool, max_objects: int | None,
@@ -927,6 +970,14 @@ def main(argv: list[str] | None = None) -> int:
         if _STATE["debug"]:
             raise
         _say(f"viewdb: {as_flags(str(exc))}", err)
+        return 1
+    except ImportError as exc:  # a module of an extra this install lacks
+        from viewdb.lazy import missing_extra
+
+        hint = missing_extra(exc)
+        if hint is None or _STATE["debug"]:
+            raise
+        _say(f"viewdb: {hint}", err)
         return 1
     code = code if isinstance(code, int) else 0
     if code == 130:  # typer turns KeyboardInterrupt into Exit(130), returned or raised

@@ -141,9 +141,10 @@ def load_mesh(
             path,
         )
     _check_references(path, options)
+    load = trimesh.load  # imports trimesh: a core install without it fails here, not below
     with interrupts_held():  # see the module doc
         try:
-            loaded = trimesh.load(str(path), process=False)
+            loaded = load(str(path), process=False)
         except Exception as exc:  # trimesh raises many types for bad files
             raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
         if options.max_faces is not None:
@@ -228,9 +229,10 @@ def _check_references(path: Path, options: LoadOptions) -> None:
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
     """Rebuild an already normalised mesh from the GLB blob a database stores."""
+    load = trimesh.load  # imports trimesh: a core install without it fails here, not below
     with interrupts_held():  # see the module doc
         try:
-            loaded = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
+            loaded = load(io.BytesIO(data), file_type="glb", process=False)
         except Exception as exc:
             raise MeshError(f"stored mesh of object {name!r} cannot be decoded: {_short(exc)}") from exc
         scene = _as_scene(loaded, name)
