@@ -71,7 +71,7 @@ def compiling(callback: Callable[[str], None]) -> Iterator[None]:
     """For the block, ``callback("module.kernel")`` as each viewdb kernel starts compiling:
     one numba did not find in its cache (a fresh install's first query, or a changed
     source). Kernels loaded from the cache are not heard."""
-    from . import jit  # noqa: F401  # numba imported as the kernels import it (jit.py)
+    from .jit import njit  # noqa: F401  # numba imported as the kernels import it (jit.py)
 
     # isort: split
     from numba.core import event
