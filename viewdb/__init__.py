@@ -68,7 +68,7 @@ _LAZY: dict[str, str] = {
     **dict.fromkeys(("SearchStats", "TierArrays"), "search.knn"),
     "Candidate": "search.plans",
     "ShiftWindow": "search.shifts",
-    "SearchHit": "storage.catalogue",
+    "SearchHit": "storage.stored_catalogue",
     "CheckReport": "storage.integrity",
 }
 
@@ -93,8 +93,8 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .search.knn import SearchStats, TierArrays
     from .search.plans import Candidate
     from .search.shifts import ShiftWindow
-    from .storage.catalogue import SearchHit
     from .storage.integrity import CheckReport
+    from .storage.stored_catalogue import SearchHit
 
     __version__: str
 

@@ -1,6 +1,6 @@
 """The :class:`ViewDB` facade: one open file, and the library's verbs on it.
 
-It delegates: reading to :class:`~viewdb.storage.catalogue.StoredCatalogue`, ingest to
+It delegates: reading to :class:`~viewdb.storage.stored_catalogue.StoredCatalogue`, ingest to
 :mod:`viewdb.catalogue.ingest`, queries to :mod:`viewdb.recognition.pipeline` over a
 client and a server tier, export and checks to :mod:`viewdb.storage`. It takes progress
 callbacks and never prints; the CLI (``cli/``) is a thin shell over it.
@@ -50,11 +50,11 @@ from .recognition.server_tier import ServerTier
 from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
 from .search.shifts import ShiftWindow
-from .storage.catalogue import SearchHit, StoredCatalogue
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import Store
+from .storage.stored_catalogue import SearchHit, StoredCatalogue
 from .storage.tiers import TIERS
 
 __all__ = ["DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"]

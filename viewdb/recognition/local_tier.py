@@ -33,7 +33,7 @@ from ..search.plans import (
     refine,
     walk,
 )
-from ..storage.catalogue import StoredCatalogue
+from ..storage.stored_catalogue import StoredCatalogue
 from .server_tier import Exchange
 
 __all__ = ["LocalServerTier"]
@@ -42,7 +42,7 @@ T = TypeVar("T")
 
 
 class LocalServerTier:
-    """The server tier of a full :class:`~viewdb.storage.catalogue.StoredCatalogue`."""
+    """The server tier of a full :class:`~viewdb.storage.stored_catalogue.StoredCatalogue`."""
 
     remote = False
 
