@@ -549,7 +549,7 @@ def query(
 @contextmanager
 def _announcing_compiles() -> Iterator[None]:
     """On a terminal, say so when a search kernel compiles (the first query after an
-    install, unless ``viewdb warm`` ran): a wait of a minute or more, otherwise silent."""
+    install, unless ``viewdb warm`` ran): some seconds of CPU per plan, otherwise silent."""
     if not err.is_terminal:
         yield
         return
