@@ -1,6 +1,7 @@
-"""A core install: the wheel in a fresh virtual environment beside the core dependencies
-alone queries a prebuilt file, and a client file against a running server, with the
-ingest and serve extras' modules not importable there.
+"""Installs for each use: the wheel in a fresh virtual environment beside the core
+dependencies alone queries a prebuilt file, and a client file against a running server,
+with the ingest and serve extras' modules not importable there; with the ingest extra
+added, it ingests a sample mesh.
 
 The environment is made offline: ``python -m venv`` without the system's packages, the
 wheel built here and installed with ``pip --no-deps``, and the core dependencies (the
@@ -48,21 +49,22 @@ def _wheel(out: Path) -> Path:
     return next(out.glob("viewdb-*.whl"))
 
 
-def _core_requirements(wheel: Path) -> list[Requirement]:
+def _requirements(wheel: Path, extras: tuple[str, ...] = ()) -> list[Requirement]:
+    """The wheel's ``Requires-Dist``: the core's, and those of ``extras``."""
     with zipfile.ZipFile(wheel) as zf:
         meta = next(n for n in zf.namelist() if n.endswith(".dist-info/METADATA"))
         lines = zf.read(meta).decode().splitlines()
     reqs = [Requirement(line.split(":", 1)[1].strip()) for line in lines if line.startswith("Requires-Dist:")]
-    return [r for r in reqs if r.marker is None or r.marker.evaluate({"extra": ""})]
+    return [r for r in reqs if r.marker is None or any(r.marker.evaluate({"extra": e}) for e in ("", *extras))]
 
 
 def _closure(reqs: list[Requirement]) -> list[metadata.Distribution]:
     """The installed distributions ``reqs`` need, with what they need in turn (no extras)."""
     found: dict[str, metadata.Distribution] = {}
-    todo = list(reqs)
+    todo = [(req, True) for req in reqs]  # the wheel's own were chosen with their extras
     while todo:
-        req = todo.pop()
-        if req.marker is not None and not req.marker.evaluate({"extra": ""}):
+        req, chosen = todo.pop()
+        if not chosen and req.marker is not None and not req.marker.evaluate({"extra": ""}):
             continue
         key = re.sub(r"[-_.]+", "-", req.name).lower()
         if key in found:
@@ -70,13 +72,14 @@ def _closure(reqs: list[Requirement]) -> list[metadata.Distribution]:
         dist = metadata.distribution(req.name)
         assert dist.version in req.specifier or not req.specifier, f"{req}: {dist.version} installed"
         found[key] = dist
-        todo += [Requirement(r) for r in dist.requires or ()]
+        todo += [(Requirement(r), False) for r in dist.requires or ()]
     return list(found.values())
 
 
-def _core_venv(tmp: Path, wheel: Path) -> Path:
+def _venv(tmp: Path, wheel: Path, extras: tuple[str, ...] = ()) -> Path:
     """A venv without the system's packages: the wheel installed, the core dependencies
-    visible through one ``.pth`` file of links to their files; its ``bin`` folder."""
+    (and those of ``extras``) visible through one ``.pth`` file of links to their files;
+    its ``bin`` folder."""
     venv = tmp / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=300)
     python = venv / "bin" / "python"
@@ -85,7 +88,7 @@ def _core_venv(tmp: Path, wheel: Path) -> Path:
     deps = tmp / "core-deps"
     deps.mkdir()
     site = Path(sysconfig.get_paths()["purelib"])
-    for dist in _closure(_core_requirements(wheel)):
+    for dist in _closure(_requirements(wheel, extras)):
         tops = {Path(str(f)).parts[0] for f in dist.files or () if not str(f).startswith("..")}
         for top in tops - {"__pycache__"}:
             target = Path(str(dist.locate_file(top)))
@@ -122,7 +125,7 @@ def test_a_core_install_queries_a_file_and_a_server_without_the_extras(tiered_db
     expected = {plan: [(r["object"], round(r["distance"], 9), r["view"]) for r in results]
                 for plan, results in here.items()}
 
-    bin_dir = _core_venv(tmp_path, _wheel(tmp_path / "wheel"))
+    bin_dir = _venv(tmp_path, _wheel(tmp_path / "wheel"))
     work = tmp_path / "work"
     work.mkdir()
     probe = _run(bin_dir, ["python", "-c", "import importlib.util, json, viewdb; print(json.dumps("
@@ -143,3 +146,19 @@ def test_a_core_install_queries_a_file_and_a_server_without_the_extras(tiered_db
 
     refused = _run(bin_dir, ["viewdb", "serve", "--db", str(tiered_db), "--port", "0"], work, timeout=300)
     assert refused.returncode == 1 and "pip install 'viewdb[serve]'" in refused.stderr, refused.stderr
+
+
+def test_the_ingest_extra_ingests_a_sample_mesh(tmp_path):
+    from tests.conftest import sample
+
+    bin_dir = _venv(tmp_path, _wheel(tmp_path / "wheel"), extras=("ingest",))
+    work = tmp_path / "work"
+    work.mkdir()
+    db = tmp_path / "cone.db"
+    done = _run(bin_dir, ["viewdb", "ingest", str(sample("cone")), "--db", str(db), "--gap", "90",
+                          "--image-size", "64", "--json"], work)
+    assert done.returncode == 0, done.stderr
+    info = _run(bin_dir, ["viewdb", "info", "--db", str(db), "--json"], work)
+    assert [o["name"] for o in json.loads(info.stdout)["objects"]] == ["cone"]
+    probe = _run(bin_dir, ["python", "-c", "import importlib.util as u; print(u.find_spec('fastapi') is None)"], work)
+    assert probe.stdout.strip() == "True"  # the serve extra stays out
