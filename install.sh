@@ -2,7 +2,8 @@
 # Install viewdb and everything it needs on a fresh Debian/Python 3.11 machine:
 # the system libraries for headless rendering (Mesa's EGL, software rasteriser) and the
 # headless browser the web page's tests use (chromium, chromium-driver), then the package
-# itself in editable mode with its dev extras. Safe to run again.
+# itself in editable mode with its dev extra, which brings every other extra (ingest,
+# serve, bench, ray). Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")"
 

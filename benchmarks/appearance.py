@@ -17,7 +17,7 @@ of each stage's ``timing_ms`` and the ratio rendered / stored.
 The top result's pose, when it is the right object of an asymmetric object (no symmetry
 generator, so the pose is unique), is compared with the photo's camera: the angle between
 the true and the estimated viewing directions. For shape poses (texture-less views) the
-same match is also posed with the off-grid walk that renders (``PosingConfig(shape_refine=
+same match is also posed with the off-grid walk that renders (``MatchedPoseConfig(shape_refine=
 "walk")``) and without leaving the grid, to compare their errors and times.
 """
 
@@ -32,7 +32,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
-from viewdb.config import PosingConfig
+from viewdb.config import MatchedPoseConfig
 from viewdb.pose.estimate import PoseConfig
 from viewdb.pose.matched import pose_matches
 from viewdb.recognition.pipeline import segment_query
@@ -134,11 +134,11 @@ def main() -> None:
                 forget(db)
                 start = time.perf_counter()
                 walked, why = pose_matches(catalogue, shape.view, [match], None, PoseConfig(), [curve],
-                                           posing=PosingConfig(shape_refine="walk"))[0]
+                                           posing=MatchedPoseConfig(shape_refine="walk"))[0]
                 walk_ms = (time.perf_counter() - start) * 1e3
                 walk = view_error(walked, spec) if walked is not None else math.nan
                 gridded, _ = pose_matches(catalogue, shape.view, [match], None, PoseConfig(), [curve],
-                                          posing=PosingConfig(shape_refine="none"))[0]
+                                          posing=MatchedPoseConfig(shape_refine="none"))[0]
                 grid = view_error(gridded, spec) if gridded is not None else math.nan
             poses.append((name, top.pose.method, error, rendered_error, walk, grid,
                           results["stored"].timing_ms["pose"], walk_ms))

@@ -42,14 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import viewdb
+from viewdb.bench.queries import grid_queries, photo_queries
+from viewdb.config import ClientFileConfig
+from viewdb.recognition.client_tier import ClientTier
+from viewdb.search.plans import RefineRequest
 
-import viewdb  # noqa: E402
-from viewdb.bench.queries import grid_queries, photo_queries  # noqa: E402
-from viewdb.config import ClientFileConfig  # noqa: E402
-from viewdb.recognition.client_tier import ClientTier  # noqa: E402
-from viewdb.search.plans import RefineRequest  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 FORMATS = {"float32": ClientFileConfig(curve_bits=0, page_size=4096), "compact": ClientFileConfig()}
 

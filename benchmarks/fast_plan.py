@@ -40,7 +40,6 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 
@@ -189,7 +188,6 @@ def photos_run(args: argparse.Namespace, shortlists: list[int]) -> None:
 
 
 def synthetic_run(args: argparse.Namespace, shortlists: list[int]) -> None:
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from scale import build, real_curves
 
     work = args.keep or Path(f"/tmp/viewdb-fast-{args.synthetic}")

@@ -27,15 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import viewdb
+from support.serving import ServerProcess
+from viewdb.catalogue.features import distance_curve
+from viewdb.errors import FeatureError
+from viewdb.pose.estimate import QueryView
+from viewdb.search.plans import RefineRequest, WalkRequest
 
-import viewdb  # noqa: E402
-from tests.serving import ServerProcess  # noqa: E402
-from viewdb.catalogue.features import distance_curve  # noqa: E402
-from viewdb.errors import FeatureError  # noqa: E402
-from viewdb.pose.estimate import QueryView  # noqa: E402
-from viewdb.search.plans import RefineRequest, WalkRequest  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def build(folder: Path) -> Path:

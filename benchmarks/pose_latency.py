@@ -13,7 +13,7 @@ curve at the turn that matched are then posed (:func:`viewdb.pose.matched.pose_m
 what a query's pose stage runs) three ways:
 
 * ``renders``: the pruned candidates' SIFT features made from renders when the stored ones
-  give no SIFT pose (``PosingConfig(regenerate="always")``), and every view without an
+  give no SIFT pose (``MatchedPoseConfig(regenerate="always")``), and every view without an
   appearance record of its own rendered (image twins off): the pose before this change;
 * ``twins``: the same, but a symmetric uncoloured object's views take a recorded image
   twin's appearance (:func:`viewdb.catalogue.skimming.image_twins`);
@@ -44,7 +44,7 @@ import viewdb.pose.estimate as estimate_module
 import viewdb.pose.matched as matched_module
 import viewdb.pose.sift_pose as sift_module
 from viewdb.bench.photos import decoded_photo, parse_seeds, photo_series, seed_photos
-from viewdb.config import PosingConfig
+from viewdb.config import MatchedPoseConfig
 from viewdb.pose.estimate import PoseConfig
 from viewdb.pose.matched import pose_matches
 from viewdb.pose.views import QueryView
@@ -52,9 +52,9 @@ from viewdb.recognition.pipeline import segment_query
 from viewdb.search.plans import Candidate
 
 WAYS = {
-    "renders": (PosingConfig(regenerate="always"), False),
-    "twins": (PosingConfig(regenerate="always"), True),
-    "default": (PosingConfig(), True),
+    "renders": (MatchedPoseConfig(regenerate="always"), False),
+    "twins": (MatchedPoseConfig(regenerate="always"), True),
+    "default": (MatchedPoseConfig(), True),
 }
 #: The pose's parts, timed by wrapping these functions: (label, module, name).
 PARTS = (("sift extract", estimate_module, "extract_sift"), ("sift match", sift_module, "_match"),
@@ -109,7 +109,7 @@ def inputs_of(db, photos):
     return out
 
 
-def run_way(path: str, inputs, posing: PosingConfig, twins: bool) -> list[dict]:
+def run_way(path: str, inputs, posing: MatchedPoseConfig, twins: bool) -> list[dict]:
     with viewdb.open(path, read_only=True) as db:
         catalogue = db._catalogue
         catalogue.image_twins = twins

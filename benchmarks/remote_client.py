@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import http.client
 import statistics
-import sys
 import tempfile
 import time
 import urllib.parse
@@ -34,14 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import viewdb
+from support.serving import ServerProcess
+from viewdb.catalogue.features import distance_curve
+from viewdb.errors import FeatureError, ImageError, ServerError
+from viewdb.search.plans import RefineRequest
 
-import viewdb  # noqa: E402
-from tests.serving import ServerProcess  # noqa: E402
-from viewdb.catalogue.features import distance_curve  # noqa: E402
-from viewdb.errors import FeatureError, ImageError, ServerError  # noqa: E402
-from viewdb.search.plans import RefineRequest  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 MODELS = ("car", "mug", "chair", "l_bracket", "arrow", "cube_dice")
 

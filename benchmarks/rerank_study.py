@@ -46,7 +46,7 @@ from viewdb.recognition.colour import colour_distance, colour_signature, has_col
 from viewdb.recognition.pipeline import segment_photo
 from viewdb.recognition.verify import physical_view, rerank_by_fit
 from viewdb.search.plans import Candidate
-from viewdb.storage.catalogue import StoredCatalogue
+from viewdb.storage.stored_catalogue import StoredCatalogue
 
 #: The shape fits ``--fits`` can compare.
 FITS = ("view", "outline", "perspective")

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -82,12 +81,11 @@ def curve_error(mask: np.ndarray, true_curve: np.ndarray) -> float:
 
 def composited(args: argparse.Namespace, methods: list[str]) -> None:
     """The sample models over the test backgrounds: IoU, curve error and CPU time per background."""
-    sys.path.insert(0, str(ROOT))  # the scene generator lives with the tests
     from scipy.ndimage import binary_fill_holes
 
     import viewdb
-    from tests.conftest import sample_files
-    from tests.test_query_image import ALL_BACKGROUNDS, make_scene
+    from support.samples import sample_files
+    from support.scenes import ALL_BACKGROUNDS, make_scene
     from viewdb.catalogue.features import distance_curve
     from viewdb.config import SegmentationConfig
     from viewdb.errors import ImageError

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -82,7 +81,7 @@ def compare(name: str, db_path: Path, photo: object, found: dict, repeat: int, o
 
 
 def table_scene(folder: Path) -> tuple[Path, np.ndarray]:
-    from tests.conftest import sample
+    from support.samples import sample
 
     path = folder / "scene.db"
     with viewdb.open(path, gap=30, image_size=256) as db:
@@ -99,7 +98,6 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--no-pose", action="store_true")
     args = parser.parse_args()
-    sys.path.insert(0, str(ROOT))  # the sample models' paths live with the tests
     options = {"k": 3, "pose": not args.no_pose}
     with tempfile.TemporaryDirectory(prefix="viewdb-several-") as folder:
         db_path, photo = table_scene(Path(folder))

@@ -23,8 +23,8 @@ import numpy as np
 
 import viewdb
 from viewdb.catalogue.features import mirror_curve
-from viewdb.storage.catalogue import StoredCatalogue
 from viewdb.storage.codecs import decode_array
+from viewdb.storage.stored_catalogue import StoredCatalogue
 
 
 def object_curves(

@@ -27,17 +27,15 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import viewdb
+from support.serving import ServerProcess, multipart, request
+from viewdb_cli.main import _demo_photo
 
-import viewdb  # noqa: E402
-from tests.serving import ServerProcess, multipart, request  # noqa: E402
-from viewdb_cli.main import _demo_photo  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def build(folder: Path) -> Path:

@@ -23,11 +23,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import viewdb  # noqa: E402
-from tests.browser import (  # noqa: E402
+import viewdb
+from support.browser import (
     choose,
     drag_box,
     gesture,
@@ -38,9 +35,11 @@ from tests.browser import (  # noqa: E402
     upload,
     wait,
 )
-from tests.serving import ServerProcess  # noqa: E402
-from viewdb.bench.photos import table_photo  # noqa: E402
-from viewdb_cli.main import _demo_photo  # noqa: E402
+from support.serving import ServerProcess
+from viewdb.bench.photos import table_photo
+from viewdb_cli.main import _demo_photo
+
+ROOT = Path(__file__).resolve().parents[1]
 
 #: The table: (object, azimuth, elevation) of each view, and where it goes (top-left).
 TABLE = (("mug", 130.0, 25.0), ("bottle", 50.0, 15.0), ("cube_dice", 200.0, 35.0))

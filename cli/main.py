@@ -12,6 +12,8 @@ import math
 import re
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -233,7 +235,7 @@ def ingest(
             bar.update(task, total=p.views_total, completed=p.views_done,
                        description=f"ingest {p.files_done}/{p.files_total} files{rate}")
             if p.outcome is not None and p.outcome.status == "failed":
-                _say(f"viewdb: {p.outcome.error}", err)
+                _say(f"viewdb: {as_flags(str(p.outcome.error))}", err)
 
         report = target.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
                                max_faces=max_faces or None,
@@ -330,6 +332,24 @@ def info(
     if rows:
         _table(["object", "faces", "type", "periods", "views", "grid", "no silhouette",
                 "perspective", "ingest s"], rows)
+
+
+@app.command()
+def warm() -> None:
+    """Compile the search kernels now, not in the first query (numba keeps them): a
+    throw-away catalogue is built and queried with every plan (needs viewdb[ingest])."""
+    from viewdb.warm import compiling, warm_up
+
+    _say("viewdb warm: compiling the search kernels (a minute or more, once per install)", err)
+    heard: list[str] = []
+
+    def on_compile(kernel: str) -> None:
+        heard.append(kernel)
+        _say(f"viewdb warm: compiling {len(heard)}: {kernel}", err)
+
+    with compiling(on_compile):
+        report = warm_up(progress=lambda step: _say(f"viewdb warm: {step}", err))
+    _say(f"search kernels ready ({report.compiled} compiled, {report.cached} from the cache)")
 
 
 @app.command()
@@ -490,39 +510,62 @@ def query(
     prompts = _prompts(box, point, every, max_objects, mask, label, label_map)
     if overlay is not None:
         _check_overlay(overlay, server)
-    if server is not None:
-        if client is None or db is not None:
-            raise typer.BadParameter("with --server give --client FILE (and no --db)",
-                                     param_hint="--server")
-        if rerank:
-            raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
-        with _open_read(client) as side, \
-                viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
-            result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
-                                rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                label_map=label_map, label=label, colour=not no_colour,
-                                verify=not no_verify, pose_top=pose_top, roll=roll,
-                                fast_shortlist=fast_shortlist, **prompts)
-    elif db is None:
-        raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
-    else:
-        with _open_read(db) as vdb:
-            side = _open_read(client) if client is not None else None
-            try:
-                result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
-                                   rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                   label_map=label_map, label=label, rerank=rerank,
-                                   colour=not no_colour, verify=not no_verify, pose_top=pose_top,
-                                   roll=roll, fast_shortlist=fast_shortlist, **prompts)
-                if overlay is not None:
-                    _write_png(overlay, result.overlay())
-            finally:
-                if side is not None:
-                    side.close()
+    with _announcing_compiles():
+        if server is not None:
+            if client is None or db is not None:
+                raise typer.BadParameter("with --server give --client FILE (and no --db)",
+                                         param_hint="--server")
+            if rerank:
+                raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
+            with _open_read(client) as side, \
+                    viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
+                result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
+                                    rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                    label_map=label_map, label=label, colour=not no_colour,
+                                    verify=not no_verify, pose_top=pose_top, roll=roll,
+                                    fast_shortlist=fast_shortlist, **prompts)
+        elif db is None:
+            raise typer.BadParameter("give --db FILE, or --client FILE with --server URL", param_hint="--db")
+        else:
+            with _open_read(db) as vdb:
+                side = _open_read(client) if client is not None else None
+                try:
+                    result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
+                                       rotations=rotations, pose=not no_pose, intrinsics=cam,
+                                       label_map=label_map, label=label, rerank=rerank,
+                                       colour=not no_colour, verify=not no_verify, pose_top=pose_top,
+                                       roll=roll, fast_shortlist=fast_shortlist, **prompts)
+                    if overlay is not None:
+                        _write_png(overlay, result.overlay())
+                finally:
+                    if side is not None:
+                        side.close()
     if as_json:
         _echo_json(result.to_dict())
         return
     _print_result(result)
+
+
+@contextmanager
+def _announcing_compiles() -> Iterator[None]:
+    """On a terminal, say so when a search kernel compiles (the first query after an
+    install, unless ``viewdb warm`` ran): some seconds of CPU per plan, otherwise silent."""
+    if not err.is_terminal:
+        yield
+        return
+    from viewdb.warm import compiling
+
+    heard: list[str] = []
+
+    def on_compile(kernel: str) -> None:
+        if not heard:
+            _say("viewdb: compiling the search kernels on first use (once; `viewdb warm` does it "
+                 "ahead)", err)
+        heard.append(kernel)
+        _say(f"viewdb: compiling {len(heard)}: {kernel}", err)
+
+    with compiling(on_compile):
+        yield
 
 
 def _prompts(box: list[str] | None, point: list[str] | None, every: bool, max_objects: int | None,
@@ -871,6 +914,41 @@ def bench(
     _say("wrote " + ", ".join(str(p) for p in run.files.values()))
 
 
+#: How the library's errors name a Python parameter (in backticks), and what the command
+#: line user typed instead; the longer forms first.
+PARAMETER_FLAGS = {
+    "(`read_only` False)": "(e.g. viewdb info --db FILE)",
+    "`allow_missing_textures`=True": "--allow-missing-textures",
+    "split_catalogue's `out`": "viewdb shard --out",
+    "`client_gap`": "--client-gap",
+    "`count`": "--shard-count",
+    "`db`": "--db",
+    "`folder`": "--shards",
+    "`gap`": "--gap",
+    "`gaps`": "--gaps",
+    "`image_size`": "--image-size",
+    "`jobs`": "--jobs",
+    "`k`": "--k",
+    "`max_faces`": "--max-faces",
+    "`out`": "--out",
+    "`perspective`": "--perspective",
+    "`perspective_gap`": "--perspective-gap",
+    "`queries`": "--queries",
+    "`server`": "--server",
+    "`shards`": "--shards",
+    "`subset`": "--subset",
+    "`workers`": "--workers",
+}
+
+
+def as_flags(message: str) -> str:
+    """A library error's ``message`` as a command line user reads it: each parameter it
+    names (:data:`PARAMETER_FLAGS`) as the flag they gave."""
+    for name, flag in PARAMETER_FLAGS.items():
+        message = message.replace(name, flag)
+    return message
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI and return its exit code (the console script calls this)."""
     if not (sys.argv[1:] if argv is None else argv):
@@ -891,7 +969,15 @@ def main(argv: list[str] | None = None) -> int:
     except viewdb.ViewDBError as exc:
         if _STATE["debug"]:
             raise
-        _say(f"viewdb: {exc}", err)
+        _say(f"viewdb: {as_flags(str(exc))}", err)
+        return 1
+    except ImportError as exc:  # a module of an extra this install lacks
+        from viewdb.lazy import missing_extra
+
+        hint = missing_extra(exc)
+        if hint is None or _STATE["debug"]:
+            raise
+        _say(f"viewdb: {hint}", err)
         return 1
     code = code if isinstance(code, int) else 0
     if code == 130:  # typer turns KeyboardInterrupt into Exit(130), returned or raised

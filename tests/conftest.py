@@ -8,6 +8,9 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+# the tests take the sample models from here, as ``tests.conftest.sample``
+from benchmarks.support.samples import sample, sample_files  # noqa: F401
+
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 # No per-example deadline: the first example of a test may compile numba kernels or
@@ -16,17 +19,7 @@ settings.register_profile("viewdb", deadline=None)
 settings.load_profile("viewdb")
 
 ROOT = Path(__file__).resolve().parent.parent
-SAMPLES = ROOT / "sample_models"
 SHARED_MODELS = ROOT.parent / "shared" / "models"
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
-
-
-def sample(stem: str) -> Path:
-    """The sample model file called ``stem`` (any supported format)."""
-    for p in sorted(SAMPLES.iterdir()):
-        if p.stem == stem and p.suffix.lower() in MESH_SUFFIXES:
-            return p
-    raise FileNotFoundError(f"no sample model {stem!r} in {SAMPLES}")
 
 
 def copy_db(src: Path, dst: Path) -> Path:
@@ -38,10 +31,6 @@ def copy_db(src: Path, dst: Path) -> Path:
     a.close()
     b.close()
     return dst
-
-
-def sample_files() -> list[Path]:
-    return sorted(p for p in SAMPLES.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:

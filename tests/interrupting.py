@@ -1,4 +1,4 @@
-"""Ctrl-C for tests: SIGINT made deliverable whatever the test runner inherited, and
+"""Ctrl-C for tests: SIGINT raising KeyboardInterrupt in this process for a block, and
 SIGINT raised inside a chosen R-tree page callback (tests of ``viewdb.interrupts``)."""
 
 from __future__ import annotations
@@ -11,21 +11,10 @@ from contextlib import contextmanager
 from viewdb.storage.spatial import SqlitePageStorage
 
 
-def deliverable_sigint() -> None:
-    """Run in the child before exec: SIGINT at its default disposition and unblocked,
-    whatever this test process inherited. A parent that ignores SIGINT (a shell's
-    background job, nohup) passes SIG_IGN on, and Python then installs no Ctrl-C handler;
-    a parent that blocks it (some CI runners) passes the blocked mask on, and the signal
-    stays pending. Either way a user's viewdb would rightly not be interrupted, so the
-    tests give their children what a terminal gives a foreground process."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-
-
 @contextmanager
 def sigint_raises() -> Iterator[None]:
     """In this process, for the block: SIGINT as a foreground Python in a terminal has
-    it, delivered and raising KeyboardInterrupt (see :func:`deliverable_sigint`)."""
+    it, delivered and raising KeyboardInterrupt (see :func:`benchmarks.support.serving.deliverable_sigint`)."""
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     try:

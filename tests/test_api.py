@@ -203,3 +203,23 @@ def test_a_non_manifold_open_mesh_is_ingested_and_searchable(tmp_path):
         hits, _ = db.search(curve, k=1)
         assert hits[0].object == "fins" and hits[0].distance == pytest.approx(0, abs=1e-9)
         assert db.check().ok
+
+
+def test_query_refuses_keywords_that_say_otherwise_than_options(small_db, tmp_path):
+    options = viewdb.QueryOptions(k=3, rotations=4)
+    missing = tmp_path / "no-such-photo.png"
+    with viewdb.open(small_db, create=False) as db:
+        with pytest.raises(viewdb.QueryError) as refused:
+            db.query(missing, options=options, k=4, colour=False)
+        message = str(refused.value)
+        assert "k=4 (options.k=3)" in message and "colour=False (options.colour=True)" in message
+        assert "rotations" not in message  # left at its default: not a conflict
+        with pytest.raises(viewdb.QueryError, match=r"fast_shortlist=9"):
+            db.query(missing, options=options, fast_shortlist=9)
+        with pytest.raises(viewdb.QueryError, match=r"intrinsics=array"):
+            db.query(missing, options=options, intrinsics=np.eye(3))
+        # the same value twice, or a keyword at its default, says nothing new: the photo is read
+        with pytest.raises(viewdb.ImageError):
+            db.query(missing, options=options, k=3, rotations=4)
+        with pytest.raises(viewdb.ImageError):
+            db.query(missing, options=options, plan="server")

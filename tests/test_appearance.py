@@ -501,7 +501,7 @@ def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, mes
     direction than the grid view, within a quarter of the gap on average (the rendering
     walk, sampling half and quarter gaps, is closer still: measured 1.4° here, and 2.0°
     against 1.4° at a 10° gap)."""
-    from viewdb.config import PosingConfig
+    from viewdb.config import MatchedPoseConfig
     from viewdb.pose.matched import pose_matches
     from viewdb.search.plans import Candidate
 
@@ -522,7 +522,7 @@ def test_the_shape_pose_leaves_the_grid_towards_the_true_direction(tmp_path, mes
             match = Candidate("l_bracket", 0.0, h0, v0 % 360.0, False)
             for way in errors:
                 pose, why = pose_matches(db._catalogue, query, [match], None, PoseConfig(),
-                                         posing=PosingConfig(shape_refine=way, near_views=0))[0]
+                                         posing=MatchedPoseConfig(shape_refine=way, near_views=0))[0]
                 assert pose is not None, why
                 assert pose.method == "shape"
                 errors[way].append(_angle((pose.azimuth, pose.elevation), (h, v)))

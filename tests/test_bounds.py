@@ -9,7 +9,6 @@ plain-Python oracles in ``tests/reference.py``.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -430,24 +429,6 @@ def test_small_values():
     np.testing.assert_array_equal(lo, [1, 2, -7, -8])
     np.testing.assert_array_equal(hi, [5, 6, -3, -4])
     assert B.dtw(np.zeros(4), np.zeros(4), np.int64(2)) == 0.0
-
-
-@pytest.mark.benchmark
-def test_timing():
-    rng = np.random.default_rng(0)
-    q, c = smooth_curve(rng, 128), smooth_curve(rng, 128)
-    L, U = B.envelope(q, 6)
-    for name, f in (
-        ("dtw", lambda: B.dtw(q, c, 6)),
-        ("lb_keogh", lambda: B.lb_keogh(L, U, c)),
-        ("envelope", lambda: B.envelope(q, 6)),
-    ):
-        f()
-        k = 20000
-        t0 = time.perf_counter()
-        for _ in range(k):
-            f()
-        print(f"{name}: {(time.perf_counter() - t0) / k * 1e6:.2f} us/call")
 
 
 # ------------------------------------------------------------- group-level bounds ----

@@ -182,3 +182,42 @@ def test_exit_now_runs_the_exit_handlers_and_flushes_the_streams(tmp_path):
     assert done.returncode == 3
     assert done.stdout == "x" * 100000 and done.stderr == "y" * 5000
     assert flag.read_text() == "ran"
+
+
+def _raised_messages() -> list[tuple[str, str]]:
+    """``(where, text)`` of every string in a ``raise`` statement of the library."""
+    import ast
+
+    found = []
+    for path in sorted((ROOT / "viewdb").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                found += [(f"{path.relative_to(ROOT)}:{sub.lineno}", sub.value) for sub in ast.walk(node.exc)
+                          if isinstance(sub, ast.Constant) and isinstance(sub.value, str)]
+    return found
+
+
+def test_library_errors_name_python_parameters_not_flags():
+    messages = _raised_messages()
+    assert any("`gap`" in text for _, text in messages)  # the scan sees the messages
+    flags = [f"{where}: {text!r}" for where, text in messages if re.search(r"(?<![\w-])--[a-z]", text)]
+    assert not flags, "library errors naming a command line flag:\n" + "\n".join(flags)
+
+
+def test_the_cli_has_a_flag_for_every_parameter_a_library_error_names():
+    from viewdb_cli.main import PARAMETER_FLAGS, as_flags
+
+    named = {name for _, text in _raised_messages() for name in re.findall(r"`\w+`", text)}
+    missing = {name for name in named if not any(name in form for form in PARAMETER_FLAGS)}
+    assert not missing, f"no flag for {sorted(missing)} in viewdb_cli.main.PARAMETER_FLAGS"
+    assert as_flags("was built with `gap` 10, not 30") == "was built with --gap 10, not 30"
+    assert as_flags("ingest with `allow_missing_textures`=True") == "ingest with --allow-missing-textures"
+
+
+def test_a_setting_the_file_was_not_built_with_is_named_as_a_parameter_or_a_flag(tmp_path, capsys):
+    db = tmp_path / "g.db"
+    assert run(capsys, "ingest", sample("cone"), "--db", db, "--gap", 90, "--image-size", 64)[0] == 0
+    with pytest.raises(viewdb.ViewDBError, match=r"was built with `gap` 90, not 45"):
+        viewdb.open(db, gap=45)
+    code, _, err = run(capsys, "ingest", sample("cone"), "--db", db, "--gap", 45)
+    assert code == 1 and "was built with --gap 90, not 45" in err and "`" not in err

@@ -111,3 +111,21 @@ def test_after_the_warm_up_a_query_compiles_no_kernel(small_db, tmp_path):
     )
     assert out["codes"] == [0] * len(queries)
     assert out["compiled"] == [] and out["cached"] > 0, out["compiled"]
+
+
+_HEAR_COMPILES = (
+    "import json, numpy as np\n"
+    "from viewdb.warm import compiling\n"
+    "heard = []\n"
+    "with compiling(heard.append):\n"
+    "    from viewdb.search import bounds\n"
+    "    bounds.dtw(np.ones(16), np.ones(16), 2)\n"
+    "print(json.dumps(heard))\n"
+)
+
+
+def test_a_kernel_compiling_is_heard_and_one_from_the_cache_is_not(tmp_path):
+    cache = {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    first = _child(_HEAR_COMPILES, cache)
+    assert "viewdb.search.bounds.dtw_kernel" in first and all(k.startswith("viewdb.") for k in first)
+    assert _child(_HEAR_COMPILES, cache) == []  # loaded from the cache: nothing to say

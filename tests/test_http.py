@@ -21,8 +21,8 @@ from hypothesis import strategies as st
 from PIL import Image
 
 import viewdb
+from benchmarks.support.serving import ServerProcess, multipart, request
 from tests.conftest import mixed_query_curves
-from tests.serving import ServerProcess, multipart, request
 from viewdb.bench.photos import composite_photo
 from viewdb.http import models
 from viewdb.http.wire import (

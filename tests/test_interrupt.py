@@ -10,8 +10,9 @@ import time
 import pytest
 
 import viewdb
+from benchmarks.support.serving import deliverable_sigint
 from tests.conftest import sample_files
-from tests.interrupting import ctrl_c_in, deliverable_sigint, sigint_raises
+from tests.interrupting import ctrl_c_in, sigint_raises
 
 
 def _interrupt_an_ingest(db, files, jobs):

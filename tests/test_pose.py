@@ -476,7 +476,7 @@ def test_iou_reranking_fits_every_match_alike_and_only_the_best_again(quick_ious
     from types import SimpleNamespace
 
     import viewdb.pose.matched as matched
-    from viewdb.config import PosingConfig
+    from viewdb.config import MatchedPoseConfig
     from viewdb.pose.estimate import PoseEstimate
     from viewdb.search.plans import Candidate
 
@@ -499,7 +499,7 @@ def test_iou_reranking_fits_every_match_alike_and_only_the_best_again(quick_ious
     try:
         matched.pose_matches(catalogue, QueryView(np.zeros((8, 8, 3), np.uint8), np.ones((8, 8), bool)),
                              matches, (10.0, 10.0, 4.0, 4.0), rerank=True,
-                             posing=PosingConfig(rerank_full=full))
+                             posing=MatchedPoseConfig(rerank_full=full))
     finally:
         matched.pose_match = original
     quick = [(n, s) for n, q, s in calls if q]

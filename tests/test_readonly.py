@@ -98,7 +98,7 @@ def test_an_old_schema_is_not_upgraded_read_only(tmp_path):
     path = tmp_path / "old.db"
     shutil.copy(ROOT / "tests" / "data" / "schema_0001.db", path)
     before = _snapshot(path)
-    with pytest.raises(StorageError, match="older than this viewdb.*open it once without read-only") as info:
+    with pytest.raises(StorageError, match="older than this viewdb.*open it once writable") as info:
         viewdb.open(path, read_only=True)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
     assert _snapshot(path) == before

@@ -93,7 +93,7 @@ def test_existing_db_keeps_its_build_config(tmp_path):
     viewdb.open(path, gap=45, image_size=128).close()
     with viewdb.open(path) as db:
         assert db.config.gap == 45 and db.config.render.image_size == 128
-    with pytest.raises(viewdb.ViewDBError, match="gap 45"):
+    with pytest.raises(viewdb.ViewDBError, match="`gap` 45"):
         viewdb.open(path, gap=10)
 
 

@@ -21,7 +21,7 @@ import pytest
 from PIL import Image
 
 import viewdb
-from tests.browser import (
+from benchmarks.support.browser import (
     CHROMEDRIVER,
     CHROMIUM,
     choose,
@@ -37,7 +37,7 @@ from tests.browser import (
     upload,
     wait,
 )
-from tests.serving import ServerProcess, multipart, request
+from benchmarks.support.serving import ServerProcess, multipart, request
 from viewdb.config import OverlayConfig
 from viewdb.http import models
 from viewdb.http.app import ENV_DB, ENV_UI, app_from_env

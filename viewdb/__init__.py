@@ -22,11 +22,10 @@ from .config import (
     BuildConfig,
     FeatureConfig,
     IndexConfig,
+    MatchedPoseConfig,
     PerspectiveConfig,
-    PosingConfig,
     RecognitionConfig,
     RenderConfig,
-    SearchConfig,
     SiftConfig,
     SkimConfig,
 )
@@ -70,7 +69,7 @@ _LAZY: dict[str, str] = {
     "ColourMatch": "search.colour_index",
     "Candidate": "search.plans",
     "ShiftWindow": "search.shifts",
-    "SearchHit": "storage.catalogue",
+    "SearchHit": "storage.stored_catalogue",
     "CheckReport": "storage.integrity",
 }
 
@@ -96,11 +95,17 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .search.knn import SearchStats, TierArrays
     from .search.plans import Candidate
     from .search.shifts import ShiftWindow
-    from .storage.catalogue import SearchHit
     from .storage.integrity import CheckReport
+    from .storage.stored_catalogue import SearchHit
+
+    __version__: str
 
 
 def __getattr__(name: str) -> Any:
+    if name == "__version__":  # the installed distribution's, as pyproject.toml gives it
+        from importlib.metadata import version
+
+        return version("viewdb")
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'viewdb' has no attribute {name!r}")
@@ -112,8 +117,6 @@ def __getattr__(name: str) -> Any:
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
 
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Appearance",
@@ -138,6 +141,7 @@ __all__ = [
     "IngestTarget",
     "Intrinsics",
     "LocalServerTier",
+    "MatchedPoseConfig",
     "MeshError",
     "NormalisedMesh",
     "NotFound",
@@ -148,7 +152,6 @@ __all__ = [
     "PoseConfig",
     "PoseError",
     "PoseEstimate",
-    "PosingConfig",
     "QueryError",
     "QueryMatch",
     "QueryOptions",
@@ -161,7 +164,6 @@ __all__ = [
     "RenderError",
     "RenderedView",
     "SchemaMismatch",
-    "SearchConfig",
     "SearchHit",
     "SearchStats",
     "ServerError",

@@ -1,6 +1,6 @@
 """The :class:`ViewDB` facade: one open file, and the library's verbs on it.
 
-It delegates: reading to :class:`~viewdb.storage.catalogue.StoredCatalogue`, ingest to
+It delegates: reading to :class:`~viewdb.storage.stored_catalogue.StoredCatalogue`, ingest to
 :mod:`viewdb.catalogue.ingest`, queries to :mod:`viewdb.recognition.pipeline` over a
 client and a server tier, export and checks to :mod:`viewdb.storage`. It takes progress
 callbacks and never prints; the CLI (``cli/``) is a thin shell over it.
@@ -8,6 +8,7 @@ callbacks and never prints; the CLI (``cli/``) is a thin shell over it.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -49,11 +50,11 @@ from .recognition.server_tier import ServerTier
 from .search.knn import SearchStats, TierArrays
 from .search.plans import Candidate
 from .search.shifts import ShiftWindow
-from .storage.catalogue import SearchHit, StoredCatalogue
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import Store
+from .storage.stored_catalogue import SearchHit, StoredCatalogue
 from .storage.tiers import TIERS
 
 __all__ = ["DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"]
@@ -273,7 +274,8 @@ class ViewDB:
         the upright curve in one search instead of ``rotations`` turned silhouettes
         (:class:`~viewdb.search.shifts.ShiftWindow`); ``roll`` (a gravity hint, degrees) only
         those near that in-plane turn. ``options`` gives all of these as one
-        :class:`~viewdb.recognition.options.QueryOptions` instead.
+        :class:`~viewdb.recognition.options.QueryOptions` instead; a keyword it holds that
+        is given as well, with another value, is refused (:class:`~viewdb.errors.QueryError`).
 
         A photo of several objects: ``boxes`` (``(x1, y1, x2, y2)`` or ``"x1,y1,x2,y2"``,
         pixels) and ``points`` (``(x, y)`` or ``"x,y"``) each ask for one object, cut out
@@ -288,13 +290,10 @@ class ViewDB:
         segmentation and the client half run here, the server half and the pose on the
         server; the answer is the one the full file gives locally.
         """
-        if options is None:
-            recognition = (RecognitionConfig() if fast_shortlist is None
-                           else RecognitionConfig(fast_shortlist=fast_shortlist))
-            options = QueryOptions(k=k, plan=plan, band=band, rotations=rotations, pose=pose,
-                                   pose_top=pose_top, intrinsics=intrinsics, rerank=rerank,
-                                   colour=colour, verify=verify, shifts=shifts, roll=roll,
-                                   recognition=recognition)
+        keywords = {"k": k, "plan": plan, "band": band, "rotations": rotations, "pose": pose,
+                    "pose_top": pose_top, "intrinsics": intrinsics, "rerank": rerank, "colour": colour,
+                    "verify": verify, "shifts": shifts, "roll": roll, "fast_shortlist": fast_shortlist}
+        options = _query_options(options, keywords)
         prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
         result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
@@ -488,6 +487,38 @@ class ViewDB:
         )
 
 
+#: The defaults of :meth:`ViewDB.query`'s keywords (those ``QueryOptions`` holds among them).
+_QUERY_DEFAULTS = {name: p.default for name, p in inspect.signature(ViewDB.query).parameters.items()}
+
+
+def _same(a: object, b: object) -> bool:
+    """``a == b`` as one truth value (arrays, which compare element-wise, are never the same)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
+def _query_options(options: QueryOptions | None, keywords: dict[str, Any]) -> QueryOptions:
+    """``options``, or the :class:`QueryOptions` of :meth:`ViewDB.query`'s ``keywords``.
+
+    With ``options``, a keyword moved from its default to a value other than the option's
+    is refused: one of the two would be silently ignored."""
+    if options is None:
+        shortlist = keywords.pop("fast_shortlist")
+        recognition = RecognitionConfig() if shortlist is None else RecognitionConfig(
+            fast_shortlist=shortlist)
+        return QueryOptions(**keywords, recognition=recognition)
+    held = {name: getattr(options, name) for name in keywords if name != "fast_shortlist"}
+    held["fast_shortlist"] = options.recognition.fast_shortlist
+    conflicts = [f"{name}={value!r} (options.{name}={held[name]!r})" for name, value in keywords.items()
+                 if not _same(value, _QUERY_DEFAULTS[name]) and not _same(value, held[name])]
+    if conflicts:
+        raise QueryError("query: " + ", ".join(conflicts) + " conflict with options; "
+                         "give them in options (dataclasses.replace(options, ...)) or leave options out")
+    return options
+
+
 def _file_bytes(path: Path) -> int:
     total = 0
     for suffix in ("", "-wal"):
@@ -577,28 +608,28 @@ def _refuse_other_settings(
     existing file was built with."""
     if gap is not None and float(gap) != stored.gap:
         raise ViewDBError(
-            f"was built with --gap {stored.gap:g}, not {gap:g}; "
+            f"was built with `gap` {stored.gap:g}, not {gap:g}; "
             "use a new database file for another grid", path,
         )
     if image_size is not None and image_size != stored.render.image_size:
         raise ViewDBError(
-            f"was built with --image-size {stored.render.image_size}, not {image_size}",
+            f"was built with `image_size` {stored.render.image_size}, not {image_size}",
             path,
         )
     if client_gap is not None and float(client_gap) != stored.client_gap:
         raise ViewDBError(
-            f"was built with --client-gap {stored.client_gap:g}, not {client_gap:g}", path
+            f"was built with `client_gap` {stored.client_gap:g}, not {client_gap:g}", path
         )
     if perspective is not None and wanted.perspective.distances != stored.perspective.distances:
         raise ViewDBError(
-            f"was built with --perspective {_distances(stored.perspective.distances)}, "
+            f"was built with `perspective` {_distances(stored.perspective.distances)}, "
             f"not {_distances(wanted.perspective.distances)}", path,
         )
     if perspective_gap is not None:  # as the file's own grid would round it
         asked = replace(stored, perspective=replace(stored.perspective, gap=wanted.perspective.gap))
         if asked.perspective_gap != stored.perspective_gap:
             raise ViewDBError(
-                f"was built with --perspective-gap {stored.perspective_gap:g}, "
+                f"was built with `perspective_gap` {stored.perspective_gap:g}, "
                 f"not {asked.perspective_gap:g}", path,
             )
 

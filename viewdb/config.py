@@ -17,7 +17,7 @@ from typing import Any
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "ClientFileConfig", "FeatureConfig", "HttpConfig",
     "ImageConfig", "IndexConfig",
-    "InputLimits", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "PosingConfig", "RayIngestConfig",
+    "InputLimits", "MatchedPoseConfig", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "RayIngestConfig",
     "RecognitionConfig",
     "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
     "SkimConfig",
@@ -997,7 +997,7 @@ class SearchConfig:
 
 
 @dataclass(frozen=True)
-class PosingConfig:
+class MatchedPoseConfig:
     """How a recognised match is posed from its catalogue (:mod:`viewdb.pose.matched`)."""
 
     #: Most candidate poses examined per result (a sphere has every grid view as one).

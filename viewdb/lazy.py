@@ -6,6 +6,10 @@ trimesh the first time one of its attributes is read (``trimesh.load(...)``,
 and hands every attribute over from the real module. Importing the module that holds it
 costs nothing, so ``import viewdb`` and ``viewdb --help`` do not pay for libraries a
 command never uses (trimesh alone takes about as long to import as the rest of viewdb).
+
+A core install (``pip install viewdb``) queries prebuilt files; building, serving and Ray
+come with extras. :func:`missing_extra` names the extra when one of their modules is
+missing, so the CLI can say what to install instead of printing a traceback.
 """
 
 from __future__ import annotations
@@ -14,7 +18,16 @@ import importlib
 import types
 from typing import Any
 
-__all__ = ["lazy_module"]
+__all__ = ["EXTRAS", "lazy_module", "missing_extra"]
+
+#: The extra (``pip install 'viewdb[EXTRA]'``) that installs each third-party module a
+#: core install lacks.
+EXTRAS = {
+    **dict.fromkeys(("trimesh", "pyrender", "OpenGL", "fast_simplification"), "ingest"),
+    **dict.fromkeys(("fastapi", "starlette", "uvicorn", "multipart", "python_multipart"), "serve"),
+    "ray": "ray",
+    "matplotlib": "bench",
+}
 
 
 class _LazyModule(types.ModuleType):
@@ -32,3 +45,13 @@ def lazy_module(name: str) -> Any:
     """A stand-in for module ``name`` that imports it when an attribute is first read
     (an ``ImportError`` surfaces then, not at definition)."""
     return _LazyModule(name)
+
+
+def missing_extra(exc: BaseException) -> str | None:
+    """What to install, in one line, when ``exc`` failed to import a module that only an
+    extra installs (:data:`EXTRAS`); None for any other error."""
+    name = getattr(exc, "name", None) if isinstance(exc, ImportError) else None
+    extra = EXTRAS.get((name or "").split(".")[0])
+    if extra is None:
+        return None
+    return f"this needs {name}, which is not installed: pip install 'viewdb[{extra}]'"

@@ -10,7 +10,9 @@ them with every plan, with and without pose and with a gravity hint (the search 
 circular shifts), draws a result over the photo (the overlay's scan conversion,
 :mod:`viewdb.recognition.raster`) and re-ranks by silhouette fits through intrinsics (their
 scan conversion, :mod:`viewdb.catalogue.coverage`). ``install.sh`` runs it, so an installed
-viewdb never compiles during a query; :func:`kernel_report` tells what a process compiled.
+viewdb never compiles during a query; :func:`kernel_report` tells what a process compiled,
+and :func:`compiling` tells a caller each kernel as it starts compiling (``viewdb query``
+says so on a terminal, so a fresh install's first query does not wait in silence).
 
 >>> report = warm_up()                                   # doctest: +SKIP
 >>> report.compiled, report.cached                        # doctest: +SKIP
@@ -21,7 +23,8 @@ from __future__ import annotations
 
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +32,7 @@ import numpy as np
 
 from .errors import ViewDBError
 
-__all__ = ["KernelReport", "kernel_report", "warm_up"]
+__all__ = ["KernelReport", "compiling", "kernel_report", "warm_up"]
 
 @dataclass(frozen=True)
 class KernelReport:
@@ -61,6 +64,30 @@ def kernel_report() -> KernelReport:
             compiled += [kernel] * sum(stats.cache_misses.values())
             cached += sum(stats.cache_hits.values())
     return KernelReport(len(compiled), cached, tuple(sorted(compiled)))
+
+
+@contextmanager
+def compiling(callback: Callable[[str], None]) -> Iterator[None]:
+    """For the block, ``callback("module.kernel")`` as each viewdb kernel starts compiling:
+    one numba did not find in its cache (a fresh install's first query, or a changed
+    source). Kernels loaded from the cache are not heard."""
+    from .jit import njit  # noqa: F401  # numba imported as the kernels import it (jit.py)
+
+    # isort: split
+    from numba.core import event
+
+    class Heard(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            func = getattr(ev.data.get("dispatcher"), "py_func", None)
+            module = getattr(func, "__module__", None) or ""
+            if func is not None and (module == "viewdb" or module.startswith("viewdb.")):
+                callback(f"{module}.{func.__name__}")
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    with event.install_listener("numba:compile", Heard()):
+        yield
 
 
 def _meshes(folder: Path) -> list[Path]:

@@ -88,15 +88,15 @@ class BenchConfig:
             return ViewDBError(message)
 
         if self.queries < 1:
-            raise bad(f"--queries must be at least 1, got {self.queries}")
+            raise bad(f"`queries` must be at least 1, got {self.queries}")
         if not 1 <= self.k <= 100:
-            raise bad(f"--k must be in [1, 100], got {self.k}")
+            raise bad(f"`k` must be in [1, 100], got {self.k}")
         if self.jobs < 1:
-            raise bad(f"--jobs must be at least 1, got {self.jobs}")
+            raise bad(f"`jobs` must be at least 1, got {self.jobs}")
         if self.subset is not None and self.subset < 1:
-            raise bad(f"--subset must be at least 1, got {self.subset}")
+            raise bad(f"`subset` must be at least 1, got {self.subset}")
         if not self.gaps:
-            raise bad("--gaps needs at least one client gap")
+            raise bad("`gaps` needs at least one client gap")
         for p in self.protocols + self.timing_protocols:
             if p not in PROTOCOLS:
                 raise bad(f"protocol must be one of {', '.join(PROTOCOLS)}, got {p!r}")

@@ -78,7 +78,7 @@ def _check_out(config: BenchConfig, names: list[str]) -> None:
             changed = sorted(k for k in fingerprint if old.get(k) != fingerprint[k])
             raise ViewDBError(
                 f"holds results of another run (different {', '.join(changed)}); "
-                "use another --out or delete it", config.out,
+                "use another `out` or delete it", config.out,
             )
     run.write_text(json.dumps({"fingerprint": fingerprint, "config": config.to_dict()}, indent=2))
 

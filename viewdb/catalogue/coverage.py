@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..search.jit import njit
+from ..jit import njit
 from ..typed import Intrinsics
 
 __all__ = ["SUBPIXELS", "MeshTriangles", "cover", "overlap", "overlap_kernel", "silhouette", "snapped"]

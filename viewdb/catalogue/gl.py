@@ -41,7 +41,11 @@ def pyrender_module() -> ModuleType:
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
         try:
             import pyrender
-        except Exception as exc:  # ImportError, OpenGL platform errors, missing libEGL
+        except ModuleNotFoundError as exc:
+            if exc.name and exc.name.split(".")[0] in ("pyrender", "OpenGL", "trimesh"):
+                raise  # not installed (the ingest extra): lazy.missing_extra names it
+            raise RenderError(f"cannot load pyrender: {exc}") from exc
+        except Exception as exc:  # OpenGL platform errors, missing libEGL
             platform = os.environ.get("PYOPENGL_PLATFORM")
             raise RenderError(
                 f"cannot load pyrender with PYOPENGL_PLATFORM={platform}: {exc}; "

@@ -141,9 +141,10 @@ def load_mesh(
             path,
         )
     _check_references(path, options)
+    load = trimesh.load  # imports trimesh: a core install without it fails here, not below
     with interrupts_held():  # see the module doc
         try:
-            loaded = trimesh.load(str(path), process=False)
+            loaded = load(str(path), process=False)
         except Exception as exc:  # trimesh raises many types for bad files
             raise MeshError(f"cannot be read as a mesh: {_short(exc)}", path) from exc
         if options.max_faces is not None:
@@ -151,7 +152,7 @@ def load_mesh(
             if faces > options.max_faces:
                 raise MeshError(
                     f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
-                    "decimate it first or raise the cap (--max-faces)", path,
+                    "decimate it first or raise the cap (`max_faces`)", path,
                 )
         digest = content_hash or file_hash(path)
         return _normalise(loaded, name or path.stem, str(path), digest, path)
@@ -221,16 +222,17 @@ def _check_references(path: Path, options: LoadOptions) -> None:
         raise MeshError(
             f"names texture file {missing[0]!r}, which does not exist"
             + (f" (and {len(missing) - 1} more)" if len(missing) > 1 else "")
-            + "; restore it, or ingest untextured with --allow-missing-textures",
+            + "; restore it, or ingest untextured with `allow_missing_textures`=True",
             path,
         )
 
 
 def mesh_from_glb(data: bytes, name: str) -> NormalisedMesh:
     """Rebuild an already normalised mesh from the GLB blob a database stores."""
+    load = trimesh.load  # imports trimesh: a core install without it fails here, not below
     with interrupts_held():  # see the module doc
         try:
-            loaded = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
+            loaded = load(io.BytesIO(data), file_type="glb", process=False)
         except Exception as exc:
             raise MeshError(f"stored mesh of object {name!r} cannot be decoded: {_short(exc)}") from exc
         scene = _as_scene(loaded, name)

@@ -2,7 +2,7 @@
 later stages (recognition, pose) read it through.
 
 :class:`CatalogueReader` is what recognition and pose need of a catalogue; the one that
-reads a viewdb file is :class:`viewdb.storage.catalogue.StoredCatalogue`. Depending on the
+reads a viewdb file is :class:`viewdb.storage.stored_catalogue.StoredCatalogue`. Depending on the
 protocol, not on the file, keeps the stages free of storage and of the facade.
 """
 

@@ -48,6 +48,7 @@ from collections.abc import AsyncIterator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -59,7 +60,6 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from .. import __version__
 from ..api import ViewDB
 from ..api import open as open_db
 from ..config import HttpConfig, WebConfig
@@ -243,7 +243,7 @@ def create_app(
     server = _Server(Path(db_path), token, max_body, max_image_body, http.max_pixels)
     app = FastAPI(
         title="viewdb server",
-        version=__version__,
+        version=version("viewdb"),
         description="The server tier of viewdb's client-server plans (CS1, CS2) and pose "
                     "estimation, over a full database opened read-only.",
         lifespan=server.lifespan,
@@ -365,7 +365,7 @@ def _routes(server: _Server) -> APIRouter:
     async def info() -> dict[str, Any]:
         data, _ = await run(lambda db: db.info().to_dict())
         data.pop("path", None)
-        return {**data, "viewdb": __version__, "role": "full", "read_only": True,
+        return {**data, "viewdb": version("viewdb"), "role": "full", "read_only": True,
                 "limits": {"max_k": MAX_K, "max_band": MAX_BAND, "max_curves": MAX_CURVES,
                            "max_body": server.max_body,
                            "max_image_body": server.max_image_body, "max_pixels": server.max_pixels,

@@ -134,7 +134,7 @@ def _open_shards(folder: Path, workers: int, ray: str) -> int:
 
     if workers != 1:
         raise ViewDBError("a sharded catalogue is served by one worker (its shards answer in "
-                          "parallel on Ray); drop --workers", folder)
+                          "parallel on Ray); serve it with `workers` 1", folder)
     os.environ[ENV_RAY] = ray
     return len(open_sharded(folder, ray).objects())
 

@@ -159,7 +159,7 @@ class PoseRequest:
     matches: list[Candidate]
     intrinsics: Intrinsics | None = None
     #: Per match, the query's distance curve at the in-plane turn that matched (its
-    #: nearest views add pose candidates, :class:`viewdb.config.PosingConfig`), or None.
+    #: nearest views add pose candidates, :class:`viewdb.config.MatchedPoseConfig`), or None.
     curves: list[np.ndarray | None] | None = field(default=None, repr=False)
     #: Fit every match so they can be ranked by silhouette IoU (with intrinsics).
     rerank: bool = False

@@ -26,7 +26,7 @@ from ..camera import normalise_angle
 from ..catalogue.appearance import margin_pixels
 from ..catalogue.pinhole import get_pinhole_renderer
 from ..catalogue.reading import CandidatePose, CatalogueReader
-from ..config import PosingConfig, SilhouetteConfig
+from ..config import MatchedPoseConfig, SilhouetteConfig
 from ..errors import QueryError, ViewDBError
 from ..search.plans import Candidate
 from .estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose, sift_estimate
@@ -43,11 +43,12 @@ __all__ = [
 #: A pose start: rotation and translation (normalised units).
 Start = tuple[NDArray[np.float64], NDArray[np.float64]]
 
-POSING = PosingConfig()
+POSING = MatchedPoseConfig()
 
 
 def _candidate_poses(
-    catalogue: CatalogueReader, match: Candidate, curve: NDArray[np.float64] | None, posing: PosingConfig,
+    catalogue: CatalogueReader, match: Candidate, curve: NDArray[np.float64] | None,
+    posing: MatchedPoseConfig,
 ) -> list[CandidatePose]:
     """The matched view's same-shape poses (the matched view first), then those of the
     object's nearest views by ``curve``."""
@@ -127,7 +128,7 @@ def pose_match(
     catalogue: CatalogueReader, query: QueryView, match: Candidate, config: PoseConfig,
     intrinsics: Intrinsics | None, search: SilhouetteConfig | None = None,
     starts: Sequence[Start] = (), curve: NDArray[np.float64] | None = None,
-    posing: PosingConfig = POSING, *, sift: bool = True,
+    posing: MatchedPoseConfig = POSING, *, sift: bool = True,
 ) -> PoseEstimate:
     """The pose of one match (module doc); ``curve``: the query's curve at the in-plane
     turn that matched (adds the nearest views' poses as candidates). Without ``sift`` the
@@ -168,7 +169,7 @@ def pose_match(
 def pose_silhouette(
     catalogue: CatalogueReader, name: str, query: QueryView, config: PoseConfig,
     intrinsics: Intrinsics, search: SilhouetteConfig | None, starts: Sequence[Start],
-    candidate: int = 0, posing: PosingConfig = POSING,
+    candidate: int = 0, posing: MatchedPoseConfig = POSING,
     directions: Sequence[tuple[float, float]] | None = None,
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
@@ -227,7 +228,7 @@ def in_mesh_units(catalogue: CatalogueReader, name: str, estimate: PoseEstimate)
 
 def refine_shape(
     catalogue: CatalogueReader, name: str, query: QueryView, start: CandidateView,
-    estimate: PoseEstimate, config: PoseConfig, posing: PosingConfig = POSING,
+    estimate: PoseEstimate, config: PoseConfig, posing: MatchedPoseConfig = POSING,
 ) -> PoseEstimate:
     """Texture-less objects: the viewing direction off the grid, from the fits of the grid
     views around the best outline match (``posing.shape_refine``: ``"interpolate"``, from
@@ -260,7 +261,7 @@ def _rotation_vector(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def interpolate_shape(
     catalogue: CatalogueReader, name: str, query: QueryView, start: CandidateView,
-    estimate: PoseEstimate, config: PoseConfig, posing: PosingConfig = POSING,
+    estimate: PoseEstimate, config: PoseConfig, posing: MatchedPoseConfig = POSING,
 ) -> PoseEstimate:
     """Texture-less objects: the viewing direction off the grid without rendering.
 
@@ -315,11 +316,11 @@ def interpolate_shape(
 
 def walk_shape(
     catalogue: CatalogueReader, name: str, query: QueryView, start: CandidateView,
-    estimate: PoseEstimate, config: PoseConfig, posing: PosingConfig = POSING,
+    estimate: PoseEstimate, config: PoseConfig, posing: MatchedPoseConfig = POSING,
 ) -> PoseEstimate:
     """Texture-less objects: walk the viewing direction off the grid, rendering the mesh
     around the best outline match (steps halving from half the grid gap down to
-    :attr:`~viewdb.config.PosingConfig.shape_refine_step`) and keeping whichever outline
+    :attr:`~viewdb.config.MatchedPoseConfig.shape_refine_step`) and keeping whichever outline
     fits the query best (a render per step: slow)."""
     h, v, best = start.azimuth, start.elevation, estimate
     step = catalogue.config.gap / 2.0
@@ -352,10 +353,10 @@ def _iou(estimate: PoseEstimate | None) -> float:
 def _refit_best(
     catalogue: CatalogueReader, query: QueryView, matches: Sequence[Candidate],
     out: list[tuple[PoseEstimate | None, str | None]], config: PoseConfig, intrinsics: Intrinsics,
-    posing: PosingConfig,
+    posing: MatchedPoseConfig,
 ) -> None:
     """Fit again, with the full silhouette search started from the quick pose, the best
-    :attr:`~viewdb.config.PosingConfig.rerank_full` quick fits: the matches are ranked by
+    :attr:`~viewdb.config.MatchedPoseConfig.rerank_full` quick fits: the matches are ranked by
     their quick fits (every one fitted alike), and those best few again among themselves
     by their full fits, which also sharpen their poses."""
     ranked = sorted(range(len(matches)), key=lambda i: (-_iou(out[i][0]), i))
@@ -377,7 +378,7 @@ def pose_matches(
     catalogue: CatalogueReader, query: QueryView, matches: Sequence[Candidate],
     intrinsics: Intrinsics | None = None, config: PoseConfig | None = None,
     curves: Sequence[NDArray[np.float64] | None] | None = None, *, rerank: bool = False,
-    posing: PosingConfig = POSING,
+    posing: MatchedPoseConfig = POSING,
 ) -> list[tuple[PoseEstimate | None, str | None]]:
     """``(pose, None)`` or ``(None, why not)`` for each match (a server's answer to a
     ``pose`` request). ``curves``: per match, the query's curve at the turn that matched
@@ -409,7 +410,7 @@ def pose_matches(
 
 def pose_known(
     catalogue: CatalogueReader, query: QueryView, name: str, intrinsics: Intrinsics,
-    config: PoseConfig | None = None, posing: PosingConfig = POSING,
+    config: PoseConfig | None = None, posing: MatchedPoseConfig = POSING,
 ) -> PoseEstimate:
     """The pinhole pose of a *known* object ``name`` from the query's silhouette alone (no
     recognition): OpenCV frame, the mesh's own units."""

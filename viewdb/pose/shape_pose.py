@@ -17,7 +17,7 @@ from ..camera import normalise_angle
 from ..catalogue.features import largest_contour
 from ..config import PoseConfig
 from ..errors import FeatureError, PoseError
-from ..search.jit import njit
+from ..jit import njit
 from .edges import QueryDetail, ViewDetail, view_detail
 from .frames import (
     CAMERA_DISTANCE,

@@ -51,7 +51,7 @@ from ..catalogue.coverage import MeshTriangles, overlap, overlap_kernel
 from ..catalogue.pinhole import Window
 from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
-from ..search.jit import njit
+from ..jit import njit
 from ..typed import Intrinsics
 from .frames import GL_TO_CV, view_rotation
 from .shape_pose import align_shape, outline_of
@@ -69,7 +69,7 @@ __all__ = [
 
 #: A quicker search, for checking many candidate objects: started from the best 5
 #: alignments of the match's candidate poses' silhouettes (at most
-#: :attr:`~viewdb.config.PosingConfig.max_candidates` views, already ranked by the outline
+#: :attr:`~viewdb.config.MatchedPoseConfig.max_candidates` views, already ranked by the outline
 #: search; else 40 evenly spread directions), no fine step, about 4x fewer renders, of a
 #: mesh decimated further.
 QUICK = SilhouetteConfig(directions=40, start_directions="candidates", coarse_starts=5, fine_starts=0,

@@ -9,7 +9,7 @@ from numpy.typing import NDArray
 
 from ..search.plans import Candidate
 from ..search.shifts import ShiftWindow
-from ..storage.catalogue import StoredCatalogue
+from ..storage.stored_catalogue import StoredCatalogue
 
 __all__ = ["ClientTier"]
 

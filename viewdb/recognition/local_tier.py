@@ -34,7 +34,7 @@ from ..search.plans import (
     refine,
     walk,
 )
-from ..storage.catalogue import StoredCatalogue
+from ..storage.stored_catalogue import StoredCatalogue
 from .server_tier import Exchange
 
 __all__ = ["LocalServerTier"]
@@ -43,7 +43,7 @@ T = TypeVar("T")
 
 
 class LocalServerTier:
-    """The server tier of a full :class:`~viewdb.storage.catalogue.StoredCatalogue`."""
+    """The server tier of a full :class:`~viewdb.storage.stored_catalogue.StoredCatalogue`."""
 
     remote = False
 
@@ -59,8 +59,8 @@ class LocalServerTier:
     def _full_tier_only(self) -> None:
         if self.catalogue.role == "client":
             raise QueryError(
-                "is a client database (no full tier): give the full database as --db, or a "
-                "server", self.catalogue.path,
+                "is a client database (no full tier): query the full database (`db`), "
+                "or give a `server`", self.catalogue.path,
             )
 
     def _exchange(self, call: Callable[[], T], request: Any = None,

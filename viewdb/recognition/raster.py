@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.coverage import snapped
-from ..search.jit import njit
+from ..jit import njit
 
 __all__ = ["face_ids"]
 

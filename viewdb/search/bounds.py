@@ -124,7 +124,7 @@ import numbers
 import numpy as np
 from numpy.typing import NDArray
 
-from .jit import njit
+from ..jit import njit
 
 __all__ = [
     "cascade_dtw",

@@ -147,7 +147,7 @@ def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSou
 
 
 def fast_knn(
-    curves: NDArray[np.floating], source: TierSource, index: FastIndex | None, k: int, r: int,
+    curves: NDArray[np.floating], source: TierSource, index: FastIndex | None, k: int, band: int,
     shortlist: int, *, upper: float = math.inf, known: Mapping[int, float] | None = None,
 ) -> tuple[list[Neighbour], SearchStats]:
     """The k nearest objects to a stack of curves ``(T, N)`` among the ``shortlist``
@@ -159,7 +159,7 @@ def fast_knn(
     stack = np.ascontiguousarray(np.atleast_2d(curves), dtype=np.float64)
     block = SearchConfig().stack_block
     if index is None or shortlist >= source.n_objects:
-        found, stats = knn_stack(stack, source, k, r, upper=upper, known=known, block=block)
+        found, stats = knn_stack(stack, source, k, band, upper=upper, known=known, block=block)
         stats.extra.update(shortlisted=float(source.n_objects), fast_index=float(index is not None))
         return found, stats
     start = time.perf_counter()
@@ -168,6 +168,6 @@ def fast_knn(
     ann_ms = (time.perf_counter() - start) * 1e3
     listed = set(objects.tolist())
     bounds = {o: d for o, d in (known or {}).items() if o in listed}
-    found, stats = knn_stack(stack, subset, k, r, upper=upper, known=bounds, block=block)
+    found, stats = knn_stack(stack, subset, k, band, upper=upper, known=bounds, block=block)
     stats.extra.update(shortlisted=float(len(objects)), ann_ms=ann_ms, fast_index=1.0)
     return found, stats

@@ -12,7 +12,7 @@ everything below them (:mod:`viewdb.search.bounds` proves the chain):
 
 The queue and the refinement run compiled (:mod:`viewdb.search.refine`, which also says
 when the search stops and why the answer is exact). The exact distance of a view is
-``min(DTW(q, c), DTW(q, reverse(c)))`` with a Sakoe–Chiba band of ``r`` samples; the
+``min(DTW(q, c), DTW(q, reverse(c)))`` with a Sakoe–Chiba band of ``band`` samples; the
 result is the ``k`` distinct objects with the smallest distances, each with its best
 view.
 
@@ -309,12 +309,12 @@ class TierArrays:
         return self.names.index(name) if name in self.names else None
 
 
-def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, r: int) -> list[Neighbour]:
+def brute_force_knn(query: NDArray[np.floating], tier: TierArrays, k: int, band: int) -> list[Neighbour]:
     """The reference: exact distance to every view, best view per object, top k objects."""
     q = np.asarray(query, dtype=np.float64)
     best: dict[int, Neighbour] = {}
     for i, c in enumerate(tier.curves):
-        d, dm = dtw(q, c, r), dtw(q, mirror_curve(c), r)
+        d, dm = dtw(q, c, band), dtw(q, mirror_curve(c), band)
         dist, mirrored = (dm, True) if dm < d else (d, False)
         o = int(tier.owner[i])
         if o not in best or dist < best[o].distance:
@@ -331,7 +331,7 @@ def knn(
     query: NDArray[np.floating],
     source: TierSource,
     k: int,
-    r: int,
+    band: int,
     *,
     upper: float = math.inf,
     known: Mapping[int, float] | None = None,
@@ -366,16 +366,16 @@ def knn(
     if shifts is not None:
         q = np.asarray(query, dtype=np.float64)
         starts = shifts.shifts(len(q))
-        found, stats = knn_stack(shifted_curves(q, starts), source, k, r, upper=upper, known=known,
+        found, stats = knn_stack(shifted_curves(q, starts), source, k, band, upper=upper, known=known,
                                  initial_radius=initial_radius, block=block, only=only)
         return [replace(nb, shift=int(starts[nb.shift])) for nb in found], stats
-    qb = QueryBoxes.of(query, r)
+    qb = QueryBoxes.of(query, band)
     envelope_pair = (qb.lower, qb.upper)
     mirrored_pair = (qb.mirrored_lower, qb.mirrored_upper)
 
     def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
         return refine_groups(
-            qb.curve, r, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
+            qb.curve, band, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
             qb.segments, qb.mirrored_segments, order, keys, pos, ready, stop_key,
             source.group_start, source.group_count, source.group_owner, source.row_owner,
             *rows, search.bound, search.exact, search.exact_row, search.exact_mirrored, k,
@@ -400,7 +400,7 @@ def knn_stack(
     curves: NDArray[np.floating],
     source: TierSource,
     k: int,
-    r: int,
+    band: int,
     *,
     upper: float = math.inf,
     known: Mapping[int, float] | None = None,
@@ -419,7 +419,7 @@ def knn_stack(
     object); the answer is the same. Default: :class:`~viewdb.config.SearchConfig`'s, at
     most the machine's CPUs, and one for a small source (:func:`search_threads`)."""
     config = SearchConfig()
-    stack = CurveQuery.of(curves, r, config.shift_block if block is None else block)
+    stack = CurveQuery.of(curves, band, config.shift_block if block is None else block)
     boxes = source.group_boxes()
     group_arrays = (source.group_start, source.group_count, source.group_owner, source.row_owner)
 

@@ -49,8 +49,8 @@ import math
 
 import numpy as np
 
+from ..jit import njit
 from .bounds import cascade_env_kernel, curve_box32, fourier_dist2, lb_keogh2, lb_paa2
-from .jit import njit
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, heap_pop, heap_push, kth_distance, load_row, widen
 
 __all__ = ["FULL", "refine_stack", "scan_stack"]

@@ -47,8 +47,8 @@ import math
 
 import numpy as np
 
+from ..jit import njit
 from .bounds import cascade_env_kernel, dtw_kernel, fourier_dist2, lb_keogh2, lb_paa2
-from .jit import njit
 
 __all__ = ["DONE", "EXHAUSTED", "NEED", "RADIUS", "WIDEN_ABS", "WIDEN_REL", "refine_groups", "scan_all"]
 

@@ -68,9 +68,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import QueryError
+from ..jit import njit
 from .bounds import envelope_box, fourier_coordinates, outward32, paa_edges
 from .grouping import INDEXED_COEFFICIENTS, indexed_rows
-from .jit import njit
 
 __all__ = ["CurveQuery", "ShiftWindow", "shift_turn", "shifted", "shifted_curves", "turn_window"]
 

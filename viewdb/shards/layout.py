@@ -80,11 +80,11 @@ def read_manifest(folder: str | Path) -> Manifest:
     folder = Path(folder)
     path = folder / MANIFEST
     if not folder.is_dir():
-        raise StorageError("is not a folder of shards (viewdb shard --out)", folder)
+        raise StorageError("is not a folder of shards (as split_catalogue's `out`)", folder)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise StorageError("has no manifest.json: not a sharded catalogue (viewdb shard --out)",
+        raise StorageError("has no manifest.json: not a sharded catalogue (as split_catalogue's `out`)",
                            folder) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise StorageError(f"is unreadable: {exc}", path) from None
@@ -113,9 +113,10 @@ def write_manifest(manifest: Manifest, folder: Path | None = None) -> None:
     os.replace(partial, folder / MANIFEST)
 
 
-def check_new_folder(out: Path, option: str = "--out") -> None:
-    """Refuse ``out`` (given as ``option``) as the folder of a new sharded catalogue
-    unless it is missing or empty and its parent exists."""
+def check_new_folder(out: Path, option: str = "`out`") -> None:
+    """Refuse ``out`` as the folder of a new sharded catalogue unless it is missing or
+    empty and its parent exists; ``option``: the caller's parameter that gave it, in
+    backticks, as library errors name parameters (the CLI shows its flag)."""
     if out.exists() and not out.is_dir():
         raise ViewDBError(f"exists and is not a folder; choose another {option}", out)
     if out.is_dir() and any(out.iterdir()):
@@ -133,7 +134,7 @@ def split_catalogue(
     ``fast`` index; ``progress(done, shards)``."""
     source, out = Path(source), Path(out)
     if not 1 <= shards <= MAX_SHARDS:
-        raise ViewDBError(f"--shards must be in [1, {MAX_SHARDS}], got {shards}")
+        raise ViewDBError(f"`shards` must be in [1, {MAX_SHARDS}], got {shards}")
     check_new_folder(out)
     names = _object_names(source)
     partial = out.with_name(f".{out.name}.partial")

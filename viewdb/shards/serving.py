@@ -96,5 +96,5 @@ class ShardedCatalogue:
 
     def __getattr__(self, name: str) -> Any:
         raise ViewDBError(f"a sharded catalogue does not serve {name!r} (the web page's photo queries, "
-                          "meshes and renders need one file): query with --server from a client",
+                          "meshes and renders need one file): query it through a `server` from a client file",
                           self.path)

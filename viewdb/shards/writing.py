@@ -63,7 +63,7 @@ def open_shards(folder: str | Path, *, count: int | None = None, **settings: Any
     if not (folder / MANIFEST).exists():
         if count is None:
             raise ViewDBError("is not a sharded catalogue yet: give the number of shards to create "
-                              "one (--shard-count N)", folder)
+                              "one (`count` N)", folder)
         _create(folder, count, settings)
     manifest = read_manifest(folder)
     if count is not None and count != manifest.shards:
@@ -84,8 +84,8 @@ def open_shards(folder: str | Path, *, count: int | None = None, **settings: Any
 def _create(folder: Path, count: int, settings: dict[str, Any]) -> None:
     """A new sharded catalogue of ``count`` empty shard files in ``folder``."""
     if not 1 <= count <= MAX_SHARDS:
-        raise ViewDBError(f"--shard-count must be in [1, {MAX_SHARDS}], got {count}")
-    check_new_folder(folder, "--shards")
+        raise ViewDBError(f"`count` must be in [1, {MAX_SHARDS}], got {count}")
+    check_new_folder(folder, "`folder`")
     partial = folder.with_name(f".{folder.name}.partial")
     shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir()

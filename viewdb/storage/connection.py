@@ -306,7 +306,7 @@ class Database:
                 return
             raise UpgradeNeeded(
                 f"has schema revision {current}, older than this viewdb's {s.SCHEMA_REVISION}: "
-                "open it once without read-only (e.g. viewdb info --db FILE) to upgrade it",
+                "open it once writable (`read_only` False) to upgrade it",
                 self.path,
             )
         from alembic import command

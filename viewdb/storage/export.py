@@ -58,7 +58,7 @@ def export_client(
     config = _common_config(sources)
     source = sources[0]
     if out.exists():
-        raise ViewDBError("already exists; remove it or choose another --out", out)
+        raise ViewDBError("already exists; remove it or choose another `out`", out)
     if not out.parent.is_dir():
         raise ViewDBError("its folder does not exist", out)
     try:

@@ -1,5 +1,5 @@
 """A real ``viewdb serve`` in a subprocess on a free loopback port, and raw HTTP requests
-(tests and ``benchmarks/http_load.py``)."""
+(the tests and the HTTP benchmarks)."""
 
 from __future__ import annotations
 
@@ -18,8 +18,16 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from tests.interrupting import deliverable_sigint
 
+def deliverable_sigint() -> None:
+    """Run in the child before exec: SIGINT at its default disposition and unblocked,
+    whatever this process inherited. A parent that ignores SIGINT (a shell's background
+    job, nohup) passes SIG_IGN on, and Python then installs no Ctrl-C handler; a parent
+    that blocks it (some CI runners) passes the blocked mask on, and the signal stays
+    pending. Either way a user's viewdb would rightly not be interrupted, so its children
+    get what a terminal gives a foreground process."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 class ServerProcess:
     """``viewdb serve --db DB --port 0 ...`` started on enter (returns once /health

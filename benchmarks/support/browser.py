@@ -40,7 +40,8 @@ def screenshot_on_failure(driver, name: str) -> Iterator[None]:
     try:
         yield
     except BaseException:
-        folder = Path(os.environ.get("VIEWDB_SCREENSHOTS", Path(tempfile.gettempdir()) / "viewdb-screenshots"))
+        default = Path(tempfile.gettempdir()) / "viewdb-screenshots"
+        folder = Path(os.environ.get("VIEWDB_SCREENSHOTS", default))
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}.png"
         driver.save_screenshot(str(path))
@@ -64,7 +65,8 @@ def open_with_token(driver, url: str, token: str | None = None) -> None:
 
     driver.get(url + "/")
     wait(driver, lambda d: js(d, "return document.readyState") == "complete")
-    wait(driver, lambda d: d.find_element(By.ID, "server").text or d.find_element(By.ID, "token-panel").is_displayed())
+    wait(driver, lambda d: (d.find_element(By.ID, "server").text
+                            or d.find_element(By.ID, "token-panel").is_displayed()))
     if token and driver.find_element(By.ID, "token-panel").is_displayed():
         driver.find_element(By.ID, "token").send_keys(token)
         driver.find_element(By.CSS_SELECTOR, "#token-form button").click()
