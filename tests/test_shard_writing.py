@@ -26,9 +26,11 @@ SETTINGS = {"gap": 90, "image_size": 64}
 
 
 def _rows(path):
-    """Every row of every table of a SQLite file, table by table (the schema too),"""
+    """Every row of every table of a SQLite file, table by table (the schema too), but the
+    tiers' stamped keys (derived from the index's generation)"""
     with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
-        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")]
+        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'"
+                                             " AND name != 'tier_stamps' ORDER BY name")]
         # but the index's generation, a fresh token on every write
         return {t: conn.execute(f'SELECT * FROM "{t}"' + (" WHERE key != 'index_generation'" if t == "settings"
                                                           else "")).fetchall() for t in tables}, \
