@@ -98,6 +98,8 @@ class ShardedServerTier:
         actor = ray.remote(_Host).options(num_cpus=self.config.actor_cpus,
                                           max_restarts=self.config.max_restarts, max_task_retries=0)
         self.health = ShardHealth(self.manifest.files, self.config.retry_after)
+        #: What each shard described when the tier opened (None until then).
+        self._described: list[dict[str, Any]] | None = None
         self.actors = [actor.remote(str(f), i, self.config.check_at_start)
                        for i, f in enumerate(self.manifest.files)]
         try:
@@ -139,6 +141,7 @@ class ShardedServerTier:
             return f"its restarted actor does not answer yet ({type(exc).__name__})"
         if now.get("error"):
             return f"its restarted actor refused the file: {now['error']}"
+        assert self._described is not None
         was = self._described[shard]
         if any(now[key] != was[key] for key in ("versions", "samples", "config")):
             return "its file changed while it was down: restart the server"
@@ -150,8 +153,7 @@ class ShardedServerTier:
 
     def close(self) -> None:
         ray = _ray()
-        if hasattr(self, "health"):
-            self.health.stop()
+        self.health.stop()
         for a in getattr(self, "actors", []):
             ray.kill(a)
         self.actors = []
@@ -179,7 +181,7 @@ class ShardedServerTier:
             dead = self._dead(refs, shards)
             reason = f"did not answer ({type(exc).__name__})"
             restarts = self.config.max_restarts != 0 and actor_state(self.actors[dead]) != "DEAD"
-            if hasattr(self, "_described"):  # open: the watcher readmits it once restarted
+            if self._described is not None:  # open: the watcher readmits it once restarted
                 self.health.down(dead, reason, final=not restarts)
             raise ShardUnavailable(
                 f"shard {dead} {reason}; no partial answer is given: "
