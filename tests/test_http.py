@@ -25,8 +25,17 @@ from tests.conftest import mixed_query_curves
 from tests.serving import ServerProcess, multipart, request
 from viewdb.bench.photos import composite_photo
 from viewdb.http import models
-from viewdb.http.wire import ColourReply, FitReply, PoseReply, PoseRequest, decode_query, encode_query
+from viewdb.http.wire import (
+    ColourRankingReply,
+    ColourReply,
+    FitReply,
+    PoseReply,
+    PoseRequest,
+    decode_query,
+    encode_query,
+)
 from viewdb.pose.estimate import QueryView
+from viewdb.recognition.colour import colour_signature
 from viewdb.search.plans import MAX_K
 from viewdb.storage.ann_file import ann_file_path
 from viewdb_cli.main import main
@@ -106,6 +115,28 @@ def test_remote_queries_equal_local_ones_for_every_plan(tiered_db, files, remote
                 assert t["client"] < 1.0  # nothing runs on the client's tier
             if pose:
                 assert t["pose_server"] > 0
+
+
+def test_a_box_prompted_query_over_http_equals_the_local_one(tiered_db, files, remote):
+    """A box prompt's colour channel (``/colour-ranking``, then the exact search of the
+    objects it names) answers over HTTP as in this process."""
+    _, client_path = files
+    with viewdb.open(tiered_db, create=False) as full, viewdb.open(client_path, read_only=True) as client:
+        img = photo(full, "mug", 47, 22, 30)
+        rows, cols = np.nonzero(np.abs(img.astype(int) - 190).sum(axis=2) > 30)
+        box = [int(cols.min()) - 3, int(rows.min()) - 3, int(cols.max()) + 4, int(rows.max()) + 4]
+        for plan in ("server", "cs1"):
+            local = full.query(img, boxes=[box], k=3, plan=plan, pose=False,
+                               client=client if plan != "server" else None)
+            there = client.query(img, boxes=[box], k=3, plan=plan, pose=False, server=remote)
+            assert there.to_dict()["objects"][0]["results"] == local.to_dict()["objects"][0]["results"], plan
+            assert there.objects[0].results[0].object == "mug"
+            assert there.objects[0].results[0].colour is not None
+        ranked, _ = remote.colour_ranking(colour_signature(img, full.query(
+            img, boxes=[box], pose=False).objects[0].region.mask), 4)
+        here, _ = full.server_tier().colour_ranking(colour_signature(
+            img, full.query(img, boxes=[box], pose=False).objects[0].region.mask), 4)
+        assert ranked == here and ranked[0].object == "mug"
 
 
 def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files, remote):
@@ -260,7 +291,8 @@ def test_health_info_and_openapi(server, remote):
     assert info["limits"]["curve_samples"] == 128 and info["limits"]["max_k"] == MAX_K
     status, schema = request(server.url, "GET", "/openapi.json")
     assert status == 200
-    assert {"/refine", "/walk", "/pose", "/colours", "/fits", "/info", "/health"} <= set(schema["paths"])
+    assert {"/refine", "/walk", "/pose", "/colours", "/colour-ranking", "/fits", "/info",
+            "/health"} <= set(schema["paths"])
     body = schema["paths"]["/refine"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert body["$ref"].split("/")[-1] in schema["components"]["schemas"]
     assert "CandidateModel" in schema["components"]["schemas"]
@@ -651,6 +683,10 @@ BODY_MODELS = {
     "/colours": st.fixed_dictionaries({"views": st.lists(st.fixed_dictionaries(
         {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
          "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=4)}),
+    "/colour-ranking": st.fixed_dictionaries({
+        "signature": _plausible_or(st.lists(st.floats(0, 1), min_size=256, max_size=256),
+                                   st.lists(NASTY_FLOATS, max_size=260)),
+        "n": _plausible_or(st.integers(1, 10), st.integers(-3, 10**6) | st.text(max_size=3))}),
     "/fits": st.fixed_dictionaries({"image": _query_png(), "views": st.lists(st.fixed_dictionaries(
         {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
          "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=3)}),
@@ -706,6 +742,7 @@ BODY_MODELS["/query"] = _query_form()
 #: The documented model of each endpoint's body: every one is fuzzed.
 DOCUMENTED = {"/refine": models.RefineRequestModel, "/walk": models.WalkRequestModel,
               "/pose": models.PoseRequestModel, "/colours": models.ColourRequestModel,
+              "/colour-ranking": models.ColourRankingRequestModel,
               "/fits": models.FitRequestModel, "/overlay": models.OverlayRequestModel,
               "/query": models.WebQueryFormModel}
 
@@ -755,6 +792,10 @@ def test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500(server, path, d
         assert len(PoseReply.from_dict(reply).poses) == len(body["matches"])
     elif path == "/colours":
         assert len(ColourReply.from_dict(reply).signatures) == len(body["views"])
+    elif path == "/colour-ranking":
+        found = ColourRankingReply.from_dict(reply).matches
+        assert len(found) <= body["n"] and all(0 <= m.distance <= 1 for m in found)
+        assert [m.distance for m in found] == sorted(m.distance for m in found)
     elif path == "/query":
         assert 1 <= len(reply["results"]) and reply["image"] and "\x1b" not in reply["image"]
     else:

@@ -138,26 +138,30 @@ def test_the_objects_share_one_decode_and_answer_as_single_queries(scene_db, sce
                 [(m.object, m.distance) for m in entry.results]
 
 
-def test_a_box_prompted_object_is_re_ranked_from_a_deeper_pool(scene_db, scene):
-    """An object cut from a box is searched deeper (``prompt_pool``): its answer is that of
-    a query with its cut-out as the mask and that pool."""
+def test_a_box_prompted_object_without_colour_is_re_ranked_from_a_deeper_pool(scene_db, scene):
+    """An object cut from a box in a photo without colour (no colour channel) is searched
+    deeper (``prompt_pool``): its answer is that of a query with its cut-out as the mask
+    and that pool."""
     from viewdb.config import RecognitionConfig
     from viewdb.recognition.options import QueryOptions
 
     photo, _, masks = scene
+    photo = cv2.cvtColor(cv2.cvtColor(photo, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
     with viewdb.open(scene_db, create=False) as db:
         boxed = db.query(photo, k=2, boxes=[true_box(masks[1])], pose=False).objects[0]
         cut = boxed.region.mask
         deep = db.query(photo, mask=cut, options=QueryOptions(
             k=2, pose=False, recognition=RecognitionConfig(pool=RecognitionConfig().prompt_pool)))
         shallow = db.query(photo, mask=cut, options=QueryOptions(k=2, pose=False))
-    assert [(m.object, m.score) for m in boxed.results] == [(m.object, m.score) for m in deep.results]
+    # (the box's cut-out keeps its holes for the fit, the mask query fills them: nearly equal fits)
+    assert [m.object for m in boxed.results] == [m.object for m in deep.results]
+    assert [m.score for m in boxed.results] == pytest.approx([m.score for m in deep.results], rel=0.01)
     assert shallow.results[0].object == deep.results[0].object == "mug"
 
 
 @pytest.mark.parametrize("prompted, colour, verify, k, expected", [
-    (True, True, True, 2, 40), (False, True, True, 2, 5), (True, False, False, 2, 2),
-    (False, False, True, 7, 7), (True, True, False, 50, 50),
+    (True, True, True, 2, 5), (True, False, True, 2, 40), (False, True, True, 2, 5),
+    (True, False, False, 2, 2), (False, False, True, 7, 7), (True, True, False, 50, 50),
 ])
 def test_how_many_objects_the_plan_finds_before_the_re_rankings(prompted, colour, verify, k, expected):
     from viewdb.recognition.options import QueryOptions

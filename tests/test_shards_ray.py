@@ -63,6 +63,31 @@ def test_shard_actors_answer_curves_and_photos_as_the_single_file(local_ray, tie
         tier.close()
 
 
+def test_the_colour_channel_over_shards_answers_as_the_single_file(local_ray, tiered_db, three_shards):
+    """Each shard ranks its own objects' colours; merged, they are the single file's
+    answer, and a box-prompted query (the channel, then the exact search of what it
+    names) answers alike."""
+    from viewdb.recognition.colour import colour_signature
+    from viewdb.shards.cluster import ShardedServerTier
+
+    tier = ShardedServerTier(three_shards.folder)
+    try:
+        with viewdb.open(tiered_db, read_only=True) as db:
+            for name, h, v in (("mug", 47, 22), ("car", 200, 15), ("chair", 110, 40)):
+                img, mask = composite_photo(db.render(name, h, v), turn=20, scale=0.8, background=200)
+                signature = colour_signature(img, mask)
+                for n in (1, 3, 6):
+                    assert tier.colour_ranking(signature, n)[0] == db.server_tier().colour_ranking(signature, n)[0]
+                rows, cols = np.nonzero(mask)
+                box = [int(cols.min()) - 2, int(rows.min()) - 2, int(cols.max()) + 3, int(rows.max()) + 3]
+                here = db.query(img, boxes=[box], k=3, pose_top=1)
+                there = db.query(img, boxes=[box], k=3, pose_top=1, server=tier)
+                assert json.dumps(there.to_dict()["objects"][0]["results"], sort_keys=True) == \
+                    json.dumps(here.to_dict()["objects"][0]["results"], sort_keys=True)
+    finally:
+        tier.close()
+
+
 def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

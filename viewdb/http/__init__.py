@@ -3,10 +3,21 @@ talks to it (:class:`RemoteServer`), and the wire messages of the client–serve
 
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .client import RemoteServer
-from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest
+from .wire import (
+    ColourRankingReply,
+    ColourRankingRequest,
+    ColourReply,
+    ColourRequest,
+     FitReply,
+    FitRequest,
+    PoseReply,
+    PoseRequest,
+)
 
 __all__ = [
     "Candidate",
+    "ColourRankingReply",
+    "ColourRankingRequest",
     "ColourReply",
     "ColourRequest",
     "FitReply",

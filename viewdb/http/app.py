@@ -11,6 +11,7 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /walk``    CS2's server half by the paper's neighbour walk (Algorithm 4)
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
+``POST /colour-ranking`` the objects whose stored colours lie nearest a cut-out's
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
                   re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
@@ -68,6 +69,8 @@ from ..errors import NotFound, QueryError, StorageError, ViewDBError
 from ..search.plans import MAX_BAND, MAX_CURVES, MAX_K, RefineRequest, ServerReply, WalkRequest
 from . import models, web
 from .wire import (
+    ColourRankingReply,
+    ColourRankingRequest,
     ColourReply,
     ColourRequest,
     FitReply,
@@ -423,6 +426,16 @@ def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]
         signatures, ms = await run(lambda db: db.server_tier().colours(req.views)[0])
         return ColourReply(signatures, {"server_ms": ms}).to_dict()
 
+    @router.post("/colour-ranking", dependencies=guarded,
+                 openapi_extra=_body(models.ColourRankingRequestModel),
+                 responses={200: {"model": models.ColourRankingReplyModel}, **_ERRORS},
+                 summary="The objects whose stored colours lie nearest a cut-out's (the colour channel)")
+    async def colour_ranking(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: ColourRankingRequest.from_dict(data))
+        found, ms = await run(lambda db: db.server_tier().colour_ranking(req.signature, req.n)[0])
+        return ColourRankingReply(found, {"server_ms": ms}).to_dict()
+
     @router.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
                  responses={200: {"model": models.FitReplyModel}, **_ERRORS},
                  summary="Shape fits of stored views to the segmented query image, to re-rank results")
@@ -441,8 +454,8 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
                              routes=app.routes)
         components = schema.setdefault("components", {}).setdefault("schemas", {})
         for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                      models.ColourRequestModel, models.FitRequestModel, models.WebQueryFormModel,
-                      models.OverlayRequestModel):
+                      models.ColourRequestModel, models.ColourRankingRequestModel, models.FitRequestModel,
+                      models.WebQueryFormModel, models.OverlayRequestModel):
             doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
             components.update(doc.pop("$defs", {}))
             components[model.__name__] = doc

@@ -39,9 +39,20 @@ from ..config import HttpConfig
 from ..errors import QueryError, ServerError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..recognition.server_tier import Exchange
+from ..search.colour_index import ColourMatch
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from ..typed import Intrinsics
-from .wire import ColourReply, ColourRequest, FitReply, FitRequest, PoseReply, PoseRequest, shrink_query
+from .wire import (
+    ColourRankingReply,
+    ColourRankingRequest,
+    ColourReply,
+    ColourRequest,
+    FitReply,
+    FitRequest,
+    PoseReply,
+    PoseRequest,
+    shrink_query,
+)
 
 __all__ = ["RemoteServer", "is_token", "json_depth"]
 
@@ -289,6 +300,11 @@ class RemoteServer:
         if len(signatures) != len(views):
             raise ServerError(f"server sent {len(signatures)} colour signatures, not {len(views)}", self.url)
         return signatures, exchange
+
+    def colour_ranking(self, signature: np.ndarray, n: int) -> tuple[list[ColourMatch], Exchange]:
+        body = ColourRankingRequest(signature, n).to_dict()
+        reply, exchange = self.request("POST", "/colour-ranking", body)
+        return _parse_reply(ColourRankingReply.from_dict, reply, self.url).matches, exchange
 
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]

@@ -192,6 +192,28 @@ class ColourReplyModel(_Strict):
     stats: dict[str, float]
 
 
+class ColourRankingRequestModel(_Strict):
+    """A cut-out's colour signature: which objects' stored colours lie nearest it."""
+
+    signature: list[float] = Field(
+        min_length=256, max_length=256,
+        description="the cut-out's rg chromaticity histogram (16 x 16, row by row)")
+    n: int = Field(ge=1, le=MAX_K, description="how many objects to name")
+
+
+class ColourMatchModel(_Strict):
+    object: str
+    distance: float = Field(description="Bhattacharyya distance of its nearest stored view's colours "
+                                        "(0 to 1)")
+    azimuth: float
+    elevation: float
+
+
+class ColourRankingReplyModel(_Strict):
+    matches: list[ColourMatchModel]
+    stats: dict[str, float]
+
+
 class FitRequestModel(_Strict):
     """The segmented query image and the stored views to fit to its shape."""
 

@@ -30,6 +30,7 @@ from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..pose.intrinsics import check_intrinsics
 from ..recognition.colour import BINS
+from ..search.colour_index import ColourMatch
 from ..search.plans import (
     MAX_K,
     Candidate,
@@ -41,7 +42,8 @@ from ..search.plans import (
 from ..typed import Intrinsics
 
 __all__ = [
-    "ColourReply", "ColourRequest", "FitReply", "FitRequest", "PoseReply", "PoseRequest",
+    "ColourRankingReply", "ColourRankingRequest", "ColourReply", "ColourRequest", "FitReply", "FitRequest",
+    "PoseReply", "PoseRequest",
     "decode_query", "encode_query",
     "pose_from_dict", "pose_to_dict", "shrink_query",
 ]
@@ -327,13 +329,66 @@ class ColourReply:
             if item is None:
                 out.append(None)
                 continue
-            if not isinstance(item, list) or len(item) != BINS * BINS:
-                raise QueryError(f"each signature must be a list of {BINS * BINS} numbers")
-            values = np.array([json_number(x, "signature") for x in item], np.float32)
-            if (values < 0).any():
-                raise QueryError("signature values must not be negative")
-            out.append(values.reshape(BINS, BINS))
+            out.append(_signature(item))
         return cls(out, stats_from_dict(data.get("stats")))
+
+
+def _signature(item: Any) -> np.ndarray:
+    """A colour signature from JSON: ``BINS × BINS`` numbers, none negative."""
+    if not isinstance(item, list) or len(item) != BINS * BINS:
+        raise QueryError(f"a signature must be a list of {BINS * BINS} numbers")
+    values = np.array([json_number(x, "signature") for x in item], np.float32)
+    if (values < 0).any():
+        raise QueryError("signature values must not be negative")
+    return values.reshape(BINS, BINS)
+
+
+@dataclass(frozen=True)
+class ColourRankingRequest:
+    """Client → server: a cut-out's colour signature, and how many objects the colour
+    channel should name (:mod:`viewdb.search.colour_index`)."""
+
+    signature: np.ndarray = field(repr=False)
+    n: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"signature": [float(x) for x in np.asarray(self.signature, np.float32).ravel()], "n": self.n}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ColourRankingRequest:
+        if not isinstance(data, dict) or "signature" not in data:
+            raise QueryError("request must be an object with a signature")
+        n = data.get("n")
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_K:
+            raise QueryError(f"n must be an integer in [1, {MAX_K}], got {n!r}"[:120])
+        return cls(_signature(data["signature"]), n)
+
+
+@dataclass(frozen=True)
+class ColourRankingReply:
+    """Server → client: the objects whose stored colours lie nearest, nearest first."""
+
+    matches: list[ColourMatch]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"matches": [m.to_dict() for m in self.matches], "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ColourRankingReply:
+        if not isinstance(data, dict) or not isinstance(data.get("matches"), list):
+            raise QueryError("reply must be an object with a matches list")
+        matches = []
+        for item in data["matches"]:
+            if not isinstance(item, dict) or not isinstance(item.get("object"), str):
+                raise QueryError("each match must be an object with an object name")
+            try:
+                matches.append(ColourMatch(item["object"], json_number(item["distance"], "distance"),
+                                           json_number(item["azimuth"], "azimuth"),
+                                           json_number(item["elevation"], "elevation")))
+            except KeyError as exc:
+                raise QueryError(f"match lacks {exc.args[0]!r}") from exc
+        return cls(matches, stats_from_dict(data.get("stats")))
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from ..pose.estimate import PoseConfig, PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
 from ..pose.matched import appearance_view, pose_matches
 from ..pose.shape_pose import shape_fit
+from ..search.colour_index import ColourMatch
 from ..search.plans import (
     Candidate,
     RefineRequest,
@@ -126,6 +127,16 @@ class LocalServerTier:
     ) -> list[NDArray[np.float32] | None]:
         return [self.catalogue.appearance(name, azimuth, elevation).colour()
                 for name, azimuth, elevation in views]
+
+    def colour_ranking(
+        self, signature: NDArray[np.float32], n: int
+    ) -> tuple[list[ColourMatch], Exchange]:
+        """The ``n`` objects of this file whose stored colours lie nearest ``signature``
+        (:meth:`StoredCatalogue.colour_index`)."""
+        self._full_tier_only()
+        return self._exchange(lambda: self.catalogue.colour_index().nearest(signature, n),
+                              {"signature": np.asarray(signature).tolist(), "n": n},
+                              lambda found: [m.to_dict() for m in found])
 
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]

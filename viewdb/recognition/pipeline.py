@@ -41,10 +41,10 @@ from ..catalogue.features import distance_curve, sample_bearings
 from ..config import RecognitionConfig, SegmentationConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
-from ..search.plans import MAX_CURVES, Candidate
+from ..search.plans import MAX_CURVES, Candidate, RefineRequest
 from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
-from .colour import colour_signature, has_colour, rerank
+from .colour import colour_distance, colour_signature, has_colour, rerank
 from .image import LoadedImage, load_image
 from .options import QueryOptions
 from .regions import Prompts, Region, find_regions
@@ -254,6 +254,80 @@ def _by_colour(
     return [pooled[i] for i in order], by_object
 
 
+#: The distance a colour channel's shortlist names its objects with: no bound at all.
+_UNBOUNDED = 1e300
+
+
+def _search_objects(
+    shape: QueryShape, options: QueryOptions, names: Sequence[str], server: ServerTier, traffic: _Traffic,
+) -> list[Pooled]:
+    """Each of objects ``names`` with its best view over the query's curves, exactly (the
+    server tier's search restricted to them, as CS2's shortlist is)."""
+    if not names:
+        return []
+    client = [Candidate(name, _UNBOUNDED, 0.0, 0.0, False) for name in names]
+    k = len(names)
+    if shape.bearings is None and len(shape.curves) <= MAX_CURVES:
+        stack = np.stack([curve for _, curve in shape.curves])
+        request = RefineRequest.of_stack(stack, options.band, k, client, shortlist=True)
+        reply, exchange = server.refine(request)
+        traffic.exchanged(exchange)
+        return [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in reply.results]
+    per_curve: list[tuple[float, list[Candidate]]] = []
+    for i, (angle, curve) in enumerate(shape.curves):
+        window = _window(shape, i, options)
+        reply, exchange = server.refine(RefineRequest(curve, options.band, k, client, window, shortlist=True))
+        traffic.exchanged(exchange)
+        if window is None:
+            per_curve.append((angle, reply.results))
+            continue
+        assert shape.bearings is not None
+        for c in reply.results:
+            turn = shift_turn(shape.bearings[i], c.shift or 0)
+            per_curve.append((turn, [c]))
+            shape.by_angle.setdefault(turn, shifted(curve, c.shift or 0))
+    return merge(per_curve, k)
+
+
+def _by_colour_channel(
+    pooled: list[Pooled], shape: QueryShape, options: QueryOptions, server: ServerTier, traffic: _Traffic,
+) -> tuple[list[Pooled], Scores] | None:
+    """Stage 4 for an object cut from a prompt: the outline's pool and the colour
+    channel's objects (:mod:`viewdb.search.colour_index`), each searched exactly, ranked
+    by colour distance plus ``prompt_outline_weight`` × log(outline distance / the best
+    one's) (:attr:`~viewdb.config.RecognitionConfig.colour_pool`). An object whose mesh
+    has no colour counts ``uncoloured_distance``; a coloured one the channel did not
+    name, the larger of that and the channel's last distance. None when the catalogue
+    has no coloured object."""
+    recognition = options.recognition
+    query = colour_signature(shape.view.color, shape.view.mask)
+    matches, exchange = server.colour_ranking(query, recognition.colour_pool)
+    traffic.exchanged(exchange)
+    if not matches:
+        return None
+    pooled = pooled + _search_objects(shape, options, [m.object for m in matches
+                                                       if m.object not in {c.object for c, _ in pooled}],
+                                      server, traffic)
+    # what each counts (``counted``) and its matched view's distance (``shown``; None: no colour)
+    counted: dict[str, float] = {m.object: m.distance for m in matches}
+    shown: dict[str, float | None] = dict(counted)
+    unnamed = [(c.object, *physical_view(c)) for c, _ in pooled if c.object not in counted]
+    if unnamed:  # which of the others have colour at all
+        signatures, exchange = server.colours(unnamed)
+        traffic.exchanged(exchange)
+        neutral = recognition.uncoloured_distance
+        for (name, _, _), signature in zip(unnamed, signatures, strict=True):
+            counted[name] = neutral if signature is None else max(neutral, matches[-1].distance)
+            shown[name] = None if signature is None else colour_distance(query, signature)
+    nearest = max(min(c.distance for c, _ in pooled), 1e-12)
+    weight = recognition.prompt_outline_weight
+    scores = [counted[c.object] + weight * float(np.log(max(c.distance, nearest) / nearest))
+              for c, _ in pooled]
+    order = sorted(range(len(pooled)), key=lambda i: (scores[i], pooled[i][0].object))
+    by_object = {c.object: (shown[c.object], s) for (c, _), s in zip(pooled, scores, strict=True)}
+    return [pooled[i] for i in order], by_object
+
+
 def _by_fit(
     pooled: list[Pooled], shape: QueryShape, colours: Scores, server: ServerTier, traffic: _Traffic,
 ) -> tuple[list[Pooled], Scores]:
@@ -305,11 +379,19 @@ def _matches(
 def pool_size(options: QueryOptions, prompted: bool, recolour: bool) -> int:
     """How many objects the plan finds before the re-rankings keep the best k: k when
     nothing re-ranks them, else at least ``recognition.pool``, or
-    ``recognition.prompt_pool`` for an object cut from a prompt."""
+    ``recognition.prompt_pool`` for an object cut from a prompt that the colour channel
+    does not rank (:func:`_colour_channel`)."""
     if not (recolour or options.verify):
         return options.k
     recognition = options.recognition
-    return max(options.k, recognition.prompt_pool if prompted else recognition.pool)
+    deeper = prompted and not _colour_channel(options, prompted, recolour)
+    return max(options.k, recognition.prompt_pool if deeper else recognition.pool)
+
+
+def _colour_channel(options: QueryOptions, prompted: bool, recolour: bool) -> bool:
+    """Whether an object is ranked by its colours first (:func:`_by_colour_channel`): cut
+    from a prompt, in a photo with colour, with a colour pool."""
+    return prompted and recolour and options.recognition.colour_pool > 0
 
 
 def _recognise(
@@ -325,11 +407,15 @@ def _recognise(
     ranked, client_ms, server_ms = _search(shape, options, pool, server, client, traffic)
     searched = time.perf_counter()
     colours: Scores = {}
-    if recolour and ranked:
+    channel = (_by_colour_channel(ranked, shape, options, server, traffic)
+               if ranked and _colour_channel(options, prompted, recolour) else None)
+    if channel is not None:
+        ranked, colours = channel
+    elif recolour and ranked:
         ranked, colours = _by_colour(ranked, shape, server, traffic)
     coloured = time.perf_counter()
     fitted: Scores = {}
-    if options.verify and len(ranked) > 1:
+    if options.verify and len(ranked) > 1 and channel is None:
         ranked, fitted = _by_fit(ranked, shape, colours, server, traffic)
     ranked = ranked[:options.k]
     recognised = time.perf_counter()

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..pose.estimate import PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
+from ..search.colour_index import ColourMatch
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 
 __all__ = ["Exchange", "ServerTier"]
@@ -61,6 +62,14 @@ class ServerTier(Protocol):
         """The colour signatures (:func:`viewdb.recognition.colour.colour_signature`) of stored views
         ``(object, azimuth, elevation)``, rendered from the server's meshes (None: the
         object's mesh has no colour)."""
+        ...
+
+    def colour_ranking(
+        self, signature: NDArray[np.float32], n: int
+    ) -> tuple[list[ColourMatch], Exchange]:
+        """The colour channel (:mod:`viewdb.search.colour_index`): the ``n`` objects whose
+        stored views' colours lie nearest ``signature`` (a photo's colour signature),
+        nearest first, each with its nearest view."""
         ...
 
     def fits(

@@ -46,6 +46,7 @@ from ..pose.intrinsics import Intrinsics
 from ..ray_cluster import actor_state, connect
 from ..ray_cluster import ray_module as _ray
 from ..recognition.server_tier import Exchange
+from ..search.colour_index import ColourMatch, merge_colour_matches
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .gather import scatter_gather
 from .health import ShardHealth
@@ -273,6 +274,16 @@ class ShardedServerTier:
     ) -> tuple[list[NDArray[np.float32] | None], Exchange]:
         return self._timed(lambda: self._routed(
             [v[0] for v in views], lambda a, at: a.call.remote("colours", [views[i] for i in at])))
+
+    def colour_ranking(
+        self, signature: NDArray[np.float32], n: int
+    ) -> tuple[list[ColourMatch], Exchange]:
+        """The colour channel over every shard: each shard's nearest ``n``, merged."""
+        def ask() -> list[ColourMatch]:
+            shards = list(range(len(self.actors)))
+            parts = self._each(shards, lambda s: self.actors[s].call.remote("colour_ranking", signature, n))
+            return merge_colour_matches([[ColourMatch.from_dict(m) for m in part] for part in parts], n)
+        return self._timed(ask)
 
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]

@@ -95,6 +95,11 @@ class Shard:
     def colours(self, views: Sequence[tuple[str, float, float]]) -> list[NDArray[np.float32] | None]:
         return self.tier.view_colours(views)
 
+    def colour_ranking(self, signature: NDArray[np.float32], n: int) -> list[dict[str, Any]]:
+        """The colour channel on this shard's objects (as JSON)."""
+        found, _ = self.tier.colour_ranking(signature, n)
+        return [m.to_dict() for m in found]
+
     def fits(self, query: QueryView, views: Sequence[tuple[str, float, float]]) -> list[float | None]:
         return self.tier.view_fits(query, views)
 

@@ -31,7 +31,7 @@ import numpy as np
 from ..catalogue.appearance import BINS, THETA_LEVELS, Appearance
 from ..errors import StorageError
 
-__all__ = ["decode_record", "encode_record", "pack_records"]
+__all__ = ["decode_record", "decode_signature", "encode_record", "pack_records"]
 
 MAGIC = b"AR"
 VERSION = 1
@@ -125,6 +125,32 @@ def decode_record(data: bytes | memoryview, azimuth: float, elevation: float, im
     mask[y0:y1, x0:x1] = box
     points = np.stack([xs + x0, ys + y0], axis=1).astype(np.int32)
     return Appearance(float(azimuth), float(elevation), mask, points, theta.copy(), signature)
+
+
+def decode_signature(data: bytes | memoryview) -> np.ndarray | None:
+    """The colour signature (uint16, ``BINS × BINS``) of the record packed in ``data``
+    without decoding its silhouette and edges, or None for a record without one.
+
+    Raises
+    ------
+    StorageError
+        The bytes are not a record, or its signature is damaged.
+    """
+    buf = bytes(data)
+    if len(buf) < _HEADER.size:
+        raise StorageError(f"appearance: record too short ({len(buf)} bytes)")
+    magic, version, flags, *_, n_mask, n_edges, n_theta = _HEADER.unpack_from(buf)
+    if magic != MAGIC or version != VERSION:
+        raise StorageError("appearance: record has a bad header")
+    start = _HEADER.size + n_mask + n_edges + n_theta
+    if start > len(buf) or (not flags & 1 and start != len(buf)):
+        raise StorageError("appearance: record lengths do not add up")
+    if not flags & 1:
+        return None
+    raw = _inflate(buf[start:], "colour signature")
+    if len(raw) != 2 * BINS * BINS:
+        raise StorageError(f"appearance: colour signature of {len(raw)} bytes, not {2 * BINS * BINS}")
+    return np.frombuffer(raw, "<u2").reshape(BINS, BINS).astype(np.uint16)
 
 
 def pack_records(records: Sequence[Appearance]) -> tuple[bytes, list[tuple[float, float, int, int]]]:

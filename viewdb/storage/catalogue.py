@@ -32,12 +32,13 @@ from ..catalogue.skimming import ViewClasses, image_twins, plan_without_skimming
 from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig, SearchConfig
 from ..errors import FeatureError, NotFound, QueryError
+from ..search.colour_index import ColourIndex
 from ..search.knn import Neighbour, SearchStats, TierArrays, knn, knn_stack, objects_within
 from ..search.plans import Candidate, neighbours_to_candidates
 from ..search.quantised import distance_bound, upper_distance
 from ..search.refine import scan_all
 from ..search.shifts import ShiftWindow
-from .appearances import decode_record
+from .appearances import decode_record, decode_signature
 from .store import ObjectRow, Store
 from .tiers import TIERS, StoredTier, TierReader
 
@@ -112,6 +113,7 @@ class StoredCatalogue:
         self._derived: dict[str, OrderedDict[tuple[Any, ...], Any]] = {}
         self._reader: TierReader | None = None
         self._role: str | None = None
+        self._colour_index: ColourIndex | None = None
 
     @property
     def path(self) -> Path:
@@ -134,11 +136,33 @@ class StoredCatalogue:
         if self._reader is not None:
             self._reader.written()
         self._curves.clear()
+        self._colour_index = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         for cache in (self._regenerated, self._renders, *self._derived.values()):
             for key in [k for k in cache if k[0] == name]:
                 del cache[key]
+
+    def colour_index(self) -> ColourIndex:
+        """The colour channel's index (:mod:`viewdb.search.colour_index`): the stored colour
+        signatures of every coloured object's views on a grid of
+        :attr:`~viewdb.config.SearchConfig.colour_grid` degrees (a multiple of the file's
+        grid), read once; an object without colour, or without stored appearance records
+        (a file from before revision 0005), is not in it."""
+        if self._colour_index is None:
+            gap = self.config.gap
+            step = gap * max(1, round(SearchConfig().colour_grid / gap))
+            names, views, signatures = [], [], []
+            if self.stored_appearance:
+                for name, azimuth, elevation, data in self._store.grid_appearance_records(step):
+                    signature = decode_signature(data)
+                    if signature is not None:
+                        names.append(name)
+                        views.append((azimuth, elevation))
+                        signatures.append(signature)
+            self._colour_index = ColourIndex(names, np.asarray(views, np.float64).reshape(-1, 2),
+                                             np.asarray(signatures, np.float64).reshape(len(names), -1))
+        return self._colour_index
 
     def derived(self, kind: str, key: tuple[Any, ...], make: Callable[[], _V], limit: int) -> _V:
         """A bounded cache of what later stages derive from this file's data (e.g. colour

@@ -7,6 +7,7 @@ job; :class:`Store` is a database with its rows. ``Store(path, read_only=True)``
 
 from __future__ import annotations
 
+import itertools
 import json
 import sqlite3
 from collections.abc import Sequence
@@ -430,6 +431,42 @@ class Store(Database):
                         raw.execute("COMMIT")
             except sqlite3.Error as exc:
                 raise StorageError(f"cannot read the appearance of {name!r}: {exc}", self.path) from exc
+
+    def grid_appearance_records(self, step: float) -> list[tuple[str, float, float, bytes]]:
+        """``(object, azimuth, elevation, packed record)`` of every stored appearance record
+        whose direction lies on a grid of ``step`` degrees, object by object, read in one
+        snapshot (only the records' bytes of each object's blob)."""
+        with self._errors(), self.engine.connect() as conn:
+            raw = conn.connection.driver_connection
+            began = not raw.in_transaction
+            try:
+                if began:
+                    raw.execute("BEGIN")
+                try:
+                    return self._read_grid_records(raw, float(step))
+                finally:
+                    if began:
+                        raw.execute("COMMIT")
+            except sqlite3.Error as exc:
+                raise StorageError(f"cannot read the appearance records: {exc}", self.path) from exc
+
+    @staticmethod
+    def _read_grid_records(raw: sqlite3.Connection, step: float) -> list[tuple[str, float, float, bytes]]:
+        rows = raw.execute(
+            "SELECT o.name, a.azimuth, a.elevation, a.offset, a.size, a.object_id FROM appearances a"
+            " JOIN objects o ON o.id = a.object_id"
+            " WHERE abs(a.azimuth - ? * round(a.azimuth / ?)) < 1e-6"
+            " AND abs(a.elevation - ? * round(a.elevation / ?)) < 1e-6"
+            " ORDER BY a.object_id, a.offset", (step, step, step, step),
+        ).fetchall()
+        out: list[tuple[str, float, float, bytes]] = []
+        for _, group in itertools.groupby(rows, key=lambda r: r[5]):
+            records = list(group)
+            with raw.blobopen("appearance_blobs", "data", int(records[0][5]), readonly=True) as blob:
+                for name, a, e, at, size, _ in records:
+                    blob.seek(int(at))
+                    out.append((str(name), float(a), float(e), blob.read(int(size))))
+        return out
 
     @staticmethod
     def _read_records(raw: sqlite3.Connection, name: str, azimuths: list[float],
