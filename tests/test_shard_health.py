@@ -43,6 +43,10 @@ def test_a_restarting_shard_is_down_until_its_actor_answers_as_before():
         assert status.recoveries == 1 and len(status.gaps) == 1 and status.gaps[0] > 0
         health.require([0, 1, 2])
 
+        sent = time.monotonic() - 60  # a call sent to the actor that died before shard 1 came back
+        health.down(1, "did not answer (ActorDiedError)", sent=sent)
+        assert health.snapshot()[1].up  # its failure says nothing of the restarted actor
+
         health.down(2, "did not answer (ActorDiedError)")  # a failed call marks it down at once
         assert not health.snapshot()[2].up and health.snapshot()[2].to_dict()["restarting"] is True
         states[2] = "DEAD"  # killed for good: no retry time

@@ -164,11 +164,13 @@ class ShardedServerTier:
         """``call(shard)`` (a Ray call) on each of ``shards`` and their answers; none is
         sent if one of them is down (:class:`ShardUnavailable` at once)."""
         self.health.require(shards)
-        return self._gather([call(s) for s in shards], shards)
+        sent = time.monotonic()
+        return self._gather([call(s) for s in shards], shards, sent)
 
-    def _gather(self, refs: list[Any], shards: Sequence[int]) -> list[Any]:
-        """The results of one round of calls (``shards``: the shard of each), or
-        :class:`ShardUnavailable` naming the first shard that failed to answer."""
+    def _gather(self, refs: list[Any], shards: Sequence[int], sent: float | None = None) -> list[Any]:
+        """The results of one round of calls (``shards``: the shard of each; ``sent``: when
+        they were sent), or :class:`ShardUnavailable` naming the first shard that failed
+        to answer."""
         ray = _ray()
         try:
             return list(ray.get(refs, timeout=self.config.timeout))
@@ -183,7 +185,7 @@ class ShardedServerTier:
             reason = f"did not answer ({type(exc).__name__})"
             restarts = self.config.max_restarts != 0 and actor_state(self.actors[dead]) != "DEAD"
             if self._described is not None:  # open: the watcher readmits it once restarted
-                self.health.down(dead, reason, final=not restarts)
+                self.health.down(dead, reason, final=not restarts, sent=sent)
             raise ShardUnavailable(
                 f"shard {dead} {reason}; no partial answer is given: "
                 + (f"it is being restarted, retry in {self.config.retry_after:g} s" if restarts

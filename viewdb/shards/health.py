@@ -42,6 +42,8 @@ class ShardStatus:
     gaps: tuple[float, ...] = ()
     #: Ray will not restart its actor (restarts used up, or killed for good).
     final: bool = False
+    #: ``time.monotonic()`` when it was last readmitted (None: up since the start).
+    up_since: float | None = None
 
     def to_dict(self) -> dict[str, object]:
         out: dict[str, object] = {"up": self.up, "recoveries": self.recoveries}
@@ -64,11 +66,16 @@ class ShardHealth:
         self._thread: threading.Thread | None = None
 
     # ------------------------------------------------------------------ state
-    def down(self, shard: int, reason: str, final: bool = False) -> None:
+    def down(self, shard: int, reason: str, final: bool = False, sent: float | None = None) -> None:
         """Mark ``shard`` down (a call to it failed, or Ray says its actor is not alive;
-        ``final``: it will not be restarted)."""
+        ``final``: it will not be restarted). ``sent``: when the failed call was sent
+        (``time.monotonic()``); a call sent before the shard was last readmitted failed on
+        the actor that died before, and leaves the restarted one up (were it dead too, the
+        watcher sees it in Ray's record)."""
         with self._lock:
             s = self._status[shard]
+            if sent is not None and s.up and s.up_since is not None and sent < s.up_since and not final:
+                return
             if s.up:
                 s.up, s.reason, s.down_since = False, reason, time.monotonic()
             if final:
@@ -79,8 +86,9 @@ class ShardHealth:
         with self._lock:
             s = self._status[shard]
             if not s.up:
-                gap = time.monotonic() - (s.down_since or time.monotonic())
-                s.up, s.reason, s.down_since = True, "", None
+                now = time.monotonic()
+                gap = now - (s.down_since or now)
+                s.up, s.reason, s.down_since, s.up_since = True, "", None, now
                 s.recoveries += 1
                 s.gaps = (*s.gaps, gap)
 
