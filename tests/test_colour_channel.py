@@ -152,3 +152,38 @@ def test_a_grey_photo_falls_back_to_the_outline(small_db):
         grey = cv2.cvtColor(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
         answer = db.query(grey, boxes=[_box(mask)], k=2, pose=False).objects[0].results
         assert all(m.colour is None for m in answer) and all(m.shape_fit is not None for m in answer)
+
+
+def test_a_server_that_predates_the_channel_names_no_object():
+    """A server without ``/colour-ranking`` (404) names nothing, so the query takes the
+    outline's path; any other refusal is still an error."""
+    import json
+    import threading
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    class Old(BaseHTTPRequestHandler):
+        def do_POST(self):  # noqa: N802 - the stdlib's name
+            self.rfile.read(int(self.headers.get("Content-Length", 0)))
+            status = 404 if self.path == "/colour-ranking" else 503
+            body = json.dumps({"error": "Not Found", "status": status}).encode()
+            self.send_response(status)
+            self.send_header("Content-Type", "application/json")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), Old)
+    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    thread.start()
+    try:
+        with viewdb.RemoteServer(f"http://127.0.0.1:{httpd.server_address[1]}") as remote:
+            assert remote.colour_ranking(np.ones((16, 16), np.float32) / 256, 3)[0] == []
+            with pytest.raises(viewdb.ServerError) as refused:
+                remote.colours([("mug", 0.0, 0.0)])
+            assert refused.value.status == 503
+    finally:
+        httpd.shutdown()
+        httpd.server_close()

@@ -67,6 +67,7 @@ _LAZY: dict[str, str] = {
     "Recognition": "recognition.retrieval",
     **dict.fromkeys(("Exchange", "ServerTier"), "recognition.server_tier"),
     **dict.fromkeys(("SearchStats", "TierArrays"), "search.knn"),
+    "ColourMatch": "search.colour_index",
     "Candidate": "search.plans",
     "ShiftWindow": "search.shifts",
     "SearchHit": "storage.catalogue",
@@ -91,6 +92,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .recognition.results import ObjectResult, QueryMatch, QueryResult
     from .recognition.retrieval import Recognition
     from .recognition.server_tier import Exchange, ServerTier
+    from .search.colour_index import ColourMatch
     from .search.knn import SearchStats, TierArrays
     from .search.plans import Candidate
     from .search.shifts import ShiftWindow
@@ -122,6 +124,7 @@ __all__ = [
     "CandidatePose",
     "CatalogueReader",
     "CheckReport",
+    "ColourMatch",
     "DEFAULT_MAX_FACES",
     "DatabaseInfo",
     "Exchange",

@@ -886,8 +886,9 @@ class RecognitionConfig:
     #: An object cut from a prompt (a box or a point) in a cluttered photo has a less sure
     #: outline than a mask's, an alpha channel's or one on a plain background: its own
     #: mesh is often beyond the outline's best 5 while its colours and inside still tell
-    #: it apart. So the plan finds at least this many objects for it before the colour and
-    #: shape re-rankings keep the best k. Measured with benchmarks/real_clutter.py on the
+    #: it apart. So, when the colour channel does not rank it (a grey photo, no coloured
+    #: mesh, ``colour_pool`` 0), the plan finds at least this many objects for it before
+    #: the colour and shape re-rankings keep the best k. Measured with benchmarks/real_clutter.py on the
     #: 230-object file (docs/results/real-clutter.md): 50 LM-O objects at least half
     #: visible in 8 photos, right object first 3 / 5 of 50 and in the top 5 6 / 13 with
     #: pools of 5 / 20 (without the shape fit: 5 / 15 at 20, 7 / 18 at 40); the 7

@@ -302,8 +302,15 @@ class RemoteServer:
         return signatures, exchange
 
     def colour_ranking(self, signature: np.ndarray, n: int) -> tuple[list[ColourMatch], Exchange]:
+        """The server's colour channel; a server that predates it (404) names no object,
+        and the query takes the outline's path."""
         body = ColourRankingRequest(signature, n).to_dict()
-        reply, exchange = self.request("POST", "/colour-ranking", body)
+        try:
+            reply, exchange = self.request("POST", "/colour-ranking", body)
+        except ServerError as exc:
+            if exc.status == 404:
+                return [], Exchange(0, 0, 0.0, 0.0)
+            raise
         return _parse_reply(ColourRankingReply.from_dict, reply, self.url).matches, exchange
 
     def fits(
