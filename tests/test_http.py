@@ -813,3 +813,37 @@ def test_fuzz_every_body_model_long(server, path, data):
 def test_the_server_is_still_up_after_all_of_it(server):
     assert server.alive()
     assert server.worker_pids() <= server.pids
+
+
+def test_the_remote_client_scales_a_photo_to_the_servers_pixel_cap_and_says_so(tiered_db, files):
+    """A server decoding at most 50,000 pixels refuses a 600×600 query image; the client
+    scales it down before sending (its pose and fits), and the query's JSON says so."""
+    from viewdb.http.wire import shrink_query
+
+    served, client_path = files
+    with viewdb.open(tiered_db, read_only=True) as full:
+        big = cv2.resize(photo(full, "mug", 47, 22, 30), (600, 600), interpolation=cv2.INTER_CUBIC)
+        local = full.query(big, k=2, rotations=6, pose_top=1)
+    with ServerProcess(served, token=TOKEN, extra=("--max-pixels", "50000")) as srv, \
+            viewdb.RemoteServer(srv.url, token=TOKEN) as remote, \
+            viewdb.open(client_path, read_only=True) as client:
+        mask = np.ones((600, 600), bool)
+        got, reply = request(srv.url, "POST", "/fits", _fit_body(base64.b64encode(
+            encode_query(QueryView(big, mask))).decode()), token=TOKEN)
+        assert got == 422 and "more than 50,000 pixels" in reply["error"]  # as it is: refused
+        assert remote.max_pixels() == 50_000
+        there = client.query(big, server=remote, k=2, rotations=6, pose_top=1)
+    transfer = there.to_dict()["transfer"]
+    assert (transfer["image_width"], transfer["image_height"]) == (600, 600)
+    assert transfer["sent_width"] * transfer["sent_height"] <= 50_000 and transfer["sent_width"] >= 200
+    assert "image_width" not in local.to_dict()["transfer"]
+    assert [m.object for m in there.results] == [m.object for m in local.results]
+    assert there.results[0].pose is not None and all(m.shape_fit is not None for m in there.results)
+    a, b = there.results[0].pose.rotation, local.results[0].pose.rotation
+    assert np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) < 15  # the same pose
+
+    # intrinsics go with the pixels: the principal point stays on the same spot of the scene
+    small, scaled = shrink_query(QueryView(big, mask), 50_000, (800.0, 800.0, 299.5, 299.5))
+    h, w = small.mask.shape
+    assert w * h <= 50_000 and abs(w - h) <= 1
+    assert scaled == pytest.approx((800 * w / 600, 800 * h / 600, (w - 1) / 2, (h - 1) / 2))

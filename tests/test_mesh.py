@@ -194,3 +194,30 @@ def test_a_mesh_over_the_face_cap_is_refused_with_its_count(tmp_path):
     assert load_mesh(path, options=LoadOptions(max_faces=None)).n_faces == faces
     with pytest.raises(ValueError):
         LoadOptions(max_faces=0)
+
+
+def test_every_sample_declares_the_faces_it_loads_with():
+    from viewdb.catalogue.mesh import _face_count, declared_faces
+
+    for path in sample_files():
+        assert declared_faces(path) == _face_count(trimesh.load(path, process=False)), path.name
+
+
+def test_a_mesh_over_the_face_cap_is_refused_before_it_is_read_whole(tmp_path):
+    """A header declaring two billion faces is refused from the header (loading it whole
+    would allocate them); an OBJ's faces are counted streaming its lines."""
+    ply = tmp_path / "huge.ply"
+    ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                    b"property float y\nproperty float z\nelement face 2000000000\n"
+                    b"property list uchar int vertex_indices\nend_header\n" + b"\0" * 64)
+    off = tmp_path / "huge.off"
+    off.write_text("OFF\n# a comment\n3 2000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    stl = tmp_path / "huge.stl"
+    stl.write_bytes(b"\0" * 80 + (3).to_bytes(4, "little") + b"\0" * 150)
+    obj = tmp_path / "many.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n" + "f 1 2 3 4\n" * 600)
+    for path, faces in ((ply, 2_000_000_000), (off, 2_000_000_000), (obj, 1200)):
+        with pytest.raises(MeshError, match=f"has {faces:,} triangles, more than the cap of 1,000"):
+            load_mesh(path, options=LoadOptions(max_faces=1000))
+    with pytest.raises(MeshError, match="has 3 triangles, more than the cap of 2"):
+        load_mesh(stl, options=LoadOptions(max_faces=2))

@@ -3,8 +3,13 @@ the stable hash and keeps the manifest true; ``export-client --shards`` writes t
 client file the single file exports."""
 
 import json
+import os
 import shutil
+import socket
 import sqlite3
+import subprocess
+import sys
+import threading
 
 import numpy as np
 import pytest
@@ -12,6 +17,7 @@ import pytest
 import viewdb
 from tests.conftest import TIERED_DB_MODELS, sample
 from viewdb.shards.layout import read_manifest, shard_of, split_catalogue
+from viewdb.shards.lock import lock_path
 from viewdb.shards.writing import export_client_from_shards, open_shards
 from viewdb_cli.main import main
 
@@ -20,9 +26,11 @@ SETTINGS = {"gap": 90, "image_size": 64}
 
 
 def _rows(path):
-    """Every row of every table of a SQLite file, table by table (the schema too),"""
+    """Every row of every table of a SQLite file, table by table (the schema too), but the
+    tiers' stamped keys (derived from the index's generation)"""
     with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
-        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")]
+        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'"
+                                             " AND name != 'tier_stamps' ORDER BY name")]
         # but the index's generation, a fresh token on every write
         return {t: conn.execute(f'SELECT * FROM "{t}"' + (" WHERE key != 'index_generation'" if t == "settings"
                                                           else "")).fetchall() for t in tables}, \
@@ -130,3 +138,47 @@ def test_ingest_shards_cli_refusals_leave_nothing(tmp_path, capsys):
     assert main(["ingest", cone, "--shards", str(tmp_path / "full"), "--shard-count", "2"]) == 1
     assert "exists and is not empty; remove it or choose another --shards" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full"]
+
+
+def _ingest_cli(folder, *names):
+    """``viewdb ingest NAMES --shards FOLDER`` in another process: (exit code, stderr)."""
+    proc = subprocess.run([sys.executable, "-m", "viewdb_cli.main", "ingest", *map(str, map(sample, names)),
+                           "--shards", str(folder)], capture_output=True, text=True, timeout=600)
+    return proc.returncode, proc.stderr
+
+
+def test_two_concurrent_sharded_ingests_one_writes_the_other_is_refused(tmp_path):
+    folder = tmp_path / "shards"
+    errors = []
+    with open_shards(folder, count=3, **SETTINGS) as first:
+        assert lock_path(folder).read_text().startswith(f"pid {os.getpid()} on {socket.gethostname()} since ")
+        writing = threading.Thread(target=lambda: errors.append(first.ingest([sample(n) for n in SMALL])))
+        writing.start()
+        code, err = _ingest_cli(folder, "torus", "cone")  # the second ingest, while the first writes
+        writing.join()
+    assert code == 1 and err.count("\n") == 1
+    assert f"is being written by another ingest (pid {os.getpid()} on {socket.gethostname()}" in err
+    assert errors[0].counts()["added"] == len(SMALL)
+    assert not lock_path(folder).exists()  # released with the files
+
+    code, err = _ingest_cli(folder, "torus", "cone")  # now alone: it writes
+    assert code == 0, err
+    manifest = read_manifest(folder)
+    for i, path in enumerate(manifest.files):  # the counts are what the files hold
+        with viewdb.open(path, read_only=True) as shard:
+            assert manifest.objects[i] == len(shard.objects())
+    assert sum(manifest.objects) == len(SMALL) + 1
+
+    # a writer asked to wait takes the folder once the first lets it go
+    first = open_shards(folder)
+    got = []
+    waiting = threading.Thread(target=lambda: got.append(open_shards(folder, wait=60)))
+    waiting.start()
+    waiting.join(1.0)
+    assert waiting.is_alive()
+    first.close()
+    waiting.join(60)
+    with got[0] as second:
+        second.ingest([sample("torus")])
+        with pytest.raises(viewdb.StorageError, match="is being written by another ingest"):
+            open_shards(folder)

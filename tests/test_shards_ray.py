@@ -1,8 +1,12 @@
 """Sharded catalogues on a local Ray: shard actors answer real queries exactly as the single
-file does, over HTTP too; a dead shard fails the query (503), a damaged one is refused."""
+file does, over HTTP too; a dead shard fails the query (503) until its restarted actor is
+readmitted, a damaged one is refused."""
 
+import contextlib
 import json
+import os
 import shutil
+import signal
 import socket
 import sqlite3
 import threading
@@ -90,48 +94,64 @@ def _free_port():
         return s.getsockname()[1]
 
 
-def _post(url, body):
+def _post(url, body, headers=None):
     req = urllib.request.Request(url, json.dumps(body).encode(), {"Content-Type": "application/json"})
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
-            return r.status, json.loads(r.read())
+            reply = r.status, json.loads(r.read())
+            out_headers = dict(r.headers)
     except urllib.error.HTTPError as exc:
-        return exc.code, json.loads(exc.read())
+        reply = exc.code, json.loads(exc.read())
+        out_headers = dict(exc.headers)
+    if headers is not None:
+        headers.clear()
+        headers.update({k.lower(): v for k, v in out_headers.items()})
+    return reply
 
 
-def test_a_killed_shard_fails_queries_with_503_and_a_damaged_shard_is_refused(
-        local_ray, tiered_db, three_shards, tmp_path, monkeypatch):
+def _health(url):
+    with urllib.request.urlopen(url + "/health", timeout=30) as r:
+        return json.loads(r.read())
+
+
+@contextlib.contextmanager
+def _serving(folder, monkeypatch):
+    """The sharded catalogue in ``folder`` served on loopback in this process: (url, catalogue)."""
     import uvicorn
 
     from viewdb.http.app import ENV_RAY, create_app
     from viewdb.shards.serving import open_sharded
 
     monkeypatch.setenv(ENV_RAY, "auto")
-    catalogue = open_sharded(three_shards.folder)
+    catalogue = open_sharded(folder)
     port = _free_port()
-    server = uvicorn.Server(uvicorn.Config(create_app(three_shards.folder, ui=False), port=port,
-                                           log_level="critical"))
+    server = uvicorn.Server(uvicorn.Config(create_app(folder, ui=False), port=port, log_level="critical"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     try:
         deadline = time.monotonic() + 60
         while not server.started and time.monotonic() < deadline:
             time.sleep(0.05)
-        url = f"http://127.0.0.1:{port}"
+        yield f"http://127.0.0.1:{port}", catalogue
+    finally:
+        server.should_exit = True
+        thread.join(30)
+        catalogue.close()
+
+
+def test_a_killed_shard_fails_queries_with_503_and_a_damaged_shard_is_refused(
+        local_ray, tiered_db, three_shards, tmp_path, monkeypatch):
+    with _serving(three_shards.folder, monkeypatch) as (url, catalogue):
         with viewdb.open(tiered_db, read_only=True) as db:
             arrays, _ = db.search_tier("full")
             body = RefineRequest(arrays.curves[5], 6, 5, []).to_dict()
             status, reply = _post(url + "/refine", body)
             assert status == 200
             assert [c["object"] for c in reply["results"]] == [h.object for h in db.search(arrays.curves[5], 5)[0]]
-        ray.kill(catalogue.server_tier().actors[1])
+        ray.kill(catalogue.server_tier().actors[1])  # for good: Ray does not restart it
         status, reply = _post(url + "/refine", body)
-        assert status == 503 and "shard 1 did not answer" in reply["error"]
+        assert status == 503 and "shard 1" in reply["error"] and "restart the server" in reply["error"]
         assert "results" not in reply
-    finally:
-        server.should_exit = True
-        thread.join(30)
-        catalogue.close()
 
     folder = tmp_path / "damaged"
     shutil.copytree(three_shards.folder, folder)
@@ -141,3 +161,44 @@ def test_a_killed_shard_fails_queries_with_503_and_a_damaged_shard_is_refused(
 
     with pytest.raises(viewdb.StorageError, match=r"shard 2 refused: .*shard-002\.viewdb: fails check"):
         ShardedServerTier(folder)
+
+
+def test_a_killed_shard_actor_is_restarted_and_answers_the_same_again(
+        local_ray, tiered_db, three_shards, monkeypatch):
+    with _serving(three_shards.folder, monkeypatch) as (url, catalogue):
+        with viewdb.open(tiered_db, read_only=True) as db:
+            arrays, _ = db.search_tier("full")
+            body = RefineRequest(arrays.curves[7], 6, 5, []).to_dict()
+            expected = [h.object for h in db.search(arrays.curves[7], 5)[0]]
+        status, before = _post(url + "/refine", body)
+        assert status == 200 and [c["object"] for c in before["results"]] == expected
+        assert [s["up"] for s in _health(url)["shards"]] == [True, True, True]
+
+        actor = catalogue.server_tier().actors[1]
+        pid = ray.get(actor.pid.remote())
+        os.kill(pid, signal.SIGKILL)  # a crash: Ray restarts the actor, which reopens its file
+
+        # the watcher marks the shard down well before its actor has reopened and checked it
+        deadline = time.monotonic() + 10
+        while (health := _health(url))["shards"][1]["up"] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert health["status"] == "degraded" and health["shards"][1]["up"] is False
+        assert health["shards"][1]["restarting"] is True
+        assert [s["up"] for s in health["shards"]][::2] == [True, True]
+
+        seen = []
+        headers = {}
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            status, reply = _post(url + "/refine", body, headers)
+            seen.append(status)
+            if status == 200:
+                break
+            assert status == 503 and "shard 1 is down" in reply["error"], reply
+            assert "results" not in reply and int(headers["retry-after"]) >= 1
+            time.sleep(0.1)
+        assert seen[0] == 503 and seen[-1] == 200, seen
+        assert reply["results"] == before["results"]  # every field of every candidate
+        assert ray.get(actor.pid.remote()) != pid
+        health = _health(url)
+        assert health["status"] == "ok" and health["shards"][1]["recoveries"] == 1

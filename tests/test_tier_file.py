@@ -189,3 +189,73 @@ def test_stored_curves_come_from_the_mapped_tier_as_the_file_holds_them(mapped_d
         db.search(np.ones(128), k=1)
         curves = db._catalogue._tier_curves("sphere")
         assert list(curves) == list(rows) and all(np.array_equal(curves[k], rows[k]) for k in rows)
+
+
+def _statements(path, call):
+    """``call(conn)`` inside a read transaction of ``path`` (read-only) and the SQL statements it ran."""
+    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    ran = []
+    try:
+        conn.execute("BEGIN")
+        conn.set_trace_callback(ran.append)
+        out = call(conn)
+        conn.set_trace_callback(None)
+        conn.execute("ROLLBACK")
+    finally:
+        conn.close()
+    return out, ran
+
+
+def test_an_ingest_stamps_each_tiers_key_and_a_fresh_open_reads_it_in_one_statement(tmp_path):
+    from tests.test_readonly import _downgrade
+    from viewdb.storage.tier_file import _unmarked_key, generation, write_tier_file
+
+    path = tmp_path / "s.db"
+    with viewdb.open(path, gap=90, image_size=64) as db:
+        db.ingest([sample("cone"), sample("pyramid")])
+    for tier in TIERS:
+        key, ran = _statements(path, lambda c, t=tier: tier_key(c, t))
+        assert len(ran) == 1, ran  # the stamp of the current generation: one read
+        with sqlite3.connect(path) as conn:
+            stamped = conn.execute("SELECT generation, key FROM tier_stamps WHERE tier = ?", (tier,)).fetchone()
+            assert stamped == (generation(conn), key)
+        assert map_tier_file(tier_file_path(path, tier), key, tier) is not None  # the ingest's file
+
+    # a write renews the generation and the stamp: the old files no longer match
+    old = {tier: tier_key(sqlite3.connect(path), tier) for tier in TIERS}
+    with viewdb.open(path) as db:
+        db.ingest([sample("torus")])
+    for tier in TIERS:
+        assert tier_key(sqlite3.connect(path), tier) != old[tier]
+
+    # a file from before the stamps (revision 0008) opens read-only as it is (its tier files
+    # used), is migrated by a normal open, and computes its keys until a write stamps them
+    before = tmp_path / "before.db"
+    copy_db(path, before)
+    _downgrade(before, "0008")
+    with sqlite3.connect(before) as conn:
+        computed = {tier: tier_key(conn, tier) for tier in TIERS}
+        assert computed != {tier: _unmarked_key(conn, tier) for tier in TIERS}  # it has a generation
+    for tier in TIERS:  # its tier files, as a viewdb before the stamps wrote them
+        write = tier_file_path(before, tier)
+        with sqlite3.connect(before) as conn:
+            conn.execute("BEGIN")
+            write_tier_file(write, computed[tier], tier, StoredTier(conn, tier).file_arrays())
+            conn.execute("ROLLBACK")
+    for tier in TIERS:  # read as it is, its files are used
+        key, _ = _statements(before, lambda c, t=tier: tier_key(c, t))
+        assert key == computed[tier] and map_tier_file(tier_file_path(before, tier), key, tier) is not None
+    with viewdb.open(before, read_only=True) as db:
+        assert db.info().schema_revision == "0008"
+        assert db.recognise(np.ones(128), 2).results == viewdb.open(path, read_only=True).recognise(
+            np.ones(128), 2).results
+    with viewdb.open(before, create=False) as db:  # migrated
+        assert db.info().schema_revision == "0009"
+    for tier in TIERS:  # no stamp yet: computed (for the new revision, as after every migration)
+        key, ran = _statements(before, lambda c, t=tier: tier_key(c, t))
+        assert len(ran) > 1 and key != computed[tier]
+    with viewdb.open(before) as db:
+        db.ingest([sample("box_long")])
+    for tier in TIERS:
+        _, ran = _statements(before, lambda c, t=tier: tier_key(c, t))
+        assert len(ran) == 1

@@ -752,8 +752,23 @@ class ShardConfig:
     check_at_start: bool = True
     #: Seconds a round of a query may wait for its shards before the query fails.
     timeout: float = 120.0
+    #: Times Ray restarts a shard's actor that died (-1: always). The restarted actor
+    #: reopens and checks its file; the server readmits it once it answers as before.
+    max_restarts: int = -1
+    #: Seconds between two looks at every shard actor's state (to mark a dead one down at
+    #: once, and readmit a restarted one).
+    probe_interval: float = 0.25
+    #: Seconds a restarted shard may take to answer the readmission call.
+    readmit_timeout: float = 5.0
+    #: The ``Retry-After`` a query needing a down shard is answered with (seconds).
+    retry_after: float = 2.0
 
     def __post_init__(self) -> None:
+        if self.max_restarts < -1:
+            raise ValueError(f"max_restarts must be -1 (always) or at least 0, got {self.max_restarts}")
+        for name in ("probe_interval", "readmit_timeout", "retry_after"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         if self.first_round < 1:
             raise ValueError(f"first_round must be at least 1, got {self.first_round}")
         if not 0.0 <= self.actor_cpus <= 64:

@@ -88,7 +88,14 @@ class NotFound(StorageError):
 
 class ShardUnavailable(StorageError):
     """A shard of a sharded catalogue did not answer (its Ray actor died or its node was
-    lost): the query fails as a whole rather than answer from the other shards."""
+    lost): the query fails as a whole rather than answer from the other shards.
+    ``retry_after``: seconds after which the shard is expected back (its actor is being
+    restarted), or None if it is not coming back by itself."""
+
+    def __init__(self, message: str, path: str | PathLike[str] | None = None,
+                 retry_after: float | None = None) -> None:
+        super().__init__(message, path)
+        self.retry_after = retry_after
 
 
 class QueryError(ViewDBError):

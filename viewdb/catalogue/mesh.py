@@ -10,6 +10,10 @@ trimesh catches ``BaseException`` in places (a texture image that fails to load,
 "failed to load image", and the mesh goes on untextured), which would swallow a Ctrl-C
 and let an ingest run on. So Ctrl-C is held while trimesh reads, normalises or writes a
 mesh and raised as soon as it is done (:mod:`viewdb.interrupts`).
+
+A mesh over the face cap is refused before it is read whole: its declared triangle count
+comes from its header, or from its lines streamed in constant memory
+(:func:`declared_faces`); the count of the loaded mesh is checked again after.
 """
 
 from __future__ import annotations
@@ -33,8 +37,8 @@ from ..lazy import lazy_module
 from ..paths import not_regular, open_regular
 
 __all__ = [
-    "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "load_mesh", "mesh_from_glb",
-    "missing_textures", "referenced_files",
+    "DEFAULT_MAX_FACES", "MESH_SUFFIXES", "LoadOptions", "NormalisedMesh", "declared_faces", "load_mesh",
+    "mesh_from_glb", "missing_textures", "referenced_files",
 ]
 
 #: File endings ingest accepts (case-insensitive).
@@ -141,6 +145,10 @@ def load_mesh(
             path,
         )
     _check_references(path, options)
+    if options.max_faces is not None:  # refused before the file is read whole
+        declared = declared_faces(path)
+        if declared is not None and declared > options.max_faces:
+            raise MeshError(_over_cap(declared, options.max_faces), path)
     load = trimesh.load  # imports trimesh: a core install without it fails here, not below
     with interrupts_held():  # see the module doc
         try:
@@ -150,12 +158,106 @@ def load_mesh(
         if options.max_faces is not None:
             faces = _face_count(loaded)
             if faces > options.max_faces:
-                raise MeshError(
-                    f"has {faces:,} triangles, more than the cap of {options.max_faces:,}; "
-                    "decimate it first or raise the cap (`max_faces`)", path,
-                )
+                raise MeshError(_over_cap(faces, options.max_faces), path)
         digest = content_hash or file_hash(path)
         return _normalise(loaded, name or path.stem, str(path), digest, path)
+
+
+def _over_cap(faces: int, cap: int) -> str:
+    return (f"has {faces:,} triangles, more than the cap of {cap:,}; decimate it first or raise "
+            "the cap (`max_faces`)")
+
+
+#: Bytes of a header read to find a mesh's declared face count (PLY, OFF; a GLB's JSON
+#: chunk may be larger and is read whole, never its binary chunk).
+_HEADER_BYTES = 1 << 16
+_GLTF_TRIANGLES = 4
+
+
+def declared_faces(path: str | Path) -> int | None:
+    """The triangles a mesh file declares, found without loading it: from the header
+    (PLY's ``element face``, OFF's counts, binary STL's count, a GLB or glTF's accessors)
+    or by streaming its lines (OBJ's ``f`` lines, ASCII STL's facets), in constant memory.
+    An OBJ's polygons count as the triangles they make, a PLY's or OFF's once each (so
+    never more than the loaded mesh has). None when it cannot tell (the loader's own
+    count then applies)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    try:
+        with open_regular(path, "rb") as f:
+            if suffix == ".ply":
+                return _ply_faces(f.read(_HEADER_BYTES))
+            if suffix == ".off":
+                return _off_faces(f.read(_HEADER_BYTES))
+            if suffix == ".stl":
+                return _stl_faces(f, path.stat().st_size)
+            if suffix == ".obj":
+                return _obj_faces(f)
+            if suffix in (".glb", ".gltf"):
+                return _gltf_faces(f, suffix == ".glb")
+    except (OSError, ValueError, KeyError, TypeError, IndexError):
+        return None
+    return None
+
+
+def _ply_faces(head: bytes) -> int | None:
+    if not head.startswith(b"ply") or b"end_header" not in head:
+        return None
+    for line in head.split(b"end_header")[0].splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face":
+            return int(parts[2])
+    return 0
+
+
+def _off_faces(head: bytes) -> int | None:
+    words: list[bytes] = []
+    for line in head.splitlines():
+        words += line.split(b"#")[0].split()
+        if len(words) >= 4:
+            break
+    if not words or not words[0].endswith(b"OFF"):
+        return None
+    return int(words[2])
+
+
+def _stl_faces(f: io.BufferedReader, size: int) -> int | None:
+    head = f.read(84)
+    if len(head) == 84 and 84 + 50 * int.from_bytes(head[80:84], "little") == size:
+        return int.from_bytes(head[80:84], "little")  # binary: the count, checked by the size
+    if not head.lstrip().lower().startswith(b"solid"):
+        return None
+    f.seek(0)
+    return sum(line.lstrip().lower().startswith(b"facet") for line in f)  # ASCII: streamed
+
+
+def _obj_faces(f: io.BufferedReader) -> int:
+    count = 0
+    for line in f:  # streamed: one line in memory at a time
+        if line.startswith(b"f ") or line.startswith(b"f\t"):
+            count += max(len(line.split()) - 3, 0)
+    return count
+
+
+def _gltf_faces(f: io.BufferedReader, binary: bool) -> int | None:
+    if binary:
+        head = f.read(20)
+        if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":
+            return None
+        doc = json.loads(f.read(int.from_bytes(head[12:16], "little")))
+    else:
+        doc = json.load(f)
+    accessors = doc.get("accessors", [])
+    count = 0
+    for mesh in doc.get("meshes", []):
+        for primitive in mesh.get("primitives", []):
+            if primitive.get("mode", _GLTF_TRIANGLES) != _GLTF_TRIANGLES:
+                continue
+            at = primitive.get("indices", primitive.get("attributes", {}).get("POSITION"))
+            if at is None:
+                continue
+            count += int(accessors[at]["count"]) // 3
+    return count
 
 
 def _face_count(loaded: object) -> int:

@@ -15,7 +15,8 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
                   re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
-``GET /health``   liveness (no database access, no token; the worker's pid only with it)
+``GET /health``   liveness (no database access, no token; the worker's pid only with it;
+                  for a sharded catalogue, which shards are up)
 ``GET /openapi.json``, ``/docs``, ``/redoc``  the schema and its pages: public even with a
                   token (they describe the API and hold no data)
 ``POST /query``, ``POST /overlay``, ``GET /objects``, ``GET /objects/{name}/views[/{h}/{v}.png]``
@@ -42,6 +43,7 @@ import asyncio
 import hmac
 import json
 import logging
+import math
 import os
 import time
 from collections.abc import AsyncIterator, Callable
@@ -329,7 +331,9 @@ def _add_error_handlers(app: FastAPI) -> None:
             return _error(404, exc.message)
         if isinstance(exc, StorageError):
             log.error("database error: %s", exc)
-            return _error(503, f"the server's database is unavailable: {exc.message}")
+            retry = getattr(exc, "retry_after", None)  # a shard being restarted (ShardUnavailable)
+            return _error(503, f"the server's database is unavailable: {exc.message}",
+                          None if retry is None else {"Retry-After": str(math.ceil(retry))})
         return _error(422, exc.message)
 
     @app.exception_handler(Exception)
@@ -354,6 +358,11 @@ def _routes(server: _Server) -> APIRouter:
                                     "needed; the worker's pid only with the token)")
     async def health(request: Request) -> dict[str, Any]:
         out: dict[str, Any] = {"status": "ok", "objects": state().objects}
+        shards = getattr(state().db, "shard_health", None)  # a sharded catalogue: which shards are up
+        if shards is not None:
+            out["shards"] = shards()
+            if not all(s["up"] for s in out["shards"]):
+                out["status"] = "degraded"
         try:
             server.authorised(request)
         except HTTPException:

@@ -15,6 +15,10 @@ header line a second is cut off at the total), a reply over ``max_reply_bytes`` 
 refused while it streams in (never held whole), a compressed reply is refused (no
 decompression bomb), and JSON nested deeper than ``max_json_depth`` is refused. Every
 failure is a :class:`~viewdb.errors.ServerError` naming the URL.
+
+The client meets the server's limits: a query image over the server's pixel cap (its
+``/info``, asked once) is scaled down before ``/pose`` and ``/fits`` (intrinsics with it),
+and the query's ``transfer`` says so (``image_width``, ``sent_width`` …).
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from .wire import (
     FitRequest,
     PoseReply,
     PoseRequest,
+    shrink_query,
 )
 
 __all__ = ["RemoteServer", "is_token", "json_depth"]
@@ -103,6 +108,8 @@ class RemoteServer:
         self._socket: socket.socket | None = None
         #: This attempt opened a connection; the watchdog fired.
         self._connected = self._timed_out = False
+        #: The most pixels the server decodes (its /info), once known.
+        self._max_pixels: int | None = None
 
     @property
     def timeout(self) -> float:
@@ -240,6 +247,32 @@ class RemoteServer:
                                self.url + path)
         return ServerError(f"request failed: {_reason(exc)}", self.url + path)
 
+    # ------------------------------------------------------------------ the server's limits
+    def max_pixels(self) -> int | None:
+        """The most pixels of a query image the server decodes (``limits.max_pixels`` of
+        its ``/info``, asked once); None if it does not say."""
+        if self._max_pixels is None:
+            limits = self.info().get("limits")
+            cap = limits.get("max_pixels") if isinstance(limits, dict) else None
+            if isinstance(cap, int) and not isinstance(cap, bool) and cap > 0:
+                self._max_pixels = cap
+        return self._max_pixels
+
+    def _fitted(
+        self, query: QueryView, intrinsics: Intrinsics | None = None,
+    ) -> tuple[QueryView, Intrinsics | None, tuple[int, int, int, int] | None]:
+        """``query`` (and ``intrinsics``) scaled down to the server's pixel cap if larger
+        (:func:`~viewdb.http.wire.shrink_query`), and the sizes before and after, if scaled."""
+        height, width = query.mask.shape
+        try:
+            cap = self.max_pixels()
+        except ServerError:  # no /info: sent as it is (the server refuses it if too large)
+            cap = None
+        if cap is None or width * height <= cap:
+            return query, intrinsics, None
+        small, scaled = shrink_query(query, cap, intrinsics)
+        return small, scaled, (width, height, small.mask.shape[1], small.mask.shape[0])
+
     # ------------------------------------------------------------------ the server tier
     def health(self) -> dict[str, Any]:
         reply, _ = self.request("GET", "/health")
@@ -285,7 +318,9 @@ class RemoteServer:
     ) -> tuple[list[float | None], Exchange]:
         if not views:
             return [], Exchange(0, 0, 0.0, 0.0, trips=0)
+        query, _, scaled = self._fitted(query)
         reply, exchange = self.request("POST", "/fits", FitRequest.from_query(query, views).to_dict())
+        exchange = replace(exchange, scaled=scaled)
         fits = _parse_reply(FitReply.from_dict, reply, self.url).fits
         if len(fits) != len(views):
             raise ServerError(f"server sent {len(fits)} shape fits, not {len(views)}", self.url)
@@ -298,8 +333,10 @@ class RemoteServer:
     ) -> tuple[list[tuple[PoseEstimate | None, str | None]], Exchange]:
         if not matches:
             return [], Exchange(0, 0, 0.0, 0.0, trips=0)
+        query, intrinsics, scaled = self._fitted(query, intrinsics)
         reply, exchange = self.request(
             "POST", "/pose", PoseRequest.from_query(query, matches, intrinsics, curves, rerank).to_dict())
+        exchange = replace(exchange, scaled=scaled)
         poses = _parse_reply(PoseReply.from_dict, reply, self.url).poses
         if len(poses) != len(matches):
             raise ServerError(f"server posed {len(poses)} matches, not {len(matches)}", self.url)

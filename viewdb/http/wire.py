@@ -45,7 +45,7 @@ __all__ = [
     "ColourRankingReply", "ColourRankingRequest", "ColourReply", "ColourRequest", "FitReply", "FitRequest",
     "PoseReply", "PoseRequest",
     "decode_query", "encode_query",
-    "pose_from_dict", "pose_to_dict",
+    "pose_from_dict", "pose_to_dict", "shrink_query",
 ]
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -62,6 +62,32 @@ def encode_query(query: QueryView) -> bytes:
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 BGRA array
         raise QueryError("cannot encode the query image")
     return data.tobytes()
+
+
+def shrink_query(
+    query: QueryView, max_pixels: int, intrinsics: Intrinsics | None = None,
+) -> tuple[QueryView, Intrinsics | None]:
+    """``query`` scaled down (same aspect ratio, area-averaged colour, the mask thresholded
+    at half) to at most ``max_pixels`` pixels, and ``intrinsics`` scaled with it, so that
+    the pose found in the smaller image is the one of the larger: the ``viewdb`` frame is
+    measured in image widths (:mod:`viewdb.pose.frames`), the ``opencv`` frame through the
+    intrinsics. ``query`` itself when it is small enough."""
+    height, width = query.mask.shape
+    if width * height <= max_pixels:
+        return query, intrinsics
+    factor = math.sqrt(max_pixels / (width * height))
+    w = max(_IMAGE.min_side, math.floor(width * factor))
+    h = max(_IMAGE.min_side, math.floor(height * factor))
+    while w * h > max_pixels and min(w, h) > _IMAGE.min_side:
+        w, h = w - 1, max(_IMAGE.min_side, round(w * height / width) - 1)
+    color = cv2.resize(np.asarray(query.color, np.uint8), (w, h), interpolation=cv2.INTER_AREA)
+    mask = cv2.resize(np.asarray(query.mask, np.uint8) * np.uint8(255), (w, h),
+                      interpolation=cv2.INTER_AREA) > 127
+    if intrinsics is not None:
+        sx, sy = w / width, h / height
+        fx, fy, cx, cy = (float(v) for v in intrinsics)
+        intrinsics = (fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5)
+    return QueryView(color, mask), intrinsics
 
 
 #: The query image limits (the same as the library's loader).

@@ -76,6 +76,8 @@ class _Traffic:
     trips: int = 0
     network_ms: float = 0.0
     pose_server_ms: float = 0.0
+    #: The query image's size and the size it was sent at, when scaled to the server's cap.
+    scaled: tuple[int, int, int, int] | None = None
 
     def add(self, sent: int, received: int, trips: int, network_ms: float) -> None:
         self.sent += sent
@@ -85,6 +87,7 @@ class _Traffic:
 
     def exchanged(self, exchange: Exchange) -> None:
         self.add(exchange.sent, exchange.received, exchange.trips, exchange.wall_ms - exchange.server_ms)
+        self.scaled = exchange.scaled or self.scaled
 
 
 @dataclass(frozen=True)
@@ -442,7 +445,11 @@ def _image_name(image: str | Path | NDArray[Any] | LoadedImage, loaded: LoadedIm
 
 
 def _transfer(traffic: _Traffic) -> dict[str, int]:
-    return {"bytes_sent": traffic.sent, "bytes_received": traffic.received, "round_trips": traffic.trips}
+    out = {"bytes_sent": traffic.sent, "bytes_received": traffic.received, "round_trips": traffic.trips}
+    if traffic.scaled is not None:  # the image was scaled down to the server's pixel cap
+        out.update(zip(("image_width", "image_height", "sent_width", "sent_height"), traffic.scaled,
+                       strict=True))
+    return out
 
 
 def _remote(server: ServerTier, traffic: _Traffic) -> dict[str, float]:

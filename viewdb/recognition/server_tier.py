@@ -37,6 +37,9 @@ class Exchange:
     #: Round trips it counts as (0: answered in this process without a message, e.g. a
     #: local ``server`` plan or a local re-ranking).
     trips: int = 1
+    #: ``(width, height, sent width, sent height)`` when the query image was scaled down
+    #: to the server's pixel cap before it was sent; None when sent as it is (or not at all).
+    scaled: tuple[int, int, int, int] | None = None
 
 
 class ServerTier(Protocol):

@@ -13,13 +13,24 @@ first), then every other shard at once, bounded by the k-th distance the first r
 found (and by the client's bounds, as in CS1). The merge (:mod:`viewdb.shards.gather`)
 gives exactly the single file's answer. A shard that dies or does not answer within
 ``ShardConfig.timeout`` fails the whole query with
-:class:`~viewdb.errors.ShardUnavailable` (HTTP 503): never a partial answer.
+:class:`~viewdb.errors.ShardUnavailable` (HTTP 503 with ``Retry-After``): never a partial
+answer.
+
+A dead shard comes back by itself: Ray restarts its actor (``ShardConfig.max_restarts``),
+whose constructor reopens and checks the file, and the watcher of
+:mod:`viewdb.shards.health` readmits it once it answers with the same objects in the same
+versions. Ray's restarts rather than a supervisor of our own: the actor handle stays valid
+(calls in flight on other threads need no swap), Ray places the new actor wherever the
+cluster has room (another node if this one is lost), and the constructor is the one path
+that opens a shard, at start and after a death alike. Until readmitted, queries needing the
+shard fail at once with 503.
 
 Re-ranking and pose calls go to the shard of each object, in parallel.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -32,12 +43,13 @@ from ..config import ShardConfig
 from ..errors import NotFound, QueryError, ShardUnavailable, StorageError, ViewDBError
 from ..pose.estimate import PoseEstimate, QueryView
 from ..pose.intrinsics import Intrinsics
-from ..ray_cluster import connect
+from ..ray_cluster import actor_state, connect
 from ..ray_cluster import ray_module as _ray
 from ..recognition.server_tier import Exchange
 from ..search.colour_index import ColourMatch, merge_colour_matches
 from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
 from .gather import scatter_gather
+from .health import ShardHealth
 from .layout import Manifest, read_manifest, shard_of
 
 __all__ = ["ShardedServerTier", "connect"]
@@ -68,6 +80,10 @@ class _Host:
     def describe(self) -> dict[str, Any]:
         return {"error": self.error} if self.shard is None else self.shard.describe()
 
+    def pid(self) -> int:
+        """The actor's process id (what a fault-injection test kills)."""
+        return os.getpid()
+
 
 class ShardedServerTier:
     """The server tier of a sharded catalogue (module doc)."""
@@ -80,15 +96,21 @@ class ShardedServerTier:
         self.manifest: Manifest = read_manifest(folder)
         connect(ray_address)
         ray = _ray()
-        actor = ray.remote(_Host).options(num_cpus=self.config.actor_cpus, max_restarts=0)
+        actor = ray.remote(_Host).options(num_cpus=self.config.actor_cpus,
+                                          max_restarts=self.config.max_restarts, max_task_retries=0)
+        self.health = ShardHealth(self.manifest.files, self.config.retry_after)
+        #: What each shard described when the tier opened (None until then).
+        self._described: list[dict[str, Any]] | None = None
         self.actors = [actor.remote(str(f), i, self.config.check_at_start)
                        for i, f in enumerate(self.manifest.files)]
         try:
             described = self._gather([a.describe.remote() for a in self.actors], range(len(self.actors)))
             self._adopt(described)
+            self._described = described
         except BaseException:
             self.close()
             raise
+        self.health.watch(lambda i: actor_state(self.actors[i]), self._readmit, self.config.probe_interval)
 
     def _adopt(self, described: list[dict[str, Any]]) -> None:
         n = self.manifest.shards
@@ -110,16 +132,45 @@ class ShardedServerTier:
         self.samples: int = first["samples"]
         self.build: dict[str, Any] = first["config"]
 
+    def _readmit(self, shard: int) -> str | None:
+        """None if shard ``shard``'s (restarted) actor answers holding what it held when
+        the catalogue was opened; else why it cannot be readmitted."""
+        ray = _ray()
+        try:
+            now = ray.get(self.actors[shard].describe.remote(), timeout=self.config.readmit_timeout)
+        except Exception as exc:  # noqa: BLE001 - not answering yet is a reason, not an error
+            return f"its restarted actor does not answer yet ({type(exc).__name__})"
+        if now.get("error"):
+            return f"its restarted actor refused the file: {now['error']}"
+        assert self._described is not None
+        was = self._described[shard]
+        if any(now[key] != was[key] for key in ("versions", "samples", "config")):
+            return "its file changed while it was down: restart the server"
+        return None
+
+    def shard_health(self) -> list[dict[str, Any]]:
+        """Each shard's state (up, recoveries, and why it is down), in shard order."""
+        return [{"shard": i, **s.to_dict()} for i, s in enumerate(self.health.snapshot())]
+
     def close(self) -> None:
         ray = _ray()
+        self.health.stop()
         for a in getattr(self, "actors", []):
             ray.kill(a)
         self.actors = []
 
     # ------------------------------------------------------------------ Ray calls
-    def _gather(self, refs: list[Any], shards: Sequence[int]) -> list[Any]:
-        """The results of one round of calls (``shards``: the shard of each), or
-        :class:`ShardUnavailable` naming the first shard that failed to answer."""
+    def _each(self, shards: Sequence[int], call: Callable[[int], Any]) -> list[Any]:
+        """``call(shard)`` (a Ray call) on each of ``shards`` and their answers; none is
+        sent if one of them is down (:class:`ShardUnavailable` at once)."""
+        self.health.require(shards)
+        sent = time.monotonic()
+        return self._gather([call(s) for s in shards], shards, sent)
+
+    def _gather(self, refs: list[Any], shards: Sequence[int], sent: float | None = None) -> list[Any]:
+        """The results of one round of calls (``shards``: the shard of each; ``sent``: when
+        they were sent), or :class:`ShardUnavailable` naming the first shard that failed
+        to answer."""
         ray = _ray()
         try:
             return list(ray.get(refs, timeout=self.config.timeout))
@@ -131,9 +182,15 @@ class ShardedServerTier:
         except (ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError,
                 ray.exceptions.ObjectLostError) as exc:
             dead = self._dead(refs, shards)
+            reason = f"did not answer ({type(exc).__name__})"
+            restarts = self.config.max_restarts != 0 and actor_state(self.actors[dead]) != "DEAD"
+            if self._described is not None:  # open: the watcher readmits it once restarted
+                self.health.down(dead, reason, final=not restarts, sent=sent)
             raise ShardUnavailable(
-                f"shard {dead} did not answer ({type(exc).__name__}); no partial answer is given: "
-                "restart the server", self.manifest.files[dead],
+                f"shard {dead} {reason}; no partial answer is given: "
+                + (f"it is being restarted, retry in {self.config.retry_after:g} s" if restarts
+                   else "restart the server"),
+                self.manifest.files[dead], retry_after=self.config.retry_after if restarts else None,
             ) from None
 
     def _dead(self, refs: list[Any], shards: Sequence[int]) -> int:
@@ -161,7 +218,7 @@ class ShardedServerTier:
         parallel); the answers put back in the order of ``names``."""
         groups = self._by_shard(names)
         shards = list(groups)
-        answers = self._gather([call(self.actors[s], groups[s]) for s in shards], shards)
+        answers = self._each(shards, lambda s: call(self.actors[s], groups[s]))
         out: list[Any] = [None] * len(names)
         for s, answer in zip(shards, answers, strict=True):
             for position, value in zip(groups[s], answer, strict=True):
@@ -188,9 +245,8 @@ class ShardedServerTier:
         body = request.to_dict()
 
         def run(shards: list[int], bound: float, client: dict[int, list[Candidate]]) -> list[Any]:
-            return self._gather([self.actors[s].call.remote(
-                "refine", {**body, "client": [c.to_dict() for c in client.get(s, [])]}, bound)
-                for s in shards], shards)
+            return self._each(shards, lambda s: self.actors[s].call.remote(
+                "refine", {**body, "client": [c.to_dict() for c in client.get(s, [])]}, bound))
 
         return scatter_gather(request, self.owner, self.versions, self.manifest.shards,
                               self.config.first_round, run)
@@ -204,11 +260,11 @@ class ShardedServerTier:
         groups = self._by_shard([c.object for c in mine])
         shards = list(groups)
         body = request.to_dict()
-        refs = [self.actors[s].call.remote("walk", {**body, "client": [mine[i].to_dict() for i in groups[s]]})
-                for s in shards]
+        replies = self._each(shards, lambda s: self.actors[s].call.remote(
+            "walk", {**body, "client": [mine[i].to_dict() for i in groups[s]]}))
         found: list[Candidate] = []
         dtw = 0.0
-        for reply in self._gather(refs, shards):
+        for reply in replies:
             parsed = ServerReply.from_dict(reply)
             found += parsed.results
             dtw += parsed.stats.get("dtw", 0.0)
@@ -227,8 +283,7 @@ class ShardedServerTier:
         """The colour channel over every shard: each shard's nearest ``n``, merged."""
         def ask() -> list[ColourMatch]:
             shards = list(range(len(self.actors)))
-            parts = self._gather([self.actors[s].call.remote("colour_ranking", signature, n) for s in shards],
-                                 shards)
+            parts = self._each(shards, lambda s: self.actors[s].call.remote("colour_ranking", signature, n))
             return merge_colour_matches([[ColourMatch.from_dict(m) for m in part] for part in parts], n)
         return self._timed(ask)
 

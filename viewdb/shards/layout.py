@@ -31,7 +31,7 @@ from ..errors import StorageError, ViewDBError
 from ..search.grouping import DIMENSION
 from ..storage.codecs import decode_array
 from ..storage.spatial import FourierIndex
-from ..storage.tier_file import new_generation
+from ..storage.tier_file import new_generation, stamp_tiers
 from ..storage.tiers import TIERS
 
 __all__ = ["MANIFEST", "Manifest", "check_new_folder", "read_manifest", "shard_file", "shard_of",
@@ -190,6 +190,7 @@ def _write_shard(source: Path, target: Path, keep: set[str]) -> None:
         conn.execute("DELETE FROM rtree_pages")
         for tier in TIERS:
             _rebuild_tier(conn, tier)
+        stamp_tiers(conn)
         conn.execute("COMMIT")
         conn.execute("PRAGMA journal_mode = DELETE")
         conn.execute("VACUUM")

@@ -75,7 +75,11 @@ class ShardedCatalogue:
     def info(self) -> ShardedInfo:
         tier = self._tier
         every = list(range(len(tier.actors)))
-        return ShardedInfo(tier._gather([a.call.remote("info") for a in tier.actors], every), self.path)
+        return ShardedInfo(tier._each(every, lambda s: tier.actors[s].call.remote("info")), self.path)
+
+    def shard_health(self) -> list[dict[str, Any]]:
+        """Each shard's state (:meth:`ShardedServerTier.shard_health`), for ``/health``."""
+        return self._tier.shard_health()
 
     def objects(self) -> list[str]:
         return sorted(self._tier.owner)

@@ -7,8 +7,11 @@ when complete) if it is new. :meth:`ShardFiles.ingest` is the single file's inge
 (:func:`~viewdb.catalogue.ingest.run_ingest`, local workers or Ray tasks) with each
 object written to its shard by the placement rule of :func:`~viewdb.shards.layout.shard_of`,
 in one transaction of that shard's file. The manifest's object counts are rewritten
-(atomically) after each new object and whenever the shards are opened, so a kill between
-an object's commit and its count is repaired by the next ingest.
+(atomically) after each new object, whenever the shards are opened and when an ingest
+ends, each time from what the shard files hold (never from the manifest's own counts), so
+a kill between an object's commit and its count is repaired by the next ingest. One
+writer at a time: the folder's lock (:mod:`viewdb.shards.lock`) is held from the open to
+the close, and a second ingest into the same folder is refused in one line.
 
 :func:`export_client_from_shards` writes the client file of a sharded catalogue: the same
 file the single file it was split from exports (:mod:`viewdb.storage.export`).
@@ -49,35 +52,45 @@ from .layout import (
     shard_of,
     write_manifest,
 )
+from .lock import FolderLock
 
 __all__ = ["ShardFiles", "export_client_from_shards", "open_shards"]
 
 
-def open_shards(folder: str | Path, *, count: int | None = None, **settings: Any) -> ShardFiles:
+def open_shards(folder: str | Path, *, count: int | None = None, wait: float = 0.0,
+                **settings: Any) -> ShardFiles:
     """The shard files of the sharded catalogue in ``folder``, open for writing. A folder
     without a manifest (missing or empty) becomes a new catalogue of ``count`` shards,
     built with ``settings`` (:func:`viewdb.open`'s ``gap``, ``image_size``,
     ``client_gap``, ``perspective``, ``config``); an existing one must hold ``count``
-    shards (if given) built with those settings."""
+    shards (if given) built with those settings. The folder's writer lock
+    (:class:`~viewdb.shards.lock.FolderLock`) is held until the files are closed: a
+    second writer is refused in one line naming the first (or waits ``wait`` seconds
+    for it)."""
     folder = Path(folder)
-    if not (folder / MANIFEST).exists():
-        if count is None:
-            raise ViewDBError("is not a sharded catalogue yet: give the number of shards to create "
-                              "one (`count` N)", folder)
-        _create(folder, count, settings)
-    manifest = read_manifest(folder)
-    if count is not None and count != manifest.shards:
-        raise ViewDBError(f"holds {manifest.shards} shards, not {count}", folder)
+    if count is None and not (folder / MANIFEST).exists():
+        raise ViewDBError("is not a sharded catalogue yet: give the number of shards to create "
+                          "one (`count` N)", folder)
+    if not folder.parent.is_dir():
+        raise ViewDBError("its parent folder does not exist", folder)
+    lock = FolderLock(folder, wait)
     dbs: list[ViewDB] = []
     try:
+        if not (folder / MANIFEST).exists():
+            assert count is not None
+            _create(folder, count, settings)
+        manifest = read_manifest(folder)
+        if count is not None and count != manifest.shards:
+            raise ViewDBError(f"holds {manifest.shards} shards, not {count}", folder)
         for path in manifest.files:
             dbs.append(open_db(path, create=False, **settings))
         if any(db.config != dbs[0].config for db in dbs):
             raise StorageError("holds shards built with different settings", folder)
-        return ShardFiles(manifest, dbs)
+        return ShardFiles(manifest, dbs, lock)
     except BaseException:
         for db in dbs:
             db.close()
+        lock.release()
         raise
 
 
@@ -105,17 +118,21 @@ def _create(folder: Path, count: int, settings: dict[str, Any]) -> None:
 class ShardFiles:
     """Every shard file of a sharded catalogue, open for writing (:func:`open_shards`)."""
 
-    def __init__(self, manifest: Manifest, dbs: list[ViewDB]) -> None:
+    def __init__(self, manifest: Manifest, dbs: list[ViewDB], lock: FolderLock) -> None:
         self.manifest = manifest
         self.dbs = dbs
+        self.lock = lock
 
     @property
     def config(self) -> BuildConfig:
         return self.dbs[0].config
 
     def close(self) -> None:
-        for db in self.dbs:
-            db.close()
+        try:
+            for db in self.dbs:
+                db.close()
+        finally:
+            self.lock.release()
 
     def __enter__(self) -> ShardFiles:
         return self
@@ -142,6 +159,7 @@ class ShardFiles:
                             progress=progress, options=options, ray=ray, ray_config=ray_config)
         for db in self.dbs:
             db.write_tier_files()
+        self._count([{o.name for o in db.objects()} for db in self.dbs])  # from the files themselves
         return report
 
     def target(self) -> IngestTarget:

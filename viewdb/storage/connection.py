@@ -35,6 +35,7 @@ from ..config import BuildConfig
 from ..errors import SchemaMismatch, StorageError, UpgradeNeeded
 from ..paths import not_regular
 from . import schema as s
+from .tier_file import generation, stamp_tiers
 
 __all__ = ["READ_ONLY_COMPATIBLE", "Database", "alembic_config", "known_revisions", "read_only_uri"]
 
@@ -109,12 +110,19 @@ _CURVE_ERRORS_STAND_IN = (
 _SCOPES_STAND_IN = (
     "CREATE TEMP TABLE IF NOT EXISTS appearance_scopes (object_id INTEGER PRIMARY KEY, scope TEXT NOT NULL)"
 )
+#: Revision 0009 only added the tiers' stamped keys: without them a tier's key is computed.
+_STAMPS_STAND_IN = (
+    "CREATE TEMP TABLE IF NOT EXISTS tier_stamps (tier TEXT PRIMARY KEY, generation TEXT NOT NULL,"
+    " key TEXT NOT NULL)"
+)
 READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
-    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
-    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
-    "0005": (_CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN),
-    "0006": (_SCOPES_STAND_IN,),
-    "0007": (_SCOPES_STAND_IN,),
+    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN,
+             _STAMPS_STAND_IN),
+    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN, _STAMPS_STAND_IN),
+    "0005": (_CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN, _STAMPS_STAND_IN),
+    "0006": (_SCOPES_STAND_IN, _STAMPS_STAND_IN),
+    "0007": (_SCOPES_STAND_IN, _STAMPS_STAND_IN),
+    "0008": (_STAMPS_STAND_IN,),
 }
 
 
@@ -270,7 +278,10 @@ class Database:
             dbapi = conn.connection.driver_connection
             if not dbapi.in_transaction:
                 dbapi.execute("BEGIN IMMEDIATE")
+            before = generation(dbapi)
             yield conn
+            if generation(dbapi) != before:  # the groups changed: the tiers' keys, stamped
+                stamp_tiers(dbapi)
 
     def revision(self) -> str | None:
         with self.read() as conn:

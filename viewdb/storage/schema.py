@@ -67,11 +67,12 @@ __all__ = [
     "rtree_pages",
     "settings",
     "sift_features",
+    "tier_stamps",
     "views",
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0008"
+SCHEMA_REVISION = "0009"
 
 metadata = MetaData()
 
@@ -240,4 +241,14 @@ curve_errors = Table(
     Column("group_id", Integer, ForeignKey("index_groups.id", ondelete="CASCADE"), primary_key=True),
     #: float32 (n, 2): per view of the group, L2 and L-infinity norm of its decoding error
     Column("errors", LargeBinary, nullable=False),
+)
+
+#: Each tier's key (:func:`~viewdb.storage.tier_file.tier_key`), stamped with the index
+#: generation of the transaction that last changed the groups (revision 0009).
+tier_stamps = Table(
+    "tier_stamps",
+    metadata,
+    Column("tier", String, primary_key=True),
+    Column("generation", String, nullable=False),
+    Column("key", String, nullable=False),
 )

@@ -20,7 +20,11 @@ The ``key`` (:func:`tier_key`) digests what identifies the tier's content in the
 database: the schema revision, the *generation* of the index (a random token every writer
 of groups renews in the same transaction, :func:`new_generation`), the tier's group
 count, id sum and maximum (read from the tier's index alone), and every object's id, name
-and content hash. A database no writer with generations has changed has none; its key is
+and content hash. Since schema revision 0009 every write transaction that renews the
+generation also stamps each tier's key, computed from the generation alone (the revision
+keeps writers that would not renew it out), in ``tier_stamps`` (:func:`stamp_tiers`): a
+fresh open reads the stamp of the current generation, one read, and computes the key only
+for a file without one. A database no writer with generations has changed has none; its key is
 the tier's group count, id sum and maximum, the total length of its curve and view-id
 BLOBs, and every object's id, name, content hash and time of writing, which cost a read of
 every group row (0.1–0.3 s on the 212-model file with the pages cached) and, before schema
@@ -45,7 +49,8 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ARRAYS", "map_tier_file", "new_generation", "tier_file_path", "tier_key", "write_tier_file"]
+__all__ = ["ARRAYS", "generation", "map_tier_file", "new_generation", "stamp_tiers", "tier_file_path",
+           "tier_key", "write_tier_file"]
 
 MAGIC = b"VDBTIER2"
 _LENGTH = struct.Struct("<I")
@@ -79,13 +84,53 @@ def new_generation(conn: sqlite3.Connection, keep: bool = False) -> None:
                  (GENERATION_KEY, json.dumps(uuid.uuid4().hex)))
 
 
+def generation(conn: sqlite3.Connection) -> str | None:
+    """The index's generation (None in a file without one, or without settings yet)."""
+    try:
+        row = conn.execute("SELECT value FROM settings WHERE key = ?", (GENERATION_KEY,)).fetchone()
+    except sqlite3.OperationalError:  # a file being created: no tables yet
+        return None
+    return None if row is None else str(row[0])
+
+
+def stamp_tiers(conn: sqlite3.Connection) -> None:
+    """Stamp the key of every tier with groups (and of every tier stamped before) with the
+    current generation, in the caller's write transaction, after its last write: a fresh
+    open then reads the key (:func:`tier_key`) rather than computes it."""
+    now = generation(conn)
+    if now is None:
+        return
+    tiers = {str(r[0]) for r in conn.execute("SELECT DISTINCT tier FROM index_groups")}
+    tiers |= {str(r[0]) for r in conn.execute("SELECT tier FROM tier_stamps")}
+    for tier in sorted(tiers):
+        conn.execute("INSERT INTO tier_stamps (tier, generation, key) VALUES (?, ?, ?) ON CONFLICT (tier)"
+                     " DO UPDATE SET generation = excluded.generation, key = excluded.key",
+                     (tier, now, _stamped_key(conn, tier, now)))
+
+
+def _stamped_key(conn: sqlite3.Connection, tier: str, now: str) -> str:
+    """A stamp's key: the generation (a fresh token in every transaction that changed any
+    group, since revision 0009 by every writer) and the schema revision identify it."""
+    digest = hashlib.sha256(f"{MAGIC!r} {tier} {now} stamped".encode())
+    digest.update(repr(conn.execute("SELECT version_num FROM alembic_version").fetchall()).encode())
+    return digest.hexdigest()
+
+
 def tier_key(conn: sqlite3.Connection, tier: str) -> str:
     """The digest of what identifies tier ``tier``'s content in the open database (module
     doc); read inside the caller's read transaction."""
-    generation = conn.execute("SELECT value FROM settings WHERE key = ?", (GENERATION_KEY,)).fetchone()
-    if generation is None:
+    try:
+        stamp = conn.execute(
+            "SELECT t.key FROM tier_stamps t JOIN settings s ON s.key = ? AND s.value = t.generation"
+            " WHERE t.tier = ?", (GENERATION_KEY, tier)).fetchone()
+    except sqlite3.OperationalError:  # a file from before revision 0009, read as it is
+        stamp = None
+    if stamp is not None:
+        return str(stamp[0])
+    token = conn.execute("SELECT value FROM settings WHERE key = ?", (GENERATION_KEY,)).fetchone()
+    if token is None:
         return _unmarked_key(conn, tier)
-    digest = hashlib.sha256(f"{MAGIC!r} {tier} {generation[0]}".encode())
+    digest = hashlib.sha256(f"{MAGIC!r} {tier} {token[0]}".encode())
     digest.update(repr(conn.execute("SELECT version_num FROM alembic_version").fetchall()).encode())
     # the tier's index covers these: no group row is read
     groups = conn.execute("SELECT count(*), total(id), max(id) FROM index_groups WHERE tier = ?",
