@@ -41,13 +41,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import viewdb  # noqa: E402
-from tests.conftest import sample  # noqa: E402
-from viewdb.bench.photos import composite_photo  # noqa: E402
-from viewdb.errors import ServerError  # noqa: E402
+import viewdb
+from support.samples import sample
+from viewdb.bench.photos import composite_photo
+from viewdb.errors import ServerError
 
 MODELS = ("marked_cube", "car", "mug", "l_bracket", "chair", "arrow", "bottle", "torus", "table")
 TOKEN = "chaos-token"

@@ -18,18 +18,14 @@ import hashlib
 import shutil
 import sqlite3
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import viewdb  # noqa: E402
-from tests.conftest import sample  # noqa: E402
-from viewdb.storage.tier_file import tier_key  # noqa: E402
-from viewdb.storage.tiers import TIERS  # noqa: E402
+import viewdb
+from support.samples import sample
+from viewdb.storage.tier_file import tier_key
+from viewdb.storage.tiers import TIERS
 
 
 def timed_key(path: Path, tier: str, runs: int) -> tuple[float, int]:
