@@ -14,18 +14,8 @@ import time
 
 import numpy as np
 
+from support.curves import smooth_curve
 from viewdb.search import bounds
-
-
-def smooth_curve(rng: np.random.Generator, n: int) -> np.ndarray:
-    """A real-looking centroid distance curve: 1 + a few low sinusoids, mean 1."""
-    t = np.arange(n) / n
-    x = np.ones(n)
-    for _ in range(rng.integers(1, 5)):
-        f = rng.integers(1, 7)
-        x += rng.uniform(0.02, 0.25) * np.cos(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-    x = np.maximum(x, 0.05)
-    return x / x.mean()
 
 
 def main() -> None:

@@ -15,24 +15,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from benchmarks.support.curves import smooth_curve
 from tests import reference as R
 from viewdb.catalogue.features import fourier_point, mirror_curve
 from viewdb.search import bounds as B
 
 SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 KINDS = ("normal", "walk", "smooth", "ties")
-
-
-def smooth_curve(rng: np.random.Generator, n: int) -> np.ndarray:
-    """A real-looking centroid distance curve: 1 + a few low sinusoids, mean 1, float32."""
-    t = np.arange(n) / n
-    x = np.ones(n)
-    for _ in range(rng.integers(1, 5)):
-        f = rng.integers(1, 7)
-        x += rng.uniform(0.02, 0.25) * np.cos(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-    x = np.maximum(x, 0.05)
-    x /= x.mean()
-    return x.astype(np.float32).astype(np.float64)
 
 
 def make_seq(rng: np.random.Generator, n: int, kind: str) -> np.ndarray:
