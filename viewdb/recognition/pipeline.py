@@ -15,7 +15,11 @@ CS2 runs on a :class:`~viewdb.recognition.client_tier.ClientTier`.
    best objects (a pool of at least k), each with its best view over all curves.
 4. **re-rank**: by colour (:mod:`viewdb.recognition.colour`) when the photo has colour,
    then by how well each matched view fits the photo's shape
-   (:mod:`viewdb.recognition.verify`); the best k are kept.
+   (:mod:`viewdb.recognition.verify`); the best k are kept. An object cut from a prompt
+   in a photo with colour is ranked by its colours first instead: the colour channel
+   (:mod:`viewdb.search.colour_index`) names the objects whose stored colours lie
+   nearest, each is searched exactly beside the outline's pool
+   (:func:`_by_colour_channel`).
 5. **pose** (:mod:`viewdb.pose.matched`): the top results' poses, chosen among their
    candidate same-shape views by SIFT or by outline; with ``rerank`` and intrinsics the
    results are re-ranked by the IoU of their perspective silhouette fit.
