@@ -753,7 +753,8 @@ def serve(
                                  envvar="VIEWDB_TOKEN")
     ] = None,
     max_body: Annotated[
-        int, typer.Option(help="Largest /refine, /walk, /colours or /colour-ranking body in bytes.", min=1024, max=1 << 30)
+        int, typer.Option(help="Largest /refine, /walk, /colours or /colour-ranking body in bytes.",
+                          min=1024, max=1 << 30)
     ] = 256 * 1024,
     max_image_body: Annotated[
         int, typer.Option(help="Largest /pose, /fits or /query body (the photo) in bytes.",
