@@ -84,11 +84,7 @@ def decode_record(data: bytes | memoryview, azimuth: float, elevation: float, im
         The bytes are not a record, or the record breaks its promises.
     """
     buf = bytes(data)
-    if len(buf) < _HEADER.size:
-        raise StorageError(f"appearance: record too short ({len(buf)} bytes)")
-    magic, version, flags, x0, y0, x1, y1, n_mask, n_edges, n_theta = _HEADER.unpack_from(buf)
-    if magic != MAGIC or version != VERSION:
-        raise StorageError("appearance: record has a bad header")
+    flags, x0, y0, x1, y1, n_mask, n_edges, n_theta = _header(buf)
     if not (x0 <= x1 <= image_size and y0 <= y1 <= image_size):
         raise StorageError(f"appearance: box {(x0, y0, x1, y1)} is not inside a {image_size}-pixel view")
     at = _HEADER.size
@@ -115,12 +111,7 @@ def decode_record(data: bytes | memoryview, azimuth: float, elevation: float, im
         raise StorageError("appearance: an edge direction is out of range")
     if not box[ys, xs].all():
         raise StorageError("appearance: edge pixels outside the silhouette")
-    signature = None
-    if flags & 1:
-        raw = _inflate(buf[ends[3]:], "colour signature")
-        if len(raw) != 2 * BINS * BINS:
-            raise StorageError(f"appearance: colour signature of {len(raw)} bytes, not {2 * BINS * BINS}")
-        signature = np.frombuffer(raw, "<u2").reshape(BINS, BINS).astype(np.uint16)
+    signature = _signature(buf[ends[3]:]) if flags & 1 else None
     mask = np.zeros((image_size, image_size), dtype=bool)
     mask[y0:y1, x0:x1] = box
     points = np.stack([xs + x0, ys + y0], axis=1).astype(np.int32)
@@ -137,17 +128,26 @@ def decode_signature(data: bytes | memoryview) -> np.ndarray | None:
         The bytes are not a record, or its signature is damaged.
     """
     buf = bytes(data)
-    if len(buf) < _HEADER.size:
-        raise StorageError(f"appearance: record too short ({len(buf)} bytes)")
-    magic, version, flags, *_, n_mask, n_edges, n_theta = _HEADER.unpack_from(buf)
-    if magic != MAGIC or version != VERSION:
-        raise StorageError("appearance: record has a bad header")
+    flags, *_, n_mask, n_edges, n_theta = _header(buf)
     start = _HEADER.size + n_mask + n_edges + n_theta
     if start > len(buf) or (not flags & 1 and start != len(buf)):
         raise StorageError("appearance: record lengths do not add up")
-    if not flags & 1:
-        return None
-    raw = _inflate(buf[start:], "colour signature")
+    return _signature(buf[start:]) if flags & 1 else None
+
+
+def _header(buf: bytes) -> tuple[int, ...]:
+    """A record's header after its magic and version: flags, box, stream lengths."""
+    if len(buf) < _HEADER.size:
+        raise StorageError(f"appearance: record too short ({len(buf)} bytes)")
+    magic, version, *rest = _HEADER.unpack_from(buf)
+    if magic != MAGIC or version != VERSION:
+        raise StorageError("appearance: record has a bad header")
+    return tuple(rest)
+
+
+def _signature(stream: bytes) -> np.ndarray:
+    """A record's colour signature from its zlib stream (uint16, ``BINS × BINS``)."""
+    raw = _inflate(stream, "colour signature")
     if len(raw) != 2 * BINS * BINS:
         raise StorageError(f"appearance: colour signature of {len(raw)} bytes, not {2 * BINS * BINS}")
     return np.frombuffer(raw, "<u2").reshape(BINS, BINS).astype(np.uint16)

@@ -10,10 +10,10 @@ from __future__ import annotations
 import itertools
 import json
 import sqlite3
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import sqlalchemy as sa
@@ -30,6 +30,8 @@ from .connection import Database
 from .spatial import raw_connection
 from .tier_file import new_generation
 from .tiers import delete_groups, orthographic_angles, write_groups
+
+_T = TypeVar("_T")
 
 __all__ = ["ObjectRow", "Store", "ViewRow"]
 
@@ -418,24 +420,19 @@ class Store(Database):
         if not wanted:
             return {}
         azimuths = sorted({h for h, _ in wanted})
-        with self._errors(), self.engine.connect() as conn:
-            raw = conn.connection.driver_connection
-            began = not raw.in_transaction
-            try:
-                if began:  # one snapshot for the offsets and the bytes (a writer may replace both)
-                    raw.execute("BEGIN")
-                try:
-                    return self._read_records(raw, name, azimuths, wanted)
-                finally:
-                    if began:
-                        raw.execute("COMMIT")
-            except sqlite3.Error as exc:
-                raise StorageError(f"cannot read the appearance of {name!r}: {exc}", self.path) from exc
+        return self._in_snapshot(lambda raw: self._read_records(raw, name, azimuths, wanted),
+                                 f"the appearance of {name!r}")
 
     def grid_appearance_records(self, step: float) -> list[tuple[str, float, float, bytes]]:
         """``(object, azimuth, elevation, packed record)`` of every stored appearance record
         whose direction lies on a grid of ``step`` degrees, object by object, read in one
         snapshot (only the records' bytes of each object's blob)."""
+        return self._in_snapshot(lambda raw: self._read_grid_records(raw, float(step)),
+                                 "the appearance records")
+
+    def _in_snapshot(self, read: Callable[[sqlite3.Connection], _T], what: str) -> _T:
+        """``read`` on the raw connection in one snapshot (offsets and blob bytes alike: a
+        writer may replace both); an SQLite error says it could not read ``what``."""
         with self._errors(), self.engine.connect() as conn:
             raw = conn.connection.driver_connection
             began = not raw.in_transaction
@@ -443,12 +440,12 @@ class Store(Database):
                 if began:
                     raw.execute("BEGIN")
                 try:
-                    return self._read_grid_records(raw, float(step))
+                    return read(raw)
                 finally:
                     if began:
                         raw.execute("COMMIT")
             except sqlite3.Error as exc:
-                raise StorageError(f"cannot read the appearance records: {exc}", self.path) from exc
+                raise StorageError(f"cannot read {what}: {exc}", self.path) from exc
 
     @staticmethod
     def _read_grid_records(raw: sqlite3.Connection, step: float) -> list[tuple[str, float, float, bytes]]:
