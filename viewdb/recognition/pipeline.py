@@ -186,23 +186,39 @@ def _search(
         return _search_stack(shape, options, pool, server, client, traffic)
     per_curve: list[tuple[float, list[Candidate]]] = []
     client_ms = server_ms = 0.0
-    for i, (angle, curve) in enumerate(shape.curves):
+    for i, (_, curve) in enumerate(shape.curves):
         prior = [c for c, _ in merge(per_curve, pool)]
         window = _window(shape, i, options)
         found = recognise_curve(curve, pool, options.band, options.plan, server, client, prior, window,
                                 **_cs2(options))
-        if window is None:
-            per_curve.append((angle, found.results))
-        else:  # each result at the in-plane turn its shift stands for
-            assert shape.bearings is not None
-            for c in found.results:
-                turn = shift_turn(shape.bearings[i], c.shift or 0)
-                per_curve.append((turn, [c]))
-                shape.by_angle.setdefault(turn, shifted(curve, c.shift or 0))
+        per_curve += _at_turns(shape, i, window, found.results)
         client_ms += found.client_ms
         server_ms += found.server_ms
         traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
     return merge(per_curve, pool), client_ms, server_ms
+
+
+def _at_turns(
+    shape: QueryShape, i: int, window: ShiftWindow | None, found: list[Candidate],
+) -> list[tuple[float, list[Candidate]]]:
+    """Curve ``i``'s results at their in-plane turns: the curve's own, or for a shift
+    search each result at the turn its shift stands for (whose curve joins
+    ``shape.by_angle``)."""
+    angle, curve = shape.curves[i]
+    if window is None:
+        return [(angle, found)]
+    assert shape.bearings is not None
+    out = []
+    for c in found:
+        turn = shift_turn(shape.bearings[i], c.shift or 0)
+        out.append((turn, [c]))
+        shape.by_angle.setdefault(turn, shifted(curve, c.shift or 0))
+    return out
+
+
+def _stack_pooled(shape: QueryShape, found: list[Candidate]) -> list[Pooled]:
+    """A stack search's results, each at the in-plane angle of the curve that matched."""
+    return [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in found]
 
 
 def _cs2(options: QueryOptions) -> dict[str, Any]:
@@ -228,8 +244,7 @@ def _search_stack(
     stack = np.stack([curve for _, curve in shape.curves])
     found = recognise_curve(stack, pool, options.band, options.plan, server, client, **_cs2(options))
     traffic.add(found.bytes_sent, found.bytes_received, found.round_trips, found.network_ms)
-    pooled = [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in found.results]
-    return pooled, found.client_ms, found.server_ms
+    return _stack_pooled(shape, found.results), found.client_ms, found.server_ms
 
 
 def _window(shape: QueryShape, i: int, options: QueryOptions) -> ShiftWindow | None:
@@ -277,20 +292,13 @@ def _search_objects(
         request = RefineRequest.of_stack(stack, options.band, k, client, shortlist=True)
         reply, exchange = server.refine(request)
         traffic.exchanged(exchange)
-        return [(replace(c, curve_index=None), shape.curves[c.curve_index or 0][0]) for c in reply.results]
+        return _stack_pooled(shape, reply.results)
     per_curve: list[tuple[float, list[Candidate]]] = []
-    for i, (angle, curve) in enumerate(shape.curves):
+    for i, (_, curve) in enumerate(shape.curves):
         window = _window(shape, i, options)
         reply, exchange = server.refine(RefineRequest(curve, options.band, k, client, window, shortlist=True))
         traffic.exchanged(exchange)
-        if window is None:
-            per_curve.append((angle, reply.results))
-            continue
-        assert shape.bearings is not None
-        for c in reply.results:
-            turn = shift_turn(shape.bearings[i], c.shift or 0)
-            per_curve.append((turn, [c]))
-            shape.by_angle.setdefault(turn, shifted(curve, c.shift or 0))
+        per_curve += _at_turns(shape, i, window, reply.results)
     return merge(per_curve, k)
 
 
@@ -317,8 +325,8 @@ def _by_colour_channel(
     mesh has no colour counts ``uncoloured_distance``; a coloured one the channel did not
     name, the larger of that and the channel's last distance."""
     recognition = options.recognition
-    pooled = pooled + _search_objects(shape, options, [m.object for m in matches
-                                                       if m.object not in {c.object for c, _ in pooled}],
+    searched = {c.object for c, _ in pooled}
+    pooled = pooled + _search_objects(shape, options, [m.object for m in matches if m.object not in searched],
                                       server, traffic)
     # what each counts (``counted``) and its matched view's distance (``shown``; None: no colour)
     counted: dict[str, float] = {m.object: m.distance for m in matches}
