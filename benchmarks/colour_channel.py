@@ -2,13 +2,13 @@
 LM-O box cut-outs against the stored colour signatures of every coloured object, and
 against every object's outlines.
 
-    python benchmarks/colour_channel.py --db CATALOGUE [--step 2] [--grid 30] [--min-visibility 0.5]
+    python benchmarks/colour_channel.py --db CATALOGUE [--step 2] [--min-visibility 0.5]
 
 Each LM-O photo (every ``--step``-th) is cut from the boxes of its annotated objects as a
 query cuts it; each cut-out's colour signature (:func:`viewdb.recognition.colour.colour_signature`)
-is compared with the stored signature of every coloured object's views on a ``--grid``°
-grid (:meth:`StoredCatalogue.appearance`), an object's colour distance being its best
-view's. Printed: the rank of the right object (or its twin) among the coloured objects by
+is ranked by the colour channel a query uses (:meth:`StoredCatalogue.colour_index`:
+every coloured object's stored views on its default grid), an object's colour distance
+being its best view's. Printed: the rank of the right object (or its twin) among the coloured objects by
 that distance, as shares at ranks 1, 3, 5 and 10. It measures whether a colour channel
 could bring an object the outline search misses into the re-ranked pool
 (docs/results/real-clutter.md). Beside it, the rank of the right object by the outline
@@ -27,7 +27,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.groundtruth import TWINS, read_frames
-from viewdb.recognition.colour import colour_distance, colour_signature
+from viewdb.recognition.colour import colour_signature
 from viewdb.recognition.image import load_image
 from viewdb.recognition.options import QueryOptions
 from viewdb.recognition.pipeline import region_shape
@@ -40,18 +40,6 @@ OUTLINE_DEPTH = 60
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
 LMO = SHARED / "real" / "lmo_dev"
-
-
-def signatures(db: viewdb.ViewDB, grid: float) -> dict[str, np.ndarray]:
-    """Every coloured object's stored colour signatures on a ``grid``° grid of directions."""
-    catalogue = db._catalogue
-    directions = [(float(h), float(v)) for h in np.arange(0, 360, grid) for v in np.arange(0, 360, grid)]
-    out = {}
-    for obj in db.objects():
-        if catalogue.appearance(obj.name, 0.0, 0.0).colour() is None:
-            continue
-        out[obj.name] = np.stack([catalogue.appearance(obj.name, h, v).colour() for h, v in directions])
-    return out
 
 
 def outline_rank(db: viewdb.ViewDB, image, region, same: tuple[str, ...]) -> int:
@@ -73,14 +61,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", type=Path, required=True)
     parser.add_argument("--step", type=int, default=2, help="every N-th photo")
-    parser.add_argument("--grid", type=float, default=30.0, help="degrees between the directions compared")
     parser.add_argument("--min-visibility", type=float, default=0.5)
     args = parser.parse_args()
     with viewdb.open(args.db, create=False, read_only=True) as db:
         start = time.perf_counter()
-        stored = signatures(db, args.grid)
-        print(f"{len(stored)} coloured objects of {len(db.objects())}, signatures read in "
-              f"{time.perf_counter() - start:.0f} s", flush=True)
+        index = db._catalogue.colour_index()
+        print(f"{len(index.objects)} coloured objects of {len(db.objects())}, signatures read in "
+              f"{time.perf_counter() - start:.1f} s", flush=True)
         ranks, outline = [], []
         for frame in read_frames(LMO)[::args.step]:
             image = load_image(str(frame.photo))
@@ -90,9 +77,7 @@ def main() -> None:
             for inst, region in zip(chosen, regions, strict=True):
                 same = (inst.mesh.stem, *TWINS.get(inst.mesh.stem, ()))
                 query = colour_signature(image.rgb, region.mask)
-                distance = {name: min(colour_distance(query, s) for s in views)
-                            for name, views in stored.items()}
-                order = sorted(distance, key=lambda n: distance[n])
+                order = [m.object for m in index.nearest(query, len(index.objects))]
                 ranks.append(next((i + 1 for i, n in enumerate(order) if n in same), len(order) + 1))
                 outline.append(outline_rank(db, image, region, same))
                 print(f"{frame.name} {inst.name}: colour rank {ranks[-1]} (best {order[0]}), "

@@ -72,6 +72,7 @@ class ColourIndex:
         self.objects = sorted(set(self.names))
         starts = [i for i in range(len(self.names)) if i == 0 or self.names[i] != self.names[i - 1]]
         self._starts = np.asarray(starts, dtype=np.intp)
+        self._ends = np.append(self._starts[1:], len(self.names)).astype(np.intp)
 
     def __len__(self) -> int:
         return len(self.names)
@@ -96,10 +97,9 @@ class ColourIndex:
             return []
         d = self.distances(signature)
         best = np.minimum.reduceat(d, self._starts)
-        ends = np.append(self._starts[1:], len(d))
         out = []
         for k in sorted(range(len(best)), key=lambda j: (best[j], self.objects[j]))[:n]:
-            row = self._starts[k] + int(np.argmin(d[self._starts[k]:ends[k]]))
+            row = self._starts[k] + int(np.argmin(d[self._starts[k]:self._ends[k]]))
             out.append(ColourMatch(self.objects[k], float(best[k]), float(self.views[row, 0]),
                                    float(self.views[row, 1])))
         return out
