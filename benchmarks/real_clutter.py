@@ -15,7 +15,9 @@ Per object:
 * **rank** of the right object among the answer's results: the exact mesh, and the first
   copy of the same object (the catalogue holds a second copy of some real objects from
   another source, e.g. ``linemod_ape``: no silhouette tells such twins apart);
-* **pose**, when the top result is the right object: ADD (asymmetric) or ADD-S
+* **pose**, when the top result is the right object (a twin's pose is carried into the
+  exact mesh's frame and units through the ICP alignment of their normalised surfaces,
+  ``support.real.twin_alignment``: the copies differ in axes and units): ADD (asymmetric) or ADD-S
   (symmetric: those ``gt.json`` lists, else a mesh whose surface maps onto itself under a
   rotation, :func:`viewdb.bench.groundtruth.symmetries`) within 0.1 × the mesh's diameter;
   the symmetry-aware rotation error; the translation error of the bounding-box centre;
@@ -36,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -45,46 +46,34 @@ import cv2
 import numpy as np
 
 import viewdb
-from viewdb.bench.groundtruth import (
-    TWINS,
-    Frame,
-    add_error,
-    load_model,
-    mask_iou,
-    pose_errors,
-    read_frames,
-    visible_masks,
+from support.real import (
+    BANDS,
+    REAL,
+    ROOT,
+    SETS,
+    band_of,
+    is_symmetric,
+    pose_row,
+    symmetric_names,
+    twin_pose,
 )
-
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
-REAL = SHARED / "real"
-SETS = ("lmo_dev", "ycb_video_2frames")
-BANDS = ((0.8, 1.01, "≥ 80 %"), (0.5, 0.8, "50–80 %"), (0.2, 0.5, "20–50 %"), (0.0, 0.2, "< 20 %"))
-
-
-def band_of(visibility: float) -> str:
-    return next(name for lo, hi, name in BANDS if lo <= visibility < hi)
+from viewdb.bench.groundtruth import TWINS, Frame, mask_iou, read_frames, visible_masks
 
 
 def _rank(results: list, names: tuple[str, ...]) -> int | None:
     return next((m.rank for m in results if m.object in names), None)
 
 
-def _symmetric_names(folder: Path) -> set[str]:
-    return set(json.loads((folder / "gt.json").read_text()).get("symmetric", []))
-
-
-def _pose_row(inst, match, symmetric: bool) -> dict:
-    """The pose errors of the top result ``match`` (the right object) against ``inst``."""
-    model = load_model(inst.mesh)
+def _pose_of_top(db: viewdb.ViewDB, inst, match, symmetric: bool) -> dict:
+    """The errors of the top result's pose (the right object, or its twin: its pose then
+    carried into the exact mesh's frame and units, :func:`support.real.twin_pose`)."""
     pose = match.pose
     if pose is None or pose.rotation is None or pose.translation is None:
         return {"posed": False}
-    r, t = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64).reshape(3)
-    add = add_error(model, r, t, inst.R, inst.t, symmetric)
-    return {"posed": True, "add": add, "add_ok": add < 0.1 * model.diameter, "diameter": model.diameter,
-            "metric": "ADD-S" if symmetric else "ADD", **pose_errors(model.symmetry, r, t, inst.R, inst.t)}
+    rotation, translation = pose.rotation, pose.translation
+    if match.object != inst.mesh.stem:
+        rotation, translation = twin_pose(db, match.object, inst.mesh.stem, rotation, translation)
+    return pose_row(inst, rotation, translation, symmetric)
 
 
 def _cause(row: dict) -> str | None:
@@ -134,8 +123,7 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
                        cut_iou=mask_iou(entry.region.mask, visible),
                        object_ms=entry.timing_ms.get("total"))
             if row["rank_same"] == 1:
-                sym = inst.name in symmetric or (not symmetric and load_model(inst.mesh).symmetry.symmetric)
-                row["pose"] = _pose_row(inst, entry.results[0], sym)
+                row["pose"] = _pose_of_top(db, inst, entry.results[0], is_symmetric(inst, symmetric))
         row["cause"] = _cause(row)
         rows.append(row)
     return rows
@@ -211,7 +199,7 @@ def main() -> None:
             folder = REAL / set_name
             if not (folder / "gt.json").is_file():
                 sys.exit(f"real_clutter: {folder / 'gt.json'} not found")
-            symmetric = _symmetric_names(folder)
+            symmetric = symmetric_names(folder)
             for frame in read_frames(folder)[:args.frames]:
                 new = run_frame(db, set_name, frame, symmetric, args.overlays)
                 rows += new

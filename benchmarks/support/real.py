@@ -1,0 +1,114 @@
+"""The real photo sets with official 6-D ground truth (``../shared/real``, or
+``$VIEWDB_SHARED/real``): where they are, the visibility bands the benchmarks report, which
+objects count as symmetric, and a pose's BOP-style errors against the ground truth."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from viewdb.bench.groundtruth import Instance, add_error, load_model, pose_errors
+
+ROOT = Path(__file__).resolve().parent.parent.parent
+SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
+REAL = SHARED / "real"
+SETS = ("lmo_dev", "ycb_video_2frames")
+BANDS = ((0.8, 1.01, "≥ 80 %"), (0.5, 0.8, "50–80 %"), (0.2, 0.5, "20–50 %"), (0.0, 0.2, "< 20 %"))
+
+
+def band_of(visibility: float) -> str:
+    return next(name for lo, hi, name in BANDS if lo <= visibility < hi)
+
+
+def symmetric_names(folder: Path) -> set[str]:
+    """The objects a set's ``gt.json`` lists as symmetric."""
+    return set(json.loads((folder / "gt.json").read_text()).get("symmetric", []))
+
+
+def is_symmetric(inst: Instance, symmetric: set[str]) -> bool:
+    """ADD-S for ``inst``: its set lists it, or (a set listing none) its mesh maps onto
+    itself under a rotation (:func:`viewdb.bench.groundtruth.symmetries`)."""
+    return inst.name in symmetric or (not symmetric and load_model(inst.mesh).symmetry.symmetric)
+
+
+def pose_row(inst: Instance, rotation, translation, symmetric: bool) -> dict:
+    """The errors of the pose ``(rotation, translation)`` (OpenCV frame, the mesh's units)
+    against ``inst``: ADD (asymmetric) or ADD-S (symmetric) and whether it is within 0.1 ×
+    the mesh's diameter, the symmetry-aware rotation error, the translation error."""
+    if rotation is None or translation is None:
+        return {"posed": False}
+    model = load_model(inst.mesh)
+    r, t = np.asarray(rotation, np.float64), np.asarray(translation, np.float64).reshape(3)
+    add = add_error(model, r, t, inst.R, inst.t, symmetric)
+    return {"posed": True, "add": add, "add_ok": add < 0.1 * model.diameter, "diameter": model.diameter,
+            "metric": "ADD-S" if symmetric else "ADD", **pose_errors(model.symmetry, r, t, inst.R, inst.t)}
+
+
+_ALIGNMENTS: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, float]] = {}
+
+
+def twin_alignment(db, twin: str, exact: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(Q, c, residual)`` with ``Q · x + c`` mapping the exact mesh's normalised frame onto
+    its twin's (another copy of the same scan, :data:`viewdb.bench.groundtruth.TWINS`,
+    perhaps in other units and axes): point-to-point ICP between 2,000 points sampled on
+    each normalised surface, from the 24 turns of a cube, the best kept; the residual is
+    the mean distance left, in normalised units (bounding radius 1)."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    key = (twin, exact)
+    if key not in _ALIGNMENTS:
+        a = np.asarray(trimesh.sample.sample_surface(db.mesh(exact).geometry, 2000, seed=0)[0])
+        b = np.asarray(trimesh.sample.sample_surface(db.mesh(twin).geometry, 2000, seed=1)[0])
+        tree = cKDTree(b)
+        best = (np.inf, np.eye(3), np.zeros(3))
+        for turn in _cube_turns():
+            q, c = turn, np.zeros(3)
+            for _ in range(40):
+                moved = a @ q.T + c
+                _, nearest = tree.query(moved)
+                q, c = _kabsch(a, b[nearest])
+            residual = float(tree.query(a @ q.T + c)[0].mean())
+            if residual < best[0]:
+                best = (residual, q, c)
+        _ALIGNMENTS[key] = (best[1], best[2], best[0])
+    return _ALIGNMENTS[key]
+
+
+def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and shift that take points ``a`` nearest onto ``b`` (least squares)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    q = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return q, cb - q @ ca
+
+
+def _cube_turns() -> list[np.ndarray]:
+    """The 24 rotations that map a cube onto itself."""
+    out = []
+    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1), (1, 0, 2), (0, 2, 1), (2, 1, 0)):
+        for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1), (-1, 1, 1), (1, -1, 1), (1, 1, -1),
+                      (-1, -1, -1)):
+            m = np.zeros((3, 3))
+            for row, (col, sign) in enumerate(zip(perm, signs, strict=True)):
+                m[row, col] = sign
+            if np.linalg.det(m) > 0:
+                out.append(m)
+    return out
+
+
+def twin_pose(db, twin: str, exact: str, rotation, translation) -> tuple[np.ndarray, np.ndarray]:
+    """A pose of ``twin`` (OpenCV frame, its mesh's units) as the same pose of ``exact``
+    (its mesh's units), through their alignment (:func:`twin_alignment`)."""
+    q, c, _ = twin_alignment(db, twin, exact)
+    r = np.asarray(rotation, np.float64)
+    t = np.asarray(translation, np.float64).reshape(3)
+    info_t, info_e = db.object(twin), db.object(exact)
+    t_n = (t + r @ np.asarray(info_t.centre)) / float(info_t.scale)
+    r_e = r @ q
+    t_en = r @ c + t_n
+    return r_e, float(info_e.scale) * t_en - r_e @ np.asarray(info_e.centre)
