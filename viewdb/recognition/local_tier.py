@@ -25,15 +25,8 @@ from ..pose.intrinsics import Intrinsics
 from ..pose.matched import appearance_view, pose_matches
 from ..pose.shape_pose import shape_fit
 from ..search.colour_index import ColourMatch
-from ..search.plans import (
-    Candidate,
-    RefineRequest,
-    ServerReply,
-    WalkRequest,
-    neighbours_to_candidates,
-    refine,
-    walk,
-)
+from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest, walk
+from ..search.route import nearest_candidates
 from ..storage.stored_catalogue import StoredCatalogue
 from .server_tier import Exchange
 
@@ -86,15 +79,8 @@ class LocalServerTier:
         curves = (None if request.curves is None
                   else np.stack([self.catalogue.query_curve(c, request.k, "full") for c in request.curves]))
         with self.catalogue.tier_reader().snapshot() as reader:
-            # the versions tell which client candidates bound (none to tell without them)
-            versions = reader.object_versions() if request.client else None
-            index = reader.fast_index("full") if request.fast is not None else None
-            found, stats = refine(reader.tier("full"), replace(request, curve=q, curves=curves), versions,
-                                  fast_index=index)
-            angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles, shifted=request.shifts is not None,
-                                                    stacked=request.curves is not None),
-                           stats.to_dict())
+            found, stats = nearest_candidates(reader, replace(request, curve=q, curves=curves))
+        return ServerReply(found, stats.to_dict())
 
     def walk(self, request: WalkRequest) -> tuple[ServerReply, Exchange]:
         """The server half of CS2 (Algorithm 4): the neighbour walk from the client's views.

@@ -20,14 +20,8 @@ from numpy.typing import NDArray
 from ..errors import StorageError
 from ..pose.estimate import QueryView
 from ..pose.intrinsics import Intrinsics
-from ..search.plans import (
-    Candidate,
-    RefineRequest,
-    ServerReply,
-    WalkRequest,
-    neighbours_to_candidates,
-    refine,
-)
+from ..search.plans import Candidate, RefineRequest, ServerReply, WalkRequest
+from ..search.route import nearest_candidates
 
 __all__ = ["Shard"]
 
@@ -69,23 +63,17 @@ class Shard:
         return self.db.info().to_dict()
 
     def refine(self, request: dict[str, Any], upper: float) -> dict[str, Any]:
-        """CS1's server half on this shard (:func:`~viewdb.search.plans.refine`; the
+        """CS1's server half on this shard (:func:`~viewdb.search.route.nearest_candidates`; the
         request as JSON, its client candidates those of this shard's objects), further
         bounded by ``upper``, an upper bound of the k-th distance over every shard: every
         object of this shard that ranks among its k best and is no farther than ``upper``
         is in the reply with its exact distance; farther objects may be left out."""
         parsed = RefineRequest.from_dict(request, self.samples)
-        catalogue = self.tier.catalogue
-        with catalogue.tier_reader().snapshot() as reader:
-            source = reader.tier("full")
-            if source.n_groups == 0:
+        with self.tier.catalogue.tier_reader().snapshot() as reader:
+            if reader.tier("full").n_groups == 0:
                 return ServerReply([], {}).to_dict()
-            index = reader.fast_index("full") if parsed.fast is not None else None
-            found, stats = refine(source, parsed, reader.object_versions(), upper, index)
-            angles = reader.view_projections([n.view for n in found])
-        return ServerReply(neighbours_to_candidates(found, angles, shifted=parsed.shifts is not None,
-                                                    stacked=parsed.curves is not None),
-                           stats.to_dict()).to_dict()
+            found, stats = nearest_candidates(reader, parsed, upper=upper)
+        return ServerReply(found, stats.to_dict()).to_dict()
 
     def walk(self, request: dict[str, Any]) -> dict[str, Any]:
         """CS2's walk from the client candidates of this shard's objects."""

@@ -1,6 +1,7 @@
 """The read side of a viewdb file: its objects, any view of them (stored, or rendered from
 the stored mesh and described on demand), any view's appearance (stored, or rendered and
-recorded on demand), renders, meshes, curves, and the k-NN search of its tiers.
+recorded on demand), renders, meshes, curves, and its tiers for the k-NN search (a read
+snapshot handed to :func:`viewdb.search.route.nearest_candidates`, which searches).
 
 :class:`StoredCatalogue` implements :class:`viewdb.catalogue.reading.CatalogueReader`. It
 keeps bounded caches of what is dear to make (decoded meshes, renders, regenerated views,
@@ -33,14 +34,14 @@ from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig, SearchConfig
 from ..errors import FeatureError, NotFound, QueryError
 from ..search.colour_index import ColourIndex
-from ..search.knn import Neighbour, SearchStats, TierArrays, knn, knn_stack, objects_within
-from ..search.plans import Candidate, neighbours_to_candidates
-from ..search.quantised import distance_bound, upper_distance
+from ..search.knn import SearchStats, TierArrays, objects_within
+from ..search.plans import Candidate, RefineRequest
 from ..search.refine import scan_all
+from ..search.route import nearest_candidates
 from ..search.shifts import ShiftWindow
 from .appearances import decode_record, decode_signature
 from .store import ObjectRow, Store
-from .tiers import TIERS, StoredTier, TierReader
+from .tiers import TIERS, TierReader
 
 __all__ = ["SearchHit", "StoredCatalogue"]
 
@@ -442,7 +443,8 @@ class StoredCatalogue:
         self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full",
         shifts: ShiftWindow | None = None, *, bounded: bool = False,
     ) -> tuple[list[Candidate], SearchStats]:
-        """Algorithm 2 on one tier, in one read snapshot: the ``k`` nearest objects, each
+        """Algorithm 2 on one tier, in one read snapshot (handed to the search route,
+        :func:`~viewdb.search.route.nearest_candidates`): the ``k`` nearest objects, each
         with its best view (and the object's content hash as its ``version``); over the
         circular ``shifts`` of the curve in one search (each with the shift that matched).
         A ``(T, N)`` stack of curves (no ``shifts``): the smallest distance over its rows,
@@ -456,22 +458,15 @@ class StoredCatalogue:
         stacked = np.ndim(curve) == 2
         if stacked and (shifts is not None or len(curve) == 0):
             raise QueryError("a stack of curves needs at least one curve and no shifts")
-        q = (np.stack([self.query_curve(c, k, tier) for c in curve]) if stacked
-             else self.query_curve(curve, k, tier))
+        if stacked:
+            q = np.stack([self.query_curve(c, k, tier) for c in curve])
+            request = RefineRequest(q[0], band, k, [], curves=q)
+        else:
+            request = RefineRequest(self.query_curve(curve, k, tier), band, k, [], shifts)
         with self.tier_reader().snapshot() as reader:
-            source = reader.tier(tier)
-            if source.n_groups == 0:
+            if reader.tier(tier).n_groups == 0:
                 raise QueryError("the database holds no views", self.path)
-            if stacked:
-                found, stats = knn_stack(q, source, k, band, block=SearchConfig().stack_block)
-            else:
-                found, stats = knn(q, source, k, band, shifts=shifts)
-            if bounded and source.quantised:
-                found = raised_distances(found, source, q.shape[-1], band)
-            angles = reader.view_projections([n.view for n in found])
-            versions = reader.object_versions()
-        return neighbours_to_candidates(found, angles, versions, shifted=shifts is not None,
-                                        stacked=stacked), stats
+            return nearest_candidates(reader, request, tier, versioned=True, bounded=bounded)
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, band: int = 6, tier: str = "full"
@@ -491,10 +486,3 @@ class StoredCatalogue:
         with self.tier_reader().snapshot() as reader:
             return reader.tier_arrays(tier)
 
-
-def raised_distances(found: list[Neighbour], source: StoredTier, samples: int, band: int) -> list[Neighbour]:
-    """``found`` with each distance raised by its view's quantisation bound (upper bounds
-    of the exact distances, :func:`~viewdb.search.quantised.upper_distance`), best first."""
-    raised = [replace(n, distance=upper_distance(
-        n.distance, float(distance_bound(source.view_errors(n.view), samples, band)))) for n in found]
-    return sorted(raised, key=lambda n: (n.distance, n.object))
