@@ -122,7 +122,7 @@ def sphere_views(gap: float) -> list[tuple[float, float]]:
     grid = grid_views(gap)  # checks the gap
     steps = round(360.0 / gap)
     quarter = int(90.0 // gap)
-    views = set()
+    views: set[tuple[int, int]] = set()
     for ring in range(-quarter, quarter + 1):
         cos_v = math.cos(math.radians(ring * gap))
         stretch = POLAR_STRETCH if cos_v < 1.0 / POLAR_STRETCH else max(1, math.floor(1.0 / cos_v + 1e-9))

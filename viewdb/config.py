@@ -121,10 +121,11 @@ def integer(value: object, what: str, low: int, high: int | None = None) -> int:
     naming ``what``."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{what} must be an integer, got {_shown(value)}")
-    if value < low or (high is not None and value > high):
+    number = int(value)  # exact for an Integral, and comparable both ways (Integral has no ``>``)
+    if number < low or (high is not None and number > high):
         bounds = f"at least {low}" if high is None else f"in [{low}, {high}]"
         raise ValueError(f"{what} must be {bounds}, got {_shown(value)}")
-    return int(value)
+    return number
 
 
 def _shown(value: object) -> str:

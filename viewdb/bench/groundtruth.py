@@ -107,7 +107,9 @@ def read_frames(folder: Path) -> list[Frame]:
         photo = folder / entry.get("color", f"{name}-color.png")
         height, width = entry.get("height"), entry.get("width")
         if height is None or width is None:
-            height, width = cv2.imread(str(photo), cv2.IMREAD_UNCHANGED).shape[:2]
+            image = cv2.imread(str(photo), cv2.IMREAD_UNCHANGED)
+            assert image is not None, f"cannot read {photo}"
+            height, width = image.shape[:2]
         frames.append(Frame(name, photo, np.asarray(entry["K"], np.float64), int(width), int(height),
                             tuple(instances)))
     return frames
@@ -163,6 +165,7 @@ class MeshModel:
 def load_model(path: Path, samples: int = 2000) -> MeshModel:
     """A mesh's :class:`MeshModel` (read once per process)."""
     mesh = trimesh.load(str(path), force="mesh", process=False)
+    assert isinstance(mesh, trimesh.Trimesh)  # what force="mesh" returns
     vertices = np.asarray(mesh.vertices, np.float64)
     hull = np.asarray(trimesh.convex.convex_hull(vertices).vertices) if len(vertices) > 3 else vertices
     diameter = float(max(np.linalg.norm(hull - p, axis=1).max() for p in hull))
@@ -173,7 +176,7 @@ def load_model(path: Path, samples: int = 2000) -> MeshModel:
 
 def _turn(axis: NDArray[np.float64], degrees: float) -> NDArray[np.float64]:
     r, _ = cv2.Rodrigues(np.asarray(axis, np.float64) * math.radians(degrees))
-    return r
+    return np.asarray(r, np.float64)
 
 
 def symmetries(mesh: trimesh.Trimesh, tolerance: float = 0.02, samples: int = 10000) -> Symmetry:
@@ -269,8 +272,8 @@ def visible_masks(frame: Frame) -> list[tuple[NDArray[np.bool_], NDArray[np.bool
         # the principal point as given: the masks then span BOP's boxes to the pixel
         camera = pyrender.IntrinsicsCamera(fx, fy, cx, cy, znear=0.01, zfar=100.0)
         scene.add(camera, pose=np.eye(4))
-        depth = render_depth(scene, side, inst.name)
-        depths.append(np.asarray(depth[:frame.height, :frame.width], np.float64))
+        rendered = render_depth(scene, side, inst.name)
+        depths.append(np.asarray(rendered[:frame.height, :frame.width], np.float64))
     stack = np.stack([np.where(d > 0, d, np.inf) for d in depths])
     nearest = stack.min(axis=0)
     out = []

@@ -107,7 +107,7 @@ def photo_series(names: Sequence[str], seed: int, count: int, image_size: int = 
     catalogue's order) and a random photo of it (:func:`draw_photo_spec`); same seed, same
     photos."""
     rng = np.random.default_rng(seed)
-    return [draw_photo_spec(rng, names[rng.integers(len(names))], image_size) for _ in range(count)]
+    return [draw_photo_spec(rng, names[int(rng.integers(len(names)))], image_size) for _ in range(count)]
 
 
 def seed_photos(db: Any, seeds: str, count: int) -> list[tuple[PhotoSpec, NDArray[np.uint8]]]:
@@ -160,7 +160,8 @@ def decoded_photo(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.uint8]:
     spec's quality and decoded again (RGB uint8)."""
     jpeg = encode_jpeg(render_photo(mesh, spec), spec.jpeg_quality)
     bgr = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
-    return np.ascontiguousarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    assert bgr is not None  # the JPEG encoded just above
+    return np.ascontiguousarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
 
 
 def true_silhouette(mesh: NormalisedMesh, spec: PhotoSpec) -> NDArray[np.bool_]:
@@ -197,9 +198,9 @@ def composite_photo(
     size = view.mask.shape[0]
     color, mask = view.color, view.mask
     if turn != 0.0 or scale != 1.0 or any(shift):
-        m = cv2.getRotationMatrix2D((size / 2, size / 2), turn, scale)
+        m = np.asarray(cv2.getRotationMatrix2D((size / 2, size / 2), turn, scale), np.float64)
         m[:, 2] += shift
-        color = cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR)
+        color = np.asarray(cv2.warpAffine(view.color, m, (size, size), flags=cv2.INTER_LINEAR), np.uint8)
         mask = cv2.warpAffine(view.mask.astype(np.uint8), m, (size, size), flags=cv2.INTER_NEAREST) > 0
     photo = np.empty((size, size, 3), np.uint8)
     photo[:] = background
@@ -221,9 +222,9 @@ def table_photo(
         1.04, 0.94, h, dtype=np.float32)[:, None, None]
     streaks = cv2.resize(rng.normal(0.0, grain, (h, max(2, w // 16))).astype(np.float32), (w, h),
                          interpolation=cv2.INTER_LINEAR)
-    photo = np.asarray(background, np.float32)[None, None, :] * shade + streaks[:, :, None]
-    photo = np.clip(photo + rng.normal(0.0, 1.5, photo.shape), 0, 255).astype(np.uint8)
-    masks = []
+    lit = np.asarray(background, np.float32)[None, None, :] * shade + streaks[:, :, None]
+    photo = np.clip(lit + rng.normal(0.0, 1.5, lit.shape), 0, 255).astype(np.uint8)
+    masks: list[NDArray[np.bool_]] = []
     for view, (x, y) in zip(views, places, strict=True):
         vh, vw = view.mask.shape
         if x < 0 or y < 0 or x + vw > w or y + vh > h:

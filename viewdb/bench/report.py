@@ -205,9 +205,9 @@ def write_report(
               "server_median_ms", "total_median_ms", "client_mean_ms", "server_mean_ms",
               "total_mean_ms", "bytes_sent_mean", "bytes_received_mean"]
     with files["timing.csv"].open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(summary["timing"])
+        dw = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        dw.writeheader()
+        dw.writerows(summary["timing"])
     _write(files["index.md"], index_table(index_rows))
     if summary["accuracy"]:
         files["cmc.png"] = out / "cmc.png"

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from ..api import ViewDB
 from ..api import open as open_db
@@ -105,8 +105,11 @@ def run_bench(
     for skim in (True, False):
         for gap in config.client_gaps:
             stage = f"export {gap:g}° client ({'skimmed' if skim else 'full grid'})"
-            clients[skim, gap] = client_db(
-                config, fulls[skim], gap, lambda d, t, stage=stage: tell(stage, d, t))
+
+            def on_export(d: int, t: int, stage: str = stage) -> None:
+                tell(stage, d, t)
+
+            clients[skim, gap] = client_db(config, fulls[skim], gap, on_export)
     with ExitStack() as stack:
         dbs = {skim: stack.enter_context(open_db(c.path, create=False)) for skim, c in fulls.items()}
         sides = {key: stack.enter_context(open_db(c.path, create=False)) for key, c in clients.items()}
@@ -125,10 +128,13 @@ def run_bench(
     return BenchRun(config.out, files_out, summary, measured, skipped)
 
 
-def _queries(
-    config: BenchConfig, db: ViewDB, names: list[str],
-    tell: Callable[[str, int, int | None, str], None],
-) -> dict[str, list[Any]]:
+class _Tell(Protocol):
+    """``run_bench``'s progress callback, whose ``detail`` may be left out."""
+
+    def __call__(self, stage: str, done: int, total: int | None, detail: str = "") -> None: ...
+
+
+def _queries(config: BenchConfig, db: ViewDB, names: list[str], tell: _Tell) -> dict[str, list[Any]]:
     folder = config.out / "queries"
     wanted = set(config.protocols) | set(config.timing_protocols)
     out: dict[str, list[Any]] = {}

@@ -43,9 +43,9 @@ def plan_tasks(config: BenchConfig) -> list[Task]:
                         groups.append((protocol, skim, plan, float(gap), k))
     seen: set[str] = set()
     tasks = []
-    for protocol, skim, plan, gap, k in groups:
+    for protocol, skim, plan, client_gap, k in groups:
         for q in range(config.queries):
-            task = Task(protocol, q, skim, plan, gap, k)
+            task = Task(protocol, q, skim, plan, client_gap, k)
             if task.key not in seen:
                 seen.add(task.key)
                 tasks.append(task)

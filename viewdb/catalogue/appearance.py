@@ -145,7 +145,7 @@ def internal_edges(
 
 def grey_of(color: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """A grey image of RGB ``color`` (grey images as they are)."""
-    return color if color.ndim == 2 else cv2.cvtColor(color, cv2.COLOR_RGB2GRAY)
+    return color if color.ndim == 2 else np.asarray(cv2.cvtColor(color, cv2.COLOR_RGB2GRAY), dtype=np.uint8)
 
 
 # --------------------------------------------------------------------------- views

@@ -157,7 +157,7 @@ def _largest_lattice_contour(mask: np.ndarray) -> tuple[NDArray[np.int64], int, 
         longest = int(np.argmax(lengths))
         floor = cv2.contourArea(contours[longest])
         bound = lengths.astype(np.float64) ** 2 * (1.01 / (2.0 * np.pi)) + 1.0
-        contours = [contours[i] for i in np.flatnonzero(bound >= floor)]
+        contours = [contours[i] for i in np.flatnonzero(bound >= floor).tolist()]
     # Areas in lattice units (4 per square pixel) are exact in float64.
     areas = [cv2.contourArea(c) for c in contours]
     best = max(areas)

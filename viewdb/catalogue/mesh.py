@@ -25,6 +25,7 @@ import logging
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import IO, TYPE_CHECKING
 from urllib.parse import unquote
 
 import numpy as np
@@ -49,8 +50,11 @@ MIN_AREA = 1e-10
 
 logging.getLogger("trimesh").setLevel(logging.ERROR)
 
-#: Imported when a mesh is first loaded or built (:mod:`viewdb.lazy`).
-trimesh = lazy_module("trimesh")
+if TYPE_CHECKING:
+    import trimesh
+else:
+    #: Imported when a mesh is first loaded or built (:mod:`viewdb.lazy`).
+    trimesh = lazy_module("trimesh")
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,7 +225,7 @@ def _off_faces(head: bytes) -> int | None:
     return int(words[2])
 
 
-def _stl_faces(f: io.BufferedReader, size: int) -> int | None:
+def _stl_faces(f: IO[bytes], size: int) -> int | None:
     head = f.read(84)
     if len(head) == 84 and 84 + 50 * int.from_bytes(head[80:84], "little") == size:
         return int.from_bytes(head[80:84], "little")  # binary: the count, checked by the size
@@ -231,7 +235,7 @@ def _stl_faces(f: io.BufferedReader, size: int) -> int | None:
     return sum(line.lstrip().lower().startswith(b"facet") for line in f)  # ASCII: streamed
 
 
-def _obj_faces(f: io.BufferedReader) -> int:
+def _obj_faces(f: IO[bytes]) -> int:
     count = 0
     for line in f:  # streamed: one line in memory at a time
         if line.startswith(b"f ") or line.startswith(b"f\t"):
@@ -239,7 +243,7 @@ def _obj_faces(f: io.BufferedReader) -> int:
     return count
 
 
-def _gltf_faces(f: io.BufferedReader, binary: bool) -> int | None:
+def _gltf_faces(f: IO[bytes], binary: bool) -> int | None:
     if binary:
         head = f.read(20)
         if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":

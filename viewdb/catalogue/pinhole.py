@@ -66,9 +66,10 @@ class Window:
         src = np.asarray(image, dtype=np.float32)
         if f < 1.0:  # pre-blur so the nearest samples are area averages
             k = int(math.ceil(1.0 / f)) | 1
-            src = cv2.blur(src, (k, k))
-        return cv2.warpAffine(src, m, (self.size, self.size), flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+            src = np.asarray(cv2.blur(src, (k, k)), dtype=np.float32)
+        out = cv2.warpAffine(src, m, (self.size, self.size), flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        return np.asarray(out, dtype=np.float32)
 
     @staticmethod
     def around(mask: NDArray[np.bool_], size: int, margin: float = 0.35) -> Window:

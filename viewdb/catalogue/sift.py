@@ -72,7 +72,7 @@ def extract_sift(
         raise ValueError(f"upscale must be >= 1, got {upscale}")
     sift = _SIFT.get(max_keypoints)
     if sift is None:
-        sift = _SIFT[max_keypoints] = cv2.SIFT_create(nfeatures=max_keypoints)
+        sift = _SIFT[max_keypoints] = cv2.SIFT.create(nfeatures=max_keypoints)
     gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
     x0 = y0 = 0
     cv_mask = None
@@ -90,8 +90,8 @@ def extract_sift(
     if upscale > 1.0:
         gray = cv2.resize(gray, None, fx=upscale, fy=upscale, interpolation=cv2.INTER_CUBIC)
         if cv_mask is not None:
-            cv_mask = cv2.resize(cv_mask, (gray.shape[1], gray.shape[0]),
-                                 interpolation=cv2.INTER_NEAREST)
+            cv_mask = np.asarray(cv2.resize(cv_mask, (gray.shape[1], gray.shape[0]),
+                                            interpolation=cv2.INTER_NEAREST), dtype=np.uint8)
     kps, desc = sift.detectAndCompute(np.ascontiguousarray(gray), cv_mask)
     if desc is None or not kps:
         return np.zeros((0, 5), np.float32), np.zeros((0, 128), np.uint8)

@@ -48,10 +48,10 @@ def check_output(path: str | Path, what: str) -> None:
         raise ViewDBError("its folder does not exist", path)
 
 
-def view_image(view: RenderedView, what: str) -> NDArray[np.generic]:
+def view_image(view: RenderedView, what: str) -> NDArray[np.uint8] | NDArray[np.uint16]:
     """The array OpenCV writes for ``what``: BGR uint8, a uint8 mask or a uint16 depth."""
     if what == "color":
-        return cv2.cvtColor(view.color, cv2.COLOR_RGB2BGR)
+        return np.asarray(cv2.cvtColor(view.color, cv2.COLOR_RGB2BGR), dtype=np.uint8)
     if what == "mask":
         return view.mask.astype(np.uint8) * np.uint8(255)
     depth = view.depth
@@ -69,7 +69,8 @@ def write_view(view: RenderedView, path: str | Path, what: str = "color") -> Non
     check_output(path, what)
     image = view_image(view, what)
     # a fresh name beside the target, its suffix kept (OpenCV picks the format by it)
-    temporary: Path | None = path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}{path.suffix}")
+    temporary: Path | None
+    temporary = path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}{path.suffix}")
     try:
         try:
             written = cv2.imwrite(str(temporary), image)

@@ -46,7 +46,8 @@ def _with_distances(ys: NDArray[np.intp], xs: NDArray[np.intp], theta: NDArray[n
     distance, labels = cv2.distanceTransformWithLabels(edges, cv2.DIST_L2, 5,
                                                        labelType=cv2.DIST_LABEL_PIXEL)
     nearest = theta.astype(np.float32)[labels - 1]
-    return _Detail(np.stack([xs, ys], axis=1).astype(np.float64), theta, interior, distance, nearest)
+    return _Detail(np.stack([xs, ys], axis=1).astype(np.float64), theta, interior,
+                   np.asarray(distance, dtype=np.float32), nearest)
 
 
 def _detail(grey: NDArray[np.uint8], mask: NDArray[np.uint8], image_size: int, config: PoseConfig) -> _Detail:
@@ -125,7 +126,8 @@ class QueryDetail:
         m = np.ascontiguousarray(mask[y0:y1, x0:x1].astype(np.uint8) * 255)
         self.levels = [(grey, m)]
         while min(grey.shape) >= 32 and len(self.levels) < 8:
-            grey, m = cv2.pyrDown(grey), cv2.pyrDown(m)
+            grey = np.asarray(cv2.pyrDown(grey), dtype=np.uint8)
+            m = np.asarray(cv2.pyrDown(m), dtype=np.uint8)
             self.levels.append((grey, np.where(m > 127, 255, 0).astype(np.uint8)))
         self._details: dict[tuple[int, int], _Detail] = {}
         # is there any detail inside, at about the resolution of a 256-pixel view?
@@ -162,7 +164,7 @@ class QueryDetail:
         turn = math.radians(angle)  # a view direction θ is θ − turn in the query
         tau = truncation * view.norm
 
-        def directed(d: NDArray[np.float64], dtheta: NDArray[np.float64]) -> float:
+        def directed(d: NDArray[np.floating], dtheta: NDArray[np.float64]) -> float:
             if len(d) == 0:
                 return tau
             dtheta = np.mod(dtheta, np.pi)

@@ -256,7 +256,7 @@ def _fit_at(
 
 
 def _rotation_vector(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
-    return cv2.Rodrigues(np.asarray(rotation, np.float64))[0].ravel()
+    return np.asarray(cv2.Rodrigues(np.asarray(rotation, np.float64))[0], np.float64).ravel()
 
 
 def interpolate_shape(

@@ -114,11 +114,11 @@ def _hypothesis(
         return None
     alpha = math.degrees(math.atan2(b, a))
     r0 = rotation_z(alpha) @ view_rotation(cand.azimuth, cand.elevation)
-    fit = OrthographicFit(r0, scale, m[:, 2].astype(np.float64), np.flatnonzero(mask.ravel()))
+    ortho = OrthographicFit(r0, scale, m[:, 2].astype(np.float64), np.flatnonzero(mask.ravel()))
     if config.refine:
-        fit = solve_orthographic(dst, points, fit, pose_thr / px)
-    t = np.array([fit.offset[0] / fit.scale, fit.offset[1] / fit.scale, -CAMERA_DISTANCE])
-    return Hypothesis(index, fit.rotation, t, fit.scale, len(fit.inliers), len(fit.inliers) / len(qi))
+        ortho = solve_orthographic(dst, points, ortho, pose_thr / px)
+    t = np.array([ortho.offset[0] / ortho.scale, ortho.offset[1] / ortho.scale, -CAMERA_DISTANCE])
+    return Hypothesis(index, ortho.rotation, t, ortho.scale, len(ortho.inliers), len(ortho.inliers) / len(qi))
 
 
 def _support(
@@ -160,7 +160,8 @@ def _refine_pooled(
             return hyp
         rot, _ = cv2.Rodrigues(rvec)
         scale = 2.0 * query.k[0, 0] / (query.width * float(t[2]))
-        return Hypothesis(hyp.candidate, rot, t, scale, hyp.own_inliers, hyp.own_ratio)
+        return Hypothesis(hyp.candidate, np.asarray(rot, dtype=np.float64), t, scale, hyp.own_inliers,
+                          hyp.own_ratio)
     px = query.width / 2.0
     start = OrthographicFit(hyp.rotation, hyp.scale, hyp.scale * hyp.translation[:2],
                             np.arange(len(q_idx)))

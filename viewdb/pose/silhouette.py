@@ -127,8 +127,8 @@ def ray_rotation(u, w, k):  # pragma: no cover - compiled
 
 
 def lift_alignment(
-    azimuth: float, elevation: float, inplane: float, lam: float, origin_px: Sequence[float],
-    image_size: int, xmag: float, k: NDArray[np.float64],
+    azimuth: float, elevation: float, inplane: float, lam: float,
+    origin_px: Sequence[float] | NDArray[np.float64], image_size: int, xmag: float, k: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The pinhole pose ``(R, t)`` (OpenCV, normalised units) of an orthographic alignment:
     view ``(azimuth, elevation)`` turned by ``inplane`` counter-clockwise, magnified ``lam``

@@ -150,4 +150,5 @@ def solve_pnp(
     proj, _ = cv2.projectPoints(obj, rvec, tvec, k, None)
     err = np.linalg.norm(proj.reshape(-1, 2) - img.reshape(-1, 2), axis=1)
     rot, _ = cv2.Rodrigues(rvec)
-    return PnPFit(rot, tvec.reshape(3).astype(np.float64), np.flatnonzero(err <= threshold))
+    return PnPFit(np.asarray(rot, dtype=np.float64), tvec.reshape(3).astype(np.float64),
+                  np.flatnonzero(err <= threshold))

@@ -276,6 +276,7 @@ class Database:
             raise StorageError("is open read-only; open it normally to change it", self.path)
         with self._errors(), self.engine.begin() as conn:
             dbapi = conn.connection.driver_connection
+            assert dbapi is not None  # None only once the connection is closed or invalidated
             if not dbapi.in_transaction:
                 dbapi.execute("BEGIN IMMEDIATE")
             before = generation(dbapi)

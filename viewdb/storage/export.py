@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sqlalchemy.engine import Connection
 
 from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig, ClientFileConfig
@@ -92,7 +93,7 @@ def _common_config(sources: Sequence[Store]) -> BuildConfig:
     """The build configuration of full files that share it."""
     if not sources:
         raise ViewDBError("nothing to export: no database files given")
-    configs = []
+    configs: list[BuildConfig] = []
     for source in sources:
         config = source.build_config()
         if config is None:
@@ -124,9 +125,16 @@ def _objects_by_name(
     return objects
 
 
+def _driver(conn: Connection) -> sqlite3.Connection:
+    """The sqlite3 connection under an open SQLAlchemy connection."""
+    raw = conn.connection.driver_connection
+    assert raw is not None  # None only once the connection is closed or invalidated
+    return raw
+
+
 def _copy(sources: Sequence[Store], target: Store, client: BuildConfig, progress, bits: int) -> None:  # type: ignore[no-untyped-def]
     with ExitStack() as stack:
-        connections = [stack.enter_context(s.read()).connection.driver_connection for s in sources]
+        connections = [_driver(stack.enter_context(s.read())) for s in sources]
         objects = _objects_by_name(connections, sources[0].path)
         for done, (row, src) in enumerate(objects, 1):
             (oid, name, path, digest, faces, vertices, centre, scale, empty, seconds, created,
@@ -141,7 +149,7 @@ def _copy(sources: Sequence[Store], target: Store, client: BuildConfig, progress
             positions = [(float(v[1]), float(v[2])) for v in views]
             keep = tier_members(positions, client.gap, client.client_gap, sym, bool(skimmed))["sparse"]
             with target.transaction() as tconn:
-                dst = tconn.connection.driver_connection
+                dst = _driver(tconn)
                 new_id = dst.execute(
                     "INSERT INTO objects (name, source, content_hash, n_faces, n_vertices, centre,"
                     " scale, mesh_glb, empty_views, ingest_seconds, created_at, skimmed, h_type,"
@@ -150,6 +158,7 @@ def _copy(sources: Sequence[Store], target: Store, client: BuildConfig, progress
                     (name, path, digest, faces, vertices, centre, scale, empty, seconds, created,
                      skimmed, h_type, v_type, h_period, v_period, symmetry),
                 ).lastrowid
+                assert new_id is not None  # an INSERT sets it
                 ids, curves = [], []
                 for i in keep:
                     _, az, el, gap, samples, coefficients = views[i]
@@ -157,6 +166,7 @@ def _copy(sources: Sequence[Store], target: Store, client: BuildConfig, progress
                         "INSERT INTO views (object_id, azimuth, elevation, grid_gap) VALUES (?, ?, ?, ?)",
                         (new_id, az, el, gap),
                     ).lastrowid
+                    assert vid is not None
                     if not bits:  # a compact file keeps the curves in its groups only
                         dst.execute("INSERT INTO curves (view_id, samples) VALUES (?, ?)", (vid, samples))
                         dst.execute("INSERT INTO fourier_points (view_id, coefficients) VALUES (?, ?)",

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,6 +107,7 @@ def check_store(store: Store, progress: Callable[[int, int], None] | None = None
             report.add(f"foreign key broken: table {row[0]} rowid {row[1]} -> {row[2]}")
         client = store.role() == "client"
         raw = conn.connection.driver_connection
+        assert raw is not None  # None only once the connection is closed or invalidated
         try:
             compact = client and raw.execute("SELECT 1 FROM curve_errors LIMIT 1").fetchone() is not None
             _check_objects(conn, config.gap, report, client)
@@ -450,6 +451,7 @@ def _check_members(  # type: ignore[no-untyped-def]
                 sym = SymmetryType.from_dict(json.loads(symmetry))
             except (ValueError, KeyError, TypeError):
                 continue  # reported with the objects
+        members: Sequence[int]
         if client:  # the client file holds the sparse tier's views only
             members = range(len(views)) if tier == "sparse" else range(0)
         else:
