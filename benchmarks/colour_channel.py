@@ -2,10 +2,11 @@
 LM-O box cut-outs against the stored colour signatures of every coloured object, and
 against every object's outlines.
 
-    python benchmarks/colour_channel.py --db CATALOGUE [--step 2] [--min-visibility 0.5]
+    python benchmarks/colour_channel.py --db CATALOGUE [--step 2] [--min-visibility 0.5] [--core 0.1]
 
 Each LM-O photo (every ``--step``-th) is cut from the boxes of its annotated objects as a
-query cuts it; each cut-out's colour signature (:func:`viewdb.recognition.colour.colour_signature`)
+query cuts it; each cut-out's colour signature, read from its core as a query reads it
+(:func:`viewdb.recognition.colour.core_signature`; ``--core`` another share)
 is ranked by the colour channel a query uses (:meth:`StoredCatalogue.colour_index`:
 every coloured object's stored views on its default grid), an object's colour distance
 being its best view's. Printed: the rank of the right object (or its twin) among the coloured objects by
@@ -27,7 +28,8 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.groundtruth import TWINS, read_frames
-from viewdb.recognition.colour import colour_signature
+from viewdb.config import RecognitionConfig
+from viewdb.recognition.colour import core_signature
 from viewdb.recognition.image import load_image
 from viewdb.recognition.options import QueryOptions
 from viewdb.recognition.pipeline import region_shape
@@ -62,6 +64,9 @@ def main() -> None:
     parser.add_argument("--db", type=Path, required=True)
     parser.add_argument("--step", type=int, default=2, help="every N-th photo")
     parser.add_argument("--min-visibility", type=float, default=0.5)
+    parser.add_argument("--core", type=float, default=RecognitionConfig().colour_core,
+                        help="the cut-out's colours from its core: eroded by this share of sqrt(area) "
+                             "(default: the query's)")
     args = parser.parse_args()
     with viewdb.open(args.db, create=False, read_only=True) as db:
         start = time.perf_counter()
@@ -76,7 +81,7 @@ def main() -> None:
             regions = find_regions(image, Prompts.of(boxes=[list(i.box) for i in chosen]))
             for inst, region in zip(chosen, regions, strict=True):
                 same = (inst.mesh.stem, *TWINS.get(inst.mesh.stem, ()))
-                query = colour_signature(image.rgb, region.mask)
+                query = core_signature(image.rgb, region.mask, args.core)
                 order = [m.object for m in index.nearest(query, len(index.objects))]
                 ranks.append(next((i + 1 for i, n in enumerate(order) if n in same), len(order) + 1))
                 outline.append(outline_rank(db, image, region, same))

@@ -12,9 +12,16 @@ from hypothesis import strategies as st
 import viewdb
 from tests.conftest import sample
 from viewdb.bench.photos import composite_photo
-from viewdb.config import BuildConfig, IndexConfig, RenderConfig
+from viewdb.config import BuildConfig, IndexConfig, RecognitionConfig, RenderConfig
 from viewdb.http.wire import ColourReply, ColourRequest
-from viewdb.recognition.colour import carries_colour, colour_distance, colour_signature, has_colour, rerank
+from viewdb.recognition.colour import (
+    carries_colour,
+    colour_distance,
+    colour_signature,
+    core_signature,
+    has_colour,
+    rerank,
+)
 
 
 def patch(rgb: tuple[int, int, int], size: int = 48) -> tuple[np.ndarray, np.ndarray]:
@@ -40,6 +47,41 @@ def test_pixels_off_the_mask_do_not_count():
     other = img.copy()
     other[~mask] = (20, 40, 220)  # a blue background around the same red object
     assert colour_distance(colour_signature(img, mask), colour_signature(other, mask)) < 0.05
+
+
+def _ringed(width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A red disc cut out with a ring of blue background ``width`` pixels wide: the
+    photo, the cut-out (disc and ring) and the disc alone."""
+    img = np.zeros((120, 120, 3), np.uint8)
+    img[:] = (20, 40, 220)
+    disc = np.zeros((120, 120), np.uint8)
+    cv2.circle(disc, (60, 60), 40, 1, -1)
+    img[disc > 0] = (200, 40, 30)
+    cut = np.zeros((120, 120), np.uint8)
+    cv2.circle(cut, (60, 60), 40 + width, 1, -1)
+    return img, cut > 0, disc > 0
+
+
+def test_a_core_signature_leaves_the_cut_outs_rim_out():
+    img, cut, disc = _ringed(6)
+    truth = colour_signature(img, disc)
+    whole, core = colour_signature(img, cut), core_signature(img, cut, 0.1)  # erodes 9 pixels
+    assert colour_distance(core, truth) < 0.02 < colour_distance(whole, truth)
+    assert colour_distance(core_signature(img, cut, 0.0), whole) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_core_too_small_falls_back_to_the_whole_cut_out():
+    img = np.zeros((20, 20, 3), np.uint8)
+    img[:] = (200, 40, 30)
+    mask = np.zeros((20, 20), bool)
+    mask[5:12, 5:12] = True  # 49 pixels: any erosion leaves fewer than CORE_MIN_PIXELS
+    assert np.array_equal(core_signature(img, mask, 0.5), colour_signature(img, mask))
+
+
+@pytest.mark.parametrize("share", [-0.1, 0.6])
+def test_a_core_share_outside_its_range_is_refused(share):
+    with pytest.raises(ValueError, match="colour_core"):
+        RecognitionConfig(colour_core=share)
 
 
 @settings(max_examples=40, deadline=None)

@@ -27,6 +27,7 @@ as the pool's others on average (:func:`rerank`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import cv2
@@ -36,8 +37,8 @@ from numpy.typing import NDArray
 from ..catalogue.appearance import BINS, carries_colour, colour_signature
 
 __all__ = [
-    "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "has_colour",
-    "reranked_score", "rerank", "rerank_by_colour",
+    "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "core_signature",
+    "has_colour", "reranked_score", "rerank", "rerank_by_colour",
 ]
 
 #: How much a full colour mismatch (distance 1) lengthens the outline distance: × (1 + w).
@@ -46,6 +47,8 @@ COLOUR_WEIGHT = 1.0
 #: :data:`CHROMA_MIN` away from neutral grey in the a*b* plane.
 COLOURED_SHARE = 0.01
 CHROMA_MIN = 12.0
+#: A cut-out's core must keep at least this many pixels, else its whole mask is used.
+CORE_MIN_PIXELS = 50
 
 
 def colour_distance(a: NDArray[np.float32], b: NDArray[np.float32]) -> float:
@@ -53,6 +56,21 @@ def colour_distance(a: NDArray[np.float32], b: NDArray[np.float32]) -> float:
     if not a.any() or not b.any():
         return 1.0
     return float(np.clip(cv2.compareHist(a, b, cv2.HISTCMP_BHATTACHARYYA), 0.0, 1.0))
+
+
+def core_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_], share: float) -> NDArray[np.float32]:
+    """The :func:`colour_signature` of a cut-out's core: ``mask`` eroded (a disc) by
+    ``share`` × the square root of its area, so the rim where a cut in clutter takes in
+    its neighbours counts for nothing; the whole mask when the core would keep fewer than
+    :data:`CORE_MIN_PIXELS` pixels, or ``share`` is 0."""
+    mask = np.asarray(mask, bool)
+    radius = int(round(share * math.sqrt(np.count_nonzero(mask))))
+    if radius > 0:
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        core = cv2.erode(mask.astype(np.uint8), disc).astype(bool)
+        if np.count_nonzero(core) >= CORE_MIN_PIXELS:
+            mask = core
+    return colour_signature(rgb, mask)
 
 
 def has_colour(rgb: NDArray[np.uint8]) -> bool:

@@ -49,7 +49,7 @@ from ..search.colour_index import ColourMatch
 from ..search.plans import MAX_CURVES, Candidate, RefineRequest
 from ..search.shifts import ShiftWindow, shift_turn, shifted, turn_window
 from .client_tier import ClientTier
-from .colour import colour_distance, colour_signature, has_colour, rerank
+from .colour import colour_distance, colour_signature, core_signature, has_colour, rerank
 from .image import LoadedImage, load_image
 from .options import QueryOptions
 from .regions import Prompts, Region, find_regions
@@ -308,7 +308,7 @@ def _colour_matches(
     """The cut-out's colour signature and the colour channel's objects for it
     (:attr:`~viewdb.config.RecognitionConfig.colour_pool`; none when the catalogue has
     no coloured object, or the server predates the channel)."""
-    query = colour_signature(shape.view.color, shape.view.mask)
+    query = core_signature(shape.view.color, shape.view.mask, options.recognition.colour_core)
     matches, exchange = server.colour_ranking(query, options.recognition.colour_pool)
     traffic.exchanged(exchange)
     return query, matches
