@@ -137,7 +137,8 @@ class StoredCatalogue:
         self._colour_index = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
-        for cache in (self._regenerated, self._renders, *self._derived.values()):
+        caches: list[OrderedDict[Any, Any]] = [self._regenerated, self._renders, *self._derived.values()]
+        for cache in caches:  # each keyed by a tuple starting with the object's name
             for key in [k for k in cache if k[0] == name]:
                 del cache[key]
 
