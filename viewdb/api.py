@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -564,8 +564,9 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         if client_gap is not None:
             wanted = replace(wanted, index=replace(wanted.index, client_gap=float(client_gap)))
         if perspective is not None:
-            wanted = replace(wanted, perspective=replace(wanted.perspective,
-                                                         distances=perspective))
+            # any sequence: PerspectiveConfig checks it and makes it a tuple of floats
+            distances = cast(tuple[float, ...], perspective)
+            wanted = replace(wanted, perspective=replace(wanted.perspective, distances=distances))
         if perspective_gap is not None:
             wanted = replace(wanted, perspective=replace(wanted.perspective, gap=float(perspective_gap)))
         wanted = wanted.resolved()
