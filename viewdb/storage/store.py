@@ -68,6 +68,12 @@ class ViewRow:
     grid_gap: float
 
 
+def _centre(blob: bytes) -> tuple[float, float, float]:
+    """An object's stored centre (three float64s) as floats."""
+    x, y, z = (float(v) for v in decode_array(blob, np.float64, (3,)))
+    return x, y, z
+
+
 def _symmetry_columns(desc: Any) -> dict[str, Any]:
     sym = getattr(desc, "symmetry", None)
     if sym is None:
@@ -219,7 +225,7 @@ class Store(Database):
             ObjectRow(
                 id=r[0], name=r[1], source=r[2], content_hash=r[3], n_faces=r[4],
                 n_vertices=r[5], scale=float(r[6]),
-                centre=tuple(float(x) for x in decode_array(r[7], np.float64, (3,))),  # type: ignore[arg-type]
+                centre=_centre(r[7]),
                 views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
                 created_at=r[11], skimmed=bool(r[12]),
                 symmetry=None if r[13] is None else json.loads(r[13]),
