@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,7 +38,7 @@ from .errors import QueryError, StorageError, ViewDBError
 from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
 from .pose.matched import pose_known
-from .recognition.client_tier import ClientTier
+from .recognition.client_tier import ClientTier, nearest_objects
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
 from .recognition.overlay import draw_result
@@ -365,7 +365,7 @@ class ViewDB:
     ) -> tuple[list[Candidate], SearchStats]:
         """The client half of CS1/CS2: the k nearest objects on this file's sparse tier
         (over ``shifts`` of the curve, as :meth:`search`)."""
-        return self._catalogue.nearest_objects(curve, k, band, "sparse", shifts)
+        return nearest_objects(self._catalogue, curve, k, band, "sparse", shifts)
 
     def search(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, tier: str = "full",
@@ -381,7 +381,7 @@ class ViewDB:
         (:class:`~viewdb.search.shifts.ShiftWindow`, e.g. ``ShiftWindow()`` for every
         in-plane turn), in one search; each hit's ``shift`` is the start that matched.
         """
-        found, stats = self._catalogue.nearest_objects(curve, k, band, tier, shifts)
+        found, stats = nearest_objects(self._catalogue, curve, k, band, tier, shifts)
         hits = [SearchHit(c.object, c.distance, c.azimuth, c.elevation, c.mirrored, c.camera_distance,
                           c.shift) for c in found]
         return hits, stats
@@ -564,8 +564,9 @@ def open(  # noqa: A001 - mirrors sqlite3.connect / builtins.open on purpose
         if client_gap is not None:
             wanted = replace(wanted, index=replace(wanted.index, client_gap=float(client_gap)))
         if perspective is not None:
-            wanted = replace(wanted, perspective=replace(wanted.perspective,
-                                                         distances=perspective))
+            # any sequence: PerspectiveConfig checks it and makes it a tuple of floats
+            distances = cast(tuple[float, ...], perspective)
+            wanted = replace(wanted, perspective=replace(wanted.perspective, distances=distances))
         if perspective_gap is not None:
             wanted = replace(wanted, perspective=replace(wanted.perspective, gap=float(perspective_gap)))
         wanted = wanted.resolved()

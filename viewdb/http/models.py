@@ -8,6 +8,7 @@ validate against them).
 
 from __future__ import annotations
 
+import builtins
 from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -271,7 +272,8 @@ class WebResultModel(BaseModel):
     colour_distance: float | None
     shape_fit: float | None
     score: float | None
-    pose: dict[str, object] | None = Field(description="as in viewdb query --json (null: not posed)")
+    # builtins.object: the field ``object`` above shadows the name in this class
+    pose: dict[str, builtins.object] | None = Field(description="as in viewdb query --json (null: not posed)")
     pose_error: str | None = None
     overlay: str | None = Field(description="data: URL of a transparent PNG of the posed mesh, as "
                                             "large as `photo`, to lay over it: the best posed result's "

@@ -80,7 +80,8 @@ def shrink_query(
     h = max(_IMAGE.min_side, math.floor(height * factor))
     while w * h > max_pixels and min(w, h) > _IMAGE.min_side:
         w, h = w - 1, max(_IMAGE.min_side, round(w * height / width) - 1)
-    color = cv2.resize(np.asarray(query.color, np.uint8), (w, h), interpolation=cv2.INTER_AREA)
+    color = np.asarray(cv2.resize(np.asarray(query.color, np.uint8), (w, h), interpolation=cv2.INTER_AREA),
+                       np.uint8)
     mask = cv2.resize(np.asarray(query.mask, np.uint8) * np.uint8(255), (w, h),
                       interpolation=cv2.INTER_AREA) > 127
     if intrinsics is not None:
@@ -201,11 +202,11 @@ class PoseRequest:
             None if curves is None else list(curves), rerank)
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"image": base64.b64encode(self.image).decode("ascii"),
-               "matches": [c.to_dict() for c in self.matches],
-               "intrinsics": None if self.intrinsics is None else list(self.intrinsics),
-               "curves": None if self.curves is None else [
-                   None if c is None else [float(x) for x in c] for c in self.curves]}
+        out: dict[str, Any] = {"image": base64.b64encode(self.image).decode("ascii"),
+                               "matches": [c.to_dict() for c in self.matches],
+                               "intrinsics": None if self.intrinsics is None else list(self.intrinsics),
+                               "curves": None if self.curves is None else [
+                                   None if c is None else [float(x) for x in c] for c in self.curves]}
         if self.rerank:
             out["rerank"] = True
         return out

@@ -40,6 +40,7 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import cv2
 import numpy as np
@@ -212,7 +213,7 @@ def _from_file(path: Path, max_pixels: int) -> tuple[NDArray[np.uint8], NDArray[
     return np.ascontiguousarray(rgb), alpha
 
 
-def _read_header(f: io.BufferedReader, name: str) -> tuple[int, int, int]:
+def _read_header(f: IO[bytes], name: str) -> tuple[int, int, int]:
     """``(width, height, EXIF orientation)`` from the header, without decoding pixels."""
     if os.fstat(f.fileno()).st_size == 0:
         raise ImageError("empty file, not an image", name)

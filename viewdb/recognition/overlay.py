@@ -159,7 +159,8 @@ def resized_photo(photo: NDArray[np.uint8], config: OverlayConfig | None = None)
     if (h, w) == rgb.shape[:2]:
         return rgb
     smaller = h * w < rgb.shape[0] * rgb.shape[1]
-    return cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA if smaller else cv2.INTER_CUBIC)
+    return np.asarray(cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA if smaller else cv2.INTER_CUBIC),
+                      np.uint8)
 
 
 @dataclass(frozen=True)
@@ -175,7 +176,7 @@ class _Projection:
 
 
 #: Where a normalised mesh sits in its file: ``original = centre + scale · normalised``.
-Placement = tuple[Sequence[float], float]
+Placement = tuple[Sequence[float] | NDArray[np.floating], float]
 
 
 def _project(pose: OverlayPose, place: Placement, points: NDArray[np.float64],

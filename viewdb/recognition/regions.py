@@ -78,6 +78,7 @@ from .segmentation import (
     check_object,
     colour_foreground,
     grabcut_from,
+    grabcut_labels,
     label_mask,
     largest_filled,
     read_label_map,
@@ -277,7 +278,7 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     margin = max(cfg.box_min_margin, round(share * max(x2 - x1, y2 - y1)))
     cx1, cy1, cx2, cy2 = max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
     crop = rgb[cy1:cy2, cx1:cx2]
-    init = np.full(crop.shape[:2], cv2.GC_BGD, np.uint8)
+    init: NDArray[np.uint8] = np.full(crop.shape[:2], cv2.GC_BGD, np.uint8)
     init[y1 - cy1:y2 - cy1, x1 - cx1:x2 - cx1] = cv2.GC_PR_FGD
     if seed is not None:
         radius = max(2, round(cfg.point_seed * min(x2 - x1, y2 - y1)))
@@ -292,23 +293,23 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     scale = min(1.0, cfg.box_work_side / max(crop.shape[:2]))
     if scale < 1.0:
         size = (max(1, round(crop.shape[1] * scale)), max(1, round(crop.shape[0] * scale)))
-        crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
-        init = cv2.resize(init, size, interpolation=cv2.INTER_NEAREST)
+        crop = np.asarray(cv2.resize(crop, size, interpolation=cv2.INTER_AREA), np.uint8)
+        init = np.asarray(cv2.resize(init, size, interpolation=cv2.INTER_NEAREST), np.uint8)
         if unknown is not None:
-            unknown = cv2.resize(unknown, size, interpolation=cv2.INTER_NEAREST)
+            unknown = np.asarray(cv2.resize(unknown, size, interpolation=cv2.INTER_NEAREST), np.uint8)
     out = np.zeros((h, w), dtype=bool)
     if not (init == cv2.GC_BGD).any():  # the box is the whole photo: nothing to learn background from
         out[y1:y2, x1:x2] = True
         return out
     bgr = np.ascontiguousarray(crop[:, :, ::-1])
     if unknown is not None and unknown.any():
-        bgr = cv2.inpaint(bgr, unknown, 3, cv2.INPAINT_TELEA)
+        bgr = np.asarray(cv2.inpaint(bgr, unknown, 3, cv2.INPAINT_TELEA), np.uint8)
     if texture:
         bgr = texture_image(bgr)
     try:
         cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
-        cv2.grabCut(bgr, init, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.box_iterations,
-                    cv2.GC_INIT_WITH_MASK)
+        grabcut_labels(bgr, init, (np.zeros((1, 65)), np.zeros((1, 65))), cfg.box_iterations,
+                       cv2.GC_INIT_WITH_MASK)
     except cv2.error:
         return out
     found = ((init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)).astype(np.uint8) * 255
@@ -330,8 +331,8 @@ def texture_image(bgr: NDArray[np.uint8]) -> NDArray[np.uint8]:
     grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
     mean = cv2.blur(grey, (15, 15))
     contrast = np.sqrt(np.maximum(cv2.blur(grey * grey, (15, 15)) - mean * mean, 0.0))
-    energy = cv2.GaussianBlur(np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1)),
-                              (0, 0), 8.0)
+    gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1))
+    energy = np.asarray(cv2.GaussianBlur(gradient, (0, 0), 8.0), np.float32)
 
     def byte(a: NDArray[np.float32]) -> NDArray[np.uint8]:
         return np.clip(a * (255.0 / (float(np.percentile(a, 99)) + 1e-6)), 0, 255).astype(np.uint8)
@@ -444,7 +445,7 @@ def _failed(whole: NDArray[np.bool_], box: tuple[int, int, int, int], cfg: Segme
     """Whether a box's cut failed: it covers less than ``box_min_cover`` of the box, or
     stops more than ``box_texture_gap`` short of one of its sides."""
     x1, y1, x2, y2 = box
-    area = np.count_nonzero(whole)
+    area = int(np.count_nonzero(whole))
     return (area == 0 or area < cfg.box_min_cover * (x2 - x1) * (y2 - y1)
             or box_gap(whole, box) > cfg.box_texture_gap)
 

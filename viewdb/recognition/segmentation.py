@@ -102,7 +102,7 @@ from .image import LoadedImage, check_size, describe_error, load_image
 
 __all__ = [
     "METHODS", "Foreground", "Segmentation", "check_object", "colour_foreground", "grabcut_from",
-    "label_mask", "largest_filled", "query_curve", "read_label_map", "segment",
+    "grabcut_labels", "label_mask", "largest_filled", "query_curve", "read_label_map", "segment",
 ]
 
 #: Every ``method`` :func:`segment` accepts; the last three are the colour methods.
@@ -209,7 +209,7 @@ def query_curve(seg: Segmentation, samples: int) -> NDArray[np.float64]:
 def _alpha_has_background(alpha: NDArray[np.uint8] | None, cfg: SegmentationConfig) -> bool:
     if alpha is None:
         return False
-    transparent = np.count_nonzero(alpha <= 127)
+    transparent = int(np.count_nonzero(alpha <= 127))
     return transparent >= (1.0 - cfg.max_object_fraction) * alpha.size
 
 
@@ -364,10 +364,10 @@ def colour_foreground(rgb: NDArray[np.uint8], method: str, cfg: SegmentationConf
     scale = min(1.0, cfg.work_max_side / max(h, w))
     if scale < 1.0:
         size = (max(1, round(w * scale)), max(1, round(h * scale)))
-        small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+        small = np.asarray(cv2.resize(rgb, size, interpolation=cv2.INTER_AREA), np.uint8)
     else:
         small = rgb
-    lab = cv2.cvtColor(small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+    lab = np.asarray(cv2.cvtColor(small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab), np.float32)
     dist, border = _background_distance(lab, cfg)
     noise = float(np.quantile(border, cfg.border_quantile))
     if method == "otsu":
@@ -390,7 +390,7 @@ def _colour_segmentation(
     fg = colour_foreground(rgb, method, cfg)
     found = fg.found
     if plain_as_border and method == "grabcut":
-        lab = cv2.cvtColor(fg.small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+        lab = np.asarray(cv2.cvtColor(fg.small.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab), np.float32)
         if _plain(lab, cfg):
             method = "border"
     if method == "grabcut":
@@ -488,7 +488,7 @@ def _background_distance(
     def distance_to(values: list[np.ndarray | float]) -> NDArray[np.float32]:
         d2 = np.zeros((h, w), np.float32)
         for channel, value in zip(channels, values, strict=True):
-            diff = channel - np.float32(value) if np.isscalar(value) else channel - value
+            diff = channel - value if isinstance(value, np.ndarray) else channel - np.float32(value)
             d2 += diff * diff
         return d2
 
@@ -631,10 +631,20 @@ def _grabcut(bgr: NDArray[np.uint8], labels: NDArray[np.uint8], cfg: Segmentatio
     models = _started_models(bgr, labels, cfg) if cfg.grabcut_start_scale < 1.0 else None
     if models is None:
         cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
-        cv2.grabCut(bgr, labels, None, np.zeros((1, 65)), np.zeros((1, 65)), cfg.grabcut_iterations,
-                    cv2.GC_INIT_WITH_MASK)
+        grabcut_labels(bgr, labels, (np.zeros((1, 65)), np.zeros((1, 65))), cfg.grabcut_iterations,
+                       cv2.GC_INIT_WITH_MASK)
     else:
-        cv2.grabCut(bgr, labels, None, *models, cfg.grabcut_iterations, cv2.GC_EVAL)
+        grabcut_labels(bgr, labels, models, cfg.grabcut_iterations, cv2.GC_EVAL)
+
+
+def grabcut_labels(
+    bgr: NDArray[np.uint8], labels: NDArray[np.uint8],
+    models: tuple[NDArray[np.float64], NDArray[np.float64]], iterations: int, mode: int,
+) -> None:
+    """``cv2.grabCut`` from the ``GC_*`` ``labels`` (no rectangle), which it overwrites, with
+    the background and object colour ``models`` (OpenCV's 1 x 65 arrays, updated too)."""
+    # OpenCV's stubs type `rect` as Sequence[int]; its binding takes None (no rectangle)
+    cv2.grabCut(bgr, labels, None, *models, iterations, mode)  # type: ignore[call-overload]
 
 
 def _started_models(
@@ -646,15 +656,15 @@ def _started_models(
     holds fewer pixels of either kind than a model has Gaussians, or GrabCut fails on it."""
     h, w = labels.shape
     size = (max(1, round(w * cfg.grabcut_start_scale)), max(1, round(h * cfg.grabcut_start_scale)))
-    small = cv2.resize(bgr, size, interpolation=cv2.INTER_AREA)
-    coarse = cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST)
+    small = np.asarray(cv2.resize(bgr, size, interpolation=cv2.INTER_AREA), np.uint8)
+    coarse = np.asarray(cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST), np.uint8)
     background = np.count_nonzero((coarse == cv2.GC_BGD) | (coarse == cv2.GC_PR_BGD))
     if min(background, coarse.size - background) < _GMM_COMPONENTS:
         return None
     bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
     try:
         cv2.setRNGSeed(0x5EED)  # GrabCut's GMM start uses OpenCV's RNG: make it repeatable
-        cv2.grabCut(small, coarse, None, bgd, fgd, 0, cv2.GC_INIT_WITH_MASK)
+        grabcut_labels(small, coarse, (bgd, fgd), 0, cv2.GC_INIT_WITH_MASK)
     except cv2.error:
         return None
     return bgd, fgd

@@ -49,8 +49,8 @@ def rotated_curves(
         else:
             # cv2 turns counter-clockwise for positive angles: turn back by -angle
             m = cv2.getRotationMatrix2D(centre, -angle, 1.0)
-            turned = cv2.warpAffine(canvas, m, (canvas.shape[1], canvas.shape[0]),
-                                    flags=cv2.INTER_LINEAR)
+            turned = np.asarray(cv2.warpAffine(canvas, m, (canvas.shape[1], canvas.shape[0]),
+                                               flags=cv2.INTER_LINEAR), np.uint8)
         try:
             out.append((angle, distance_curve(turned > 127, samples)))
         except FeatureError:

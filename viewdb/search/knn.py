@@ -176,6 +176,10 @@ class QueryBoxes:
         )
 
 
+#: What :meth:`TierSource.rows` returns: the curves, indexed coordinates and segment means.
+_Rows = tuple[NDArray[np.floating], NDArray[np.float64], NDArray[np.float64]]
+
+
 class TierSource(Protocol):
     """Where a search gets its groups from.
 
@@ -373,7 +377,8 @@ def knn(
     envelope_pair = (qb.lower, qb.upper)
     mirrored_pair = (qb.mirrored_lower, qb.mirrored_upper)
 
-    def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
+    def step(search: _Search, order: NDArray[np.int64], keys: NDArray[np.float64], pos: int, ready: int,
+             stop_key: float, rows: _Rows) -> tuple[int, int]:
         return refine_groups(
             qb.curve, band, envelope_pair, mirrored_pair, qb.box, qb.mirrored_box,
             qb.segments, qb.mirrored_segments, order, keys, pos, ready, stop_key,
@@ -423,7 +428,8 @@ def knn_stack(
     boxes = source.group_boxes()
     group_arrays = (source.group_start, source.group_count, source.group_owner, source.row_owner)
 
-    def step(search: _Search, order, keys, pos, ready, stop_key, rows) -> tuple[int, int]:
+    def step(search: _Search, order: NDArray[np.int64], keys: NDArray[np.float64], pos: int, ready: int,
+             stop_key: float, rows: _Rows) -> tuple[int, int]:
         while True:
             pos, status = refine_stack(
                 stack, order, keys, pos, ready, stop_key, group_arrays, rows, boxes,
@@ -493,6 +499,13 @@ class _Search:
     """The state of one search and its range browsing (module doc): per-object bounds
     and results, the heap of the compiled refinement, and the loop that lists groups
     within a growing radius and hands them to a refinement ``step``."""
+
+    bound: NDArray[np.float64]
+    exact: NDArray[np.float64]
+    exact_row: NDArray[np.int64]
+    exact_mirrored: NDArray[np.bool_]
+    exact_curve: NDArray[np.int64]
+    kth: NDArray[np.float64]
 
     def __init__(self, source: TierSource, k: int, upper: float, known: Mapping[int, float] | None,
                  heap_per_view: int, shared: _Search | None = None) -> None:

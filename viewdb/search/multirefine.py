@@ -46,14 +46,20 @@ kernel returns :data:`FULL` before popping and the caller grows the heap.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..jit import njit
 from .bounds import cascade_env_kernel, curve_box32, fourier_dist2, lb_keogh2, lb_paa2
 from .refine import DONE, EXHAUSTED, NEED, RADIUS, heap_pop, heap_push, kth_distance, load_row, widen
+from .shifts import CurveQuery
 
 __all__ = ["FULL", "refine_stack", "scan_stack"]
+
+#: An array handed to the compiled kernels as it is (dtypes as the docstrings say).
+Array = NDArray[Any]
 
 #: :func:`refine_stack` status besides those of :mod:`.refine`: the heap may overflow.
 FULL = 4
@@ -318,7 +324,11 @@ def _stack_kernel(  # pragma: no cover - compiled
 
 
 def refine_stack(
-    query, order, keys, start_at, ready, stop_key, source_groups, rows, groups, state, k, cap, stats,
+    query: CurveQuery, order: Array, keys: Array, start_at: int, ready: int, stop_key: float,
+    source_groups: tuple[Array, Array, Array, Array], rows: tuple[Array, Array, Array],
+    groups: tuple[Array, Array, Array, Array],
+    state: tuple[Array, Array, Array, Array, Array, Array, Array, Array, Array],
+    k: int, cap: float, stats: Array,
 ) -> tuple[int, int]:
     """One call of the compiled refinement for a :class:`~viewdb.search.shifts.CurveQuery`;
     returns ``(next group position, status)`` with the statuses of

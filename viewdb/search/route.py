@@ -2,10 +2,11 @@
 candidates.
 
 Every k-NN over a file's tier runs through :func:`nearest_candidates`: the client half of
-CS1/CS2 and a file's own search (:meth:`~viewdb.storage.stored_catalogue.StoredCatalogue.nearest_objects`),
+CS1/CS2 and a file's own search (:func:`~viewdb.recognition.client_tier.nearest_objects`),
 the server half of the plans (:class:`~viewdb.recognition.local_tier.LocalServerTier`)
-and each shard of a sharded catalogue (:class:`~viewdb.shards.shard.Shard`). Storage
-only reads: it opens a read snapshot (a :class:`TierSnapshot`) and hands it over; the
+and each shard of a sharded catalogue (:class:`~viewdb.shards.shard.Shard`). Each opens
+a read snapshot of a file's tiers (a :class:`TierSnapshot`; storage only reads) and hands
+it over; the
 search (:func:`~viewdb.search.plans.refine`, with the request's bounds and options), the
 raised distances of a compact client file and the views' directions on the candidates
 are done here, the same way for all of them.

@@ -59,7 +59,9 @@ class SubsetSource:
         self.group_count = np.ascontiguousarray(source.group_count[self.groups])
         self.row_owner = source.row_owner
         lo, hi, curve_lo, curve_hi = source.group_boxes()
-        self._boxes = tuple(np.ascontiguousarray(a[self.groups]) for a in (lo, hi, curve_lo, curve_hi))
+        g = self.groups
+        self._boxes = (np.ascontiguousarray(lo[g]), np.ascontiguousarray(hi[g]),
+                       np.ascontiguousarray(curve_lo[g]), np.ascontiguousarray(curve_hi[g]))
 
     def groups_within(
         self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]

@@ -68,6 +68,12 @@ class ViewRow:
     grid_gap: float
 
 
+def _centre(blob: bytes) -> tuple[float, float, float]:
+    """An object's stored centre (three float64s) as floats."""
+    x, y, z = (float(v) for v in decode_array(blob, np.float64, (3,)))
+    return x, y, z
+
+
 def _symmetry_columns(desc: Any) -> dict[str, Any]:
     sym = getattr(desc, "symmetry", None)
     if sym is None:
@@ -133,7 +139,7 @@ class Store(Database):
         """``view id -> (azimuth, elevation)`` of stored orthographic views (ids not stored
         are left out)."""
         with self.read() as conn:
-            return orthographic_angles(conn.connection.driver_connection, view_ids)
+            return orthographic_angles(raw_connection(conn), view_ids)
 
     def perspective_curves_at(
         self, name: str, directions: Sequence[tuple[float, float]]
@@ -145,7 +151,7 @@ class Store(Database):
         out = []
         with self.read() as conn:
             object_id = self.object_id(conn, name)
-            raw = conn.connection.driver_connection
+            raw = raw_connection(conn)
             for azimuth, elevation in directions:
                 rows = raw.execute(
                     "SELECT azimuth, elevation, distance, samples FROM perspective_views"
@@ -158,7 +164,7 @@ class Store(Database):
 
     @staticmethod
     def _group_curves(conn: Connection, name: str) -> dict[tuple[float, float], NDArray[np.float32]]:
-        raw = conn.connection.driver_connection
+        raw = raw_connection(conn)
         out = {}
         for ids_blob, curves_blob in raw.execute(
             "SELECT g.view_ids, g.curves FROM index_groups g JOIN objects o ON o.id = g.object_id"
@@ -219,7 +225,7 @@ class Store(Database):
             ObjectRow(
                 id=r[0], name=r[1], source=r[2], content_hash=r[3], n_faces=r[4],
                 n_vertices=r[5], scale=float(r[6]),
-                centre=tuple(float(x) for x in decode_array(r[7], np.float64, (3,))),  # type: ignore[arg-type]
+                centre=_centre(r[7]),
                 views=int(r[8]), empty_views=int(r[9]), ingest_seconds=float(r[10]),
                 created_at=r[11], skimmed=bool(r[12]),
                 symmetry=None if r[13] is None else json.loads(r[13]),
@@ -250,9 +256,9 @@ class Store(Database):
         grid_gap = config.gap
         with self.transaction() as conn:
             old = conn.execute(sa.select(s.objects.c.id).where(s.objects.c.name == desc.name)).all()
-            delete_groups(conn.connection.driver_connection, [r[0] for r in old])
+            delete_groups(raw_connection(conn), [r[0] for r in old])
             conn.execute(sa.delete(s.objects).where(s.objects.c.name == desc.name))
-            object_id = conn.execute(
+            inserted = conn.execute(
                 sa.insert(s.objects).values(
                     name=desc.name, source=desc.source, content_hash=desc.content_hash,
                     n_faces=int(desc.n_faces), n_vertices=int(desc.n_vertices),
@@ -261,7 +267,9 @@ class Store(Database):
                     empty_views=len(desc.empty_views), ingest_seconds=float(desc.seconds),
                     created_at=now, **_symmetry_columns(desc),
                 )
-            ).inserted_primary_key[0]
+            ).inserted_primary_key
+            assert inserted is not None  # an INSERT's row
+            object_id = inserted[0]
             self._insert_appearances(conn, object_id, getattr(desc, "appearance", []))
             self._mark_scope(conn, object_id, getattr(desc, "appearance_scope", None))
             if not desc.views:
@@ -274,7 +282,7 @@ class Store(Database):
                     for v in desc.views
                 ],
             )
-            ids = {
+            view_ids = {
                 (float(a), float(e)): int(i)
                 for i, a, e in conn.execute(
                     sa.select(s.views.c.id, s.views.c.azimuth, s.views.c.elevation).where(
@@ -282,7 +290,7 @@ class Store(Database):
                     )
                 )
             }
-            keyed = [(ids[(float(v.azimuth), float(v.elevation))], v) for v in desc.views]
+            keyed = [(view_ids[(float(v.azimuth), float(v.elevation))], v) for v in desc.views]
             conn.execute(
                 sa.insert(s.curves),
                 [{"view_id": i, "samples": encode_array(v.curve)} for i, v in keyed],
@@ -309,7 +317,7 @@ class Store(Database):
             perspective = getattr(desc, "perspective", [])
             ids = [i for i, _ in keyed] + self._insert_perspective(conn, object_id, perspective)
             members["full"] = list(range(len(ids)))
-            write_groups(conn.connection.driver_connection, object_id, ids,
+            write_groups(raw_connection(conn), object_id, ids,
                          np.stack([v.curve for v in (*desc.views, *perspective)]),
                          members, config.index.group_views)
 
@@ -319,7 +327,7 @@ class Store(Database):
         again over all its views, as an ingest groups them."""
         with self.transaction() as conn:
             object_id = self.object_id(conn, name)
-            raw = conn.connection.driver_connection
+            raw = raw_connection(conn)
             delete_groups(raw, [object_id], tiers=("full",))
             conn.execute(sa.delete(s.perspective_views)
                          .where(s.perspective_views.c.object_id == object_id))
@@ -434,7 +442,7 @@ class Store(Database):
         """``read`` on the raw connection in one snapshot (offsets and blob bytes alike: a
         writer may replace both); an SQLite error says it could not read ``what``."""
         with self._errors(), self.engine.connect() as conn:
-            raw = conn.connection.driver_connection
+            raw = raw_connection(conn)
             began = not raw.in_transaction
             try:
                 if began:

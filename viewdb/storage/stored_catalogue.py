@@ -1,7 +1,7 @@
 """The read side of a viewdb file: its objects, any view of them (stored, or rendered from
 the stored mesh and described on demand), any view's appearance (stored, or rendered and
-recorded on demand), renders, meshes, curves, and its tiers for the k-NN search (a read
-snapshot handed to :func:`viewdb.search.route.nearest_candidates`, which searches).
+recorded on demand), renders, meshes, curves, and its tiers for the k-NN search (read
+snapshots, which the callers hand to :func:`viewdb.search.route.nearest_candidates`).
 
 :class:`StoredCatalogue` implements :class:`viewdb.catalogue.reading.CatalogueReader`. It
 keeps bounded caches of what is dear to make (decoded meshes, renders, regenerated views,
@@ -34,11 +34,8 @@ from ..catalogue.symmetry import SymmetryType
 from ..config import BuildConfig, SearchConfig
 from ..errors import FeatureError, NotFound, QueryError
 from ..search.colour_index import ColourIndex
-from ..search.knn import SearchStats, TierArrays, objects_within
-from ..search.plans import Candidate, RefineRequest
+from ..search.knn import TierArrays, objects_within
 from ..search.refine import scan_all
-from ..search.route import nearest_candidates
-from ..search.shifts import ShiftWindow
 from .appearances import decode_record, decode_signature
 from .store import ObjectRow, Store
 from .tiers import TIERS, TierReader
@@ -140,7 +137,8 @@ class StoredCatalogue:
         self._colour_index = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
-        for cache in (self._regenerated, self._renders, *self._derived.values()):
+        caches: list[OrderedDict[Any, Any]] = [self._regenerated, self._renders, *self._derived.values()]
+        for cache in caches:  # each keyed by a tuple starting with the object's name
             for key in [k for k in cache if k[0] == name]:
                 del cache[key]
 
@@ -438,35 +436,6 @@ class StoredCatalogue:
             self._reader = TierReader(self.path, self._store.connect,
                                        write_files=not self._store.read_only)
         return self._reader
-
-    def nearest_objects(
-        self, curve: NDArray[np.floating], k: int, band: int = 6, tier: str = "full",
-        shifts: ShiftWindow | None = None, *, bounded: bool = False,
-    ) -> tuple[list[Candidate], SearchStats]:
-        """Algorithm 2 on one tier, in one read snapshot (handed to the search route,
-        :func:`~viewdb.search.route.nearest_candidates`): the ``k`` nearest objects, each
-        with its best view (and the object's content hash as its ``version``); over the
-        circular ``shifts`` of the curve in one search (each with the shift that matched).
-        A ``(T, N)`` stack of curves (no ``shifts``): the smallest distance over its rows,
-        in one search (:func:`~viewdb.search.knn.knn_stack`; each with the row that
-        matched as its ``curve_index``).
-
-        The distances are those of the stored curves. ``bounded``: each is raised by its
-        view's proven quantisation error (a compact client file; nothing to add for exact
-        curves), so it bounds the distance to the exact curve from above, as a CS1 client
-        must send (:mod:`viewdb.search.quantised`)."""
-        stacked = np.ndim(curve) == 2
-        if stacked and (shifts is not None or len(curve) == 0):
-            raise QueryError("a stack of curves needs at least one curve and no shifts")
-        if stacked:
-            q = np.stack([self.query_curve(c, k, tier) for c in curve])
-            request = RefineRequest(q[0], band, k, [], curves=q)
-        else:
-            request = RefineRequest(self.query_curve(curve, k, tier), band, k, [], shifts)
-        with self.tier_reader().snapshot() as reader:
-            if reader.tier(tier).n_groups == 0:
-                raise QueryError("the database holds no views", self.path)
-            return nearest_candidates(reader, request, tier, versioned=True, bounded=bounded)
 
     def objects_within(
         self, curve: NDArray[np.floating], distance: float, band: int = 6, tier: str = "full"

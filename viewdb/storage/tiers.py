@@ -158,6 +158,7 @@ def write_groups(
                      encode_array(lo), encode_array(hi), encode_array(grouped.min(axis=0)),
                      encode_array(grouped.max(axis=0))),
                 ).lastrowid
+                assert gid is not None  # an INSERT's row
                 if errors is not None:
                     raw.execute("INSERT INTO curve_errors (group_id, errors) VALUES (?, ?)",
                                 (gid, encode_array(rounded32(errors, up=True))))
