@@ -382,10 +382,14 @@ def _matches(
     ranked: list[Pooled], poses: Sequence[tuple[PoseEstimate | None, str | None]], colours: Scores,
     fitted: Scores, by_iou: bool,
 ) -> list[QueryMatch]:
-    matches = [QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored, angle,
-                          *poses[rank - 1], *colours.get(c.object, (None, None)), c.camera_distance,
-                          *fitted.get(c.object, (None, None)))
-               for rank, (c, angle) in enumerate(ranked, 1)]
+    def match(rank: int, c: Candidate, angle: float) -> QueryMatch:
+        pose, pose_error = poses[rank - 1]
+        colour, colour_score = colours.get(c.object, (None, None))
+        shape_fit, verified_score = fitted.get(c.object, (None, None))
+        return QueryMatch(rank, c.object, c.distance, c.azimuth, c.elevation, c.mirrored, angle, pose,
+                          pose_error, colour, colour_score, c.camera_distance, shape_fit, verified_score)
+
+    matches = [match(rank, c, angle) for rank, (c, angle) in enumerate(ranked, 1)]
     if not by_iou:
         return matches
 
