@@ -22,15 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 import viewdb
-from support.real import BANDS, REAL, ROOT, SETS, band_of, is_symmetric, pose_row, symmetric_names
-from viewdb.bench.groundtruth import Frame, mask_iou, read_frames, visible_masks
+from support.real import BANDS, add_set_arguments, band_of, each_frame, is_symmetric, pose_row, share
+from viewdb.bench.groundtruth import Frame, mask_iou, visible_masks
 
 
 def _posed(db: viewdb.ViewDB, frame: Frame, inst, mask: np.ndarray, symmetric: bool) -> dict:
@@ -101,9 +99,6 @@ def markdown(summary: dict, catalogue: str) -> str:
              "| median rot. err (°): cut / true | s per pose (median) |",
              "|---|---|---|---|---|---|---|---|"]
 
-    def share(part: int, n: int) -> str:
-        return f"{part} ({100.0 * part / n:.0f} %)" if n else "–"
-
     def deg(x: float | None) -> str:
         return "–" if x is None else f"{x:.1f}"
 
@@ -122,25 +117,17 @@ def markdown(summary: dict, catalogue: str) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--db", type=Path, required=True, help="the catalogue (every real mesh ingested)")
-    parser.add_argument("--sets", default=",".join(SETS), help="photo sets of ../shared/real")
-    parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each set")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "pose_from_cut")
+    add_set_arguments(parser, "pose_from_cut")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     with viewdb.open(args.db, create=False, read_only=True) as db:
-        for set_name in args.sets.split(","):
-            folder = REAL / set_name
-            if not (folder / "gt.json").is_file():
-                sys.exit(f"pose_from_cut: {folder / 'gt.json'} not found")
-            symmetric = symmetric_names(folder)
-            for frame in read_frames(folder)[:args.frames]:
-                new = run_frame(db, set_name, frame, symmetric)
-                rows += new
-                done = ", ".join(f"{r['object']} {'+' if r['from_cut'].get('add_ok') else '-'}"
-                                 f"{'+' if r['from_truth'].get('add_ok') else '-'}" for r in new)
-                print(f"{set_name} {frame.name}: {done} (ADD from the cut, from the truth)", flush=True)
+        for set_name, symmetric, frame in each_frame(args.sets, args.frames, "pose_from_cut"):
+            new = run_frame(db, set_name, frame, symmetric)
+            rows += new
+            done = ", ".join(f"{r['object']} {'+' if r['from_cut'].get('add_ok') else '-'}"
+                             f"{'+' if r['from_truth'].get('add_ok') else '-'}" for r in new)
+            print(f"{set_name} {frame.name}: {done} (ADD from the cut, from the truth)", flush=True)
     summary = summarise(rows)
     (args.out / "pose_from_cut.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=1,
                                                             default=float))

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -48,16 +47,15 @@ import numpy as np
 import viewdb
 from support.real import (
     BANDS,
-    REAL,
-    ROOT,
-    SETS,
+    add_set_arguments,
     band_of,
+    each_frame,
     is_symmetric,
     pose_row,
-    symmetric_names,
+    share,
     twin_pose,
 )
-from viewdb.bench.groundtruth import TWINS, Frame, mask_iou, read_frames, visible_masks
+from viewdb.bench.groundtruth import TWINS, Frame, mask_iou, visible_masks
 
 
 def _rank(results: list, names: tuple[str, ...]) -> int | None:
@@ -159,10 +157,6 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-def _pct(part: int, n: int) -> str:
-    return f"{part} ({100.0 * part / n:.0f} %)" if n else "–"
-
-
 def markdown(summary: dict, catalogue: str, objects: int) -> str:
     lines = [f"Catalogue: `{catalogue}`, {objects} objects; every photo queried once with the boxes of its "
              "annotated objects and its intrinsics, default options.", "",
@@ -176,8 +170,8 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
                 continue
             c = s["causes"]
             rot = "–" if s["median_rotation_deg"] is None else f"{s['median_rotation_deg']:.1f}"
-            lines.append(f"| {set_name} | {group} | {s['n']} | {_pct(s['first'], s['n'])} | "
-                         f"{_pct(s['top5'], s['n'])} | {_pct(s['add'], s['n'])} | {rot} | "
+            lines.append(f"| {set_name} | {group} | {s['n']} | {share(s['first'], s['n'])} | "
+                         f"{share(s['top5'], s['n'])} | {share(s['add'], s['n'])} | {rot} | "
                          f"{s['median_cut_iou']:.2f} | {s['median_seconds']:.2f} | "
                          f"{' / '.join(str(c.get(k, 0)) for k in ('cut', 'search', 're-ranking', 'pose'))} |")
     return "\n".join(lines) + "\n"
@@ -185,26 +179,18 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--db", type=Path, required=True, help="the catalogue (every real mesh ingested)")
-    parser.add_argument("--sets", default=",".join(SETS), help="photo sets of ../shared/real")
-    parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each set")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "real_clutter")
+    add_set_arguments(parser, "real_clutter")
     parser.add_argument("--overlays", type=Path, default=None, help="draw each photo's answers here")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     with viewdb.open(args.db, create=False, read_only=True) as db:
         objects = len(db.objects())
-        for set_name in args.sets.split(","):
-            folder = REAL / set_name
-            if not (folder / "gt.json").is_file():
-                sys.exit(f"real_clutter: {folder / 'gt.json'} not found")
-            symmetric = symmetric_names(folder)
-            for frame in read_frames(folder)[:args.frames]:
-                new = run_frame(db, set_name, frame, symmetric, args.overlays)
-                rows += new
-                done = ", ".join(f"{r['object']} {r['rank_same'] or '-'}" for r in new)
-                print(f"{set_name} {frame.name}: {done} ({new[0]['seconds']:.2f} s per object)", flush=True)
+        for set_name, symmetric, frame in each_frame(args.sets, args.frames, "real_clutter"):
+            new = run_frame(db, set_name, frame, symmetric, args.overlays)
+            rows += new
+            done = ", ".join(f"{r['object']} {r['rank_same'] or '-'}" for r in new)
+            print(f"{set_name} {frame.name}: {done} ({new[0]['seconds']:.2f} s per object)", flush=True)
     summary = summarise(rows)
     (args.out / "real_clutter.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=1,
                                                            default=float))

@@ -4,13 +4,16 @@ objects count as symmetric, and a pose's BOP-style errors against the ground tru
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from viewdb.bench.groundtruth import Instance, add_error, load_model, pose_errors
+from viewdb.bench.groundtruth import Frame, Instance, add_error, load_model, pose_errors, read_frames
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
@@ -112,3 +115,29 @@ def twin_pose(db, twin: str, exact: str, rotation, translation) -> tuple[np.ndar
     r_e = r @ q
     t_en = r @ c + t_n
     return r_e, float(info_e.scale) * t_en - r_e @ np.asarray(info_e.centre)
+
+
+def add_set_arguments(parser: argparse.ArgumentParser, name: str) -> None:
+    """The options every real-set benchmark takes: ``--db``, ``--sets``, ``--frames`` and
+    ``--out`` (default ``benchmarks/out/NAME``)."""
+    parser.add_argument("--db", type=Path, required=True, help="the catalogue (every real mesh ingested)")
+    parser.add_argument("--sets", default=",".join(SETS), help="photo sets of ../shared/real")
+    parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each set")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / name)
+
+
+def each_frame(sets: str, frames: int | None, name: str) -> Iterator[tuple[str, set[str], Frame]]:
+    """``(set, its symmetric objects, frame)`` for the first ``frames`` frames of each of the
+    comma-separated ``sets``; exits naming the benchmark ``name`` when a set is missing."""
+    for set_name in sets.split(","):
+        folder = REAL / set_name
+        if not (folder / "gt.json").is_file():
+            sys.exit(f"{name}: {folder / 'gt.json'} not found")
+        symmetric = symmetric_names(folder)
+        for frame in read_frames(folder)[:frames]:
+            yield set_name, symmetric, frame
+
+
+def share(part: int, n: int) -> str:
+    """``part`` of ``n`` with its percentage, as the tables print it."""
+    return f"{part} ({100.0 * part / n:.0f} %)" if n else "–"
