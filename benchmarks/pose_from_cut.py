@@ -21,13 +21,21 @@ table goes to ``OUT/pose_from_cut.md``, the rows to ``OUT/pose_from_cut.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
 
 import viewdb
-from support.real import BANDS, add_set_arguments, band_of, each_frame, is_symmetric, pose_row, share
+from support.real import (
+    BANDS,
+    add_set_arguments,
+    band_of,
+    each_frame,
+    is_symmetric,
+    pose_row,
+    share,
+    write_results,
+)
 from viewdb.bench.groundtruth import Frame, mask_iou, visible_masks
 
 
@@ -129,11 +137,7 @@ def main() -> None:
                              f"{'+' if r['from_truth'].get('add_ok') else '-'}" for r in new)
             print(f"{set_name} {frame.name}: {done} (ADD from the cut, from the truth)", flush=True)
     summary = summarise(rows)
-    (args.out / "pose_from_cut.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=1,
-                                                            default=float))
-    table = markdown(summary, str(args.db))
-    (args.out / "pose_from_cut.md").write_text(table)
-    print(table)
+    write_results(args.out, "pose_from_cut", summary, rows, markdown(summary, str(args.db)))
 
 
 if __name__ == "__main__":

@@ -37,7 +37,6 @@ photo's answers.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -54,6 +53,7 @@ from support.real import (
     pose_row,
     share,
     twin_pose,
+    write_results,
 )
 from viewdb.bench.groundtruth import TWINS, Frame, mask_iou, visible_masks
 
@@ -192,11 +192,7 @@ def main() -> None:
             done = ", ".join(f"{r['object']} {r['rank_same'] or '-'}" for r in new)
             print(f"{set_name} {frame.name}: {done} ({new[0]['seconds']:.2f} s per object)", flush=True)
     summary = summarise(rows)
-    (args.out / "real_clutter.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=1,
-                                                           default=float))
-    table = markdown(summary, str(args.db), objects)
-    (args.out / "real_clutter.md").write_text(table)
-    print(table)
+    write_results(args.out, "real_clutter", summary, rows, markdown(summary, str(args.db), objects))
 
 
 if __name__ == "__main__":

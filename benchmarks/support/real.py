@@ -141,3 +141,11 @@ def each_frame(sets: str, frames: int | None, name: str) -> Iterator[tuple[str, 
 def share(part: int, n: int) -> str:
     """``part`` of ``n`` with its percentage, as the tables print it."""
     return f"{part} ({100.0 * part / n:.0f} %)" if n else "–"
+
+
+def write_results(out: Path, name: str, summary: dict, rows: list[dict], table: str) -> None:
+    """``OUT/NAME.json`` (the summary and every row) and ``OUT/NAME.md`` (the table), and the
+    table printed."""
+    (out / f"{name}.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=1, default=float))
+    (out / f"{name}.md").write_text(table)
+    print(table)
