@@ -27,11 +27,12 @@ import numpy as np
 
 import viewdb
 from support.real import (
-    BANDS,
     add_set_arguments,
     band_of,
+    by_group,
     each_frame,
     is_symmetric,
+    median,
     pose_row,
     share,
     write_results,
@@ -81,24 +82,15 @@ def summarise(rows: list[dict]) -> dict:
         out: dict = {"n": len(group)}
         if not group:
             return out
-        out["median_cut_iou"] = float(np.median([r["cut_iou"] for r in group]))
+        out["median_cut_iou"] = median([r["cut_iou"] for r in group])
         for key in ("from_cut", "from_truth"):
             posed = [r[key] for r in group if r[key].get("posed")]
-            def median(field: str, of: list[dict] = posed) -> float | None:
-                return float(np.median([p[field] for p in of])) if of else None
-
             out[key] = {"add": sum(bool(p["add_ok"]) for p in posed),
-                        "median_rotation_deg": median("rotation_deg"), "median_seconds": median("seconds")}
+                        "median_rotation_deg": median([p["rotation_deg"] for p in posed]),
+                        "median_seconds": median([p["seconds"] for p in posed])}
         return out
 
-    summary: dict = {}
-    for set_name in sorted({r["set"] for r in rows}):
-        mine = [r for r in rows if r["set"] == set_name]
-        half = [r for r in mine if r["visibility"] >= 0.5]
-        summary[set_name] = {"all": stats(mine), "visible ≥ 50 %": stats(half)}
-        for _, _, name in BANDS:
-            summary[set_name][name] = stats([r for r in mine if r["band"] == name])
-    return summary
+    return by_group(rows, stats)
 
 
 def markdown(summary: dict, catalogue: str) -> str:

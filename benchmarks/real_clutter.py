@@ -16,8 +16,8 @@ Per object:
   copy of the same object (the catalogue holds a second copy of some real objects from
   another source, e.g. ``linemod_ape``: no silhouette tells such twins apart);
 * **pose**, when the top result is the right object (a twin's pose is carried into the
-  exact mesh's frame and units through the ICP alignment of their normalised surfaces,
-  ``support.real.twin_alignment``: the copies differ in axes and units): ADD (asymmetric) or ADD-S
+  exact mesh's frame and units through the alignment of their normalised surfaces,
+  :func:`viewdb.bench.twins.rigid_alignment`: the copies differ in axes and units): ADD (asymmetric) or ADD-S
   (symmetric: those ``gt.json`` lists, else a mesh whose surface maps onto itself under a
   rotation, :func:`viewdb.bench.groundtruth.symmetries`) within 0.1 × the mesh's diameter;
   the symmetry-aware rotation error; the translation error of the bounding-box centre;
@@ -45,11 +45,12 @@ import numpy as np
 
 import viewdb
 from support.real import (
-    BANDS,
     add_set_arguments,
     band_of,
+    by_group,
     each_frame,
     is_symmetric,
+    median,
     pose_row,
     share,
     twin_pose,
@@ -143,18 +144,11 @@ def summarise(rows: list[dict]) -> dict:
                 causes[r["cause"]] = causes.get(r["cause"], 0) + 1
         refused = sum(r["error"] is not None for r in group)
         return {"n": n, "first": first, "top5": top5, "add": add, "refused": refused,
-                "median_rotation_deg": float(np.median(rot)) if rot else None,
+                "median_rotation_deg": median(rot),
                 "median_cut_iou": float(np.median([r["cut_iou"] for r in group])),
                 "median_seconds": float(np.median([r["seconds"] for r in group])), "causes": causes}
 
-    out: dict = {}
-    for set_name in sorted({r["set"] for r in rows}):
-        mine = [r for r in rows if r["set"] == set_name]
-        half = [r for r in mine if r["visibility"] >= 0.5]
-        out[set_name] = {"all": stats(mine), "visible ≥ 50 %": stats(half)}
-        for _, _, name in BANDS:
-            out[set_name][name] = stats([r for r in mine if r["band"] == name])
-    return out
+    return by_group(rows, stats)
 
 
 def markdown(summary: dict, catalogue: str, objects: int) -> str:

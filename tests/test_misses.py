@@ -17,7 +17,7 @@ from tests.conftest import sample
 from viewdb.bench.config import MissConfig, TwinConfig
 from viewdb.bench.misses import CAUSES, cause_of, filled, iou
 from viewdb.bench.photos import draw_photo_spec, photo_series, render_photo, true_silhouette
-from viewdb.bench.twins import Twins, normalised_cloud, twin_distance
+from viewdb.bench.twins import Twins, normalised_cloud, rigid_alignment, twin_distance
 from viewdb.catalogue.mesh import NormalisedMesh, load_mesh
 
 masks = arrays(np.bool_, st.tuples(st.integers(1, 24), st.integers(1, 24)))
@@ -90,6 +90,21 @@ def test_a_moved_copy_is_a_twin_and_another_mesh_is_not(stem: str, seed: int, mi
     assert twins.distance(stem, "arrow") > 0.1
     assert not twins.are_twins("arrow", stem)
     assert twins.distance(stem, stem) == 0.0
+
+
+@pytest.mark.parametrize(("stem", "seed"), [("l_bracket", 4), ("car", 5)])
+def test_rigid_alignment_finds_the_turn_between_two_frames(stem: str, seed: int) -> None:
+    mesh = load_mesh(sample(stem))
+    turn = Rotation.random(random_state=seed).as_matrix()
+    shift = np.random.default_rng(seed).normal(0.0, 0.05, 3)
+    geometry = mesh.geometry.copy()
+    geometry.vertices = geometry.vertices @ turn.T + shift  # x -> turn · x + shift
+    turned = NormalisedMesh(f"{stem}_turned", trimesh.Scene(geometry), np.zeros(3), 1.0)
+    distance, rotation, found_shift = rigid_alignment(mesh, turned)
+    assert distance < 0.02
+    assert np.linalg.det(rotation) > 0  # a turn, never a mirror
+    points = np.asarray(mesh.geometry.vertices)
+    np.testing.assert_allclose(points @ rotation + found_shift, points @ turn.T + shift, atol=0.02)
 
 
 @settings(max_examples=20)

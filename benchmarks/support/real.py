@@ -8,12 +8,14 @@ import argparse
 import json
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from viewdb.bench.groundtruth import Frame, Instance, add_error, load_model, pose_errors, read_frames
+from viewdb.bench.twins import rigid_alignment
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 SHARED = Path(os.environ.get("VIEWDB_SHARED", ROOT.parent / "shared"))
@@ -50,69 +52,24 @@ def pose_row(inst: Instance, rotation, translation, symmetric: bool) -> dict:
             "metric": "ADD-S" if symmetric else "ADD", **pose_errors(model.symmetry, r, t, inst.R, inst.t)}
 
 
-_ALIGNMENTS: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, float]] = {}
-
-
-def twin_alignment(db, twin: str, exact: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """``(Q, c, residual)`` with ``Q · x + c`` mapping the exact mesh's normalised frame onto
-    its twin's (another copy of the same scan, :data:`viewdb.bench.groundtruth.TWINS`,
-    perhaps in other units and axes): point-to-point ICP between 2,000 points sampled on
-    each normalised surface, from the 24 turns of a cube, the best kept; the residual is
-    the mean distance left, in normalised units (bounding radius 1)."""
-    import trimesh
-    from scipy.spatial import cKDTree
-
-    key = (twin, exact)
-    if key not in _ALIGNMENTS:
-        a = np.asarray(trimesh.sample.sample_surface(db.mesh(exact).geometry, 2000, seed=0)[0])
-        b = np.asarray(trimesh.sample.sample_surface(db.mesh(twin).geometry, 2000, seed=1)[0])
-        tree = cKDTree(b)
-        best = (np.inf, np.eye(3), np.zeros(3))
-        for turn in _cube_turns():
-            q, c = turn, np.zeros(3)
-            for _ in range(40):
-                moved = a @ q.T + c
-                _, nearest = tree.query(moved)
-                q, c = _kabsch(a, b[nearest])
-            residual = float(tree.query(a @ q.T + c)[0].mean())
-            if residual < best[0]:
-                best = (residual, q, c)
-        _ALIGNMENTS[key] = (best[1], best[2], best[0])
-    return _ALIGNMENTS[key]
-
-
-def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rotation and shift that take points ``a`` nearest onto ``b`` (least squares)."""
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    q = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return q, cb - q @ ca
-
-
-def _cube_turns() -> list[np.ndarray]:
-    """The 24 rotations that map a cube onto itself."""
-    out = []
-    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1), (1, 0, 2), (0, 2, 1), (2, 1, 0)):
-        for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1), (-1, 1, 1), (1, -1, 1), (1, 1, -1),
-                      (-1, -1, -1)):
-            m = np.zeros((3, 3))
-            for row, (col, sign) in enumerate(zip(perm, signs, strict=True)):
-                m[row, col] = sign
-            if np.linalg.det(m) > 0:
-                out.append(m)
-    return out
+@cache
+def twin_alignment(db, twin: str, exact: str) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(residual, Q, c)``: ``x @ Q + c`` maps the exact mesh's normalised frame onto its
+    twin's (another copy of the same scan, :data:`viewdb.bench.groundtruth.TWINS`, perhaps
+    in other axes and units; :func:`viewdb.bench.twins.rigid_alignment`), leaving
+    ``residual`` (normalised units, bounding radius 1)."""
+    return rigid_alignment(db.mesh(exact), db.mesh(twin))
 
 
 def twin_pose(db, twin: str, exact: str, rotation, translation) -> tuple[np.ndarray, np.ndarray]:
     """A pose of ``twin`` (OpenCV frame, its mesh's units) as the same pose of ``exact``
     (its mesh's units), through their alignment (:func:`twin_alignment`)."""
-    q, c, _ = twin_alignment(db, twin, exact)
+    _, q, c = twin_alignment(db, twin, exact)
     r = np.asarray(rotation, np.float64)
     t = np.asarray(translation, np.float64).reshape(3)
     info_t, info_e = db.object(twin), db.object(exact)
     t_n = (t + r @ np.asarray(info_t.centre)) / float(info_t.scale)
-    r_e = r @ q
+    r_e = r @ q.T  # x_twin = Qᵀ x_exact + c (column vectors)
     t_en = r @ c + t_n
     return r_e, float(info_e.scale) * t_en - r_e @ np.asarray(info_e.centre)
 
@@ -136,6 +93,24 @@ def each_frame(sets: str, frames: int | None, name: str) -> Iterator[tuple[str, 
         symmetric = symmetric_names(folder)
         for frame in read_frames(folder)[:frames]:
             yield set_name, symmetric, frame
+
+
+def by_group(rows: list[dict], stats: Callable[[list[dict]], dict]) -> dict:
+    """``stats`` of each set's rows: all of them, those at least half visible, and each
+    visibility band's (``{set: {group: stats}}``)."""
+    out: dict = {}
+    for set_name in sorted({r["set"] for r in rows}):
+        mine = [r for r in rows if r["set"] == set_name]
+        half = [r for r in mine if r["visibility"] >= 0.5]
+        out[set_name] = {"all": stats(mine), "visible ≥ 50 %": stats(half)}
+        for _, _, name in BANDS:
+            out[set_name][name] = stats([r for r in mine if r["band"] == name])
+    return out
+
+
+def median(values: list[float]) -> float | None:
+    """The median, or None of nothing."""
+    return float(np.median(values)) if values else None
 
 
 def share(part: int, n: int) -> str:

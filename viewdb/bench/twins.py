@@ -34,21 +34,29 @@ from scipy.spatial import cKDTree
 from ..catalogue.mesh import NormalisedMesh
 from .config import TwinConfig
 
-__all__ = ["Twins", "shape_cloud", "twin_distance"]
+__all__ = ["Twins", "rigid_alignment", "shape_cloud", "twin_distance"]
 
 #: The 48 signed permutations of three axes (rotations and reflections of a box's frame).
 AXIS_FRAMES = np.array([np.diag(signs) @ np.eye(3)[list(order)]
                         for signs in itertools.product((1.0, -1.0), repeat=3)
                         for order in itertools.permutations(range(3))])
+#: The 24 of them that are rotations (a box's frame turned, not mirrored).
+AXIS_TURNS = AXIS_FRAMES[np.linalg.det(AXIS_FRAMES) > 0]
 
 
 def shape_cloud(mesh: NormalisedMesh, samples: int, seed: int = 0) -> NDArray[np.float64]:
     """``samples`` random points of the mesh's surface (area-weighted, seeded, in random
     order), centred, scaled to RMS radius 1 and expressed in their principal axes."""
+    return normalised_cloud(_surface(mesh, samples, seed))
+
+
+def _surface(mesh: NormalisedMesh, samples: int, seed: int) -> NDArray[np.float64]:
+    """``samples`` random points of the mesh's surface (area-weighted, seeded), in its
+    normalised frame."""
     import trimesh  # noqa: PLC0415 - heavy; only the twin test needs it here
 
     points, _ = trimesh.sample.sample_surface(mesh.geometry, samples, seed=seed)
-    return normalised_cloud(np.asarray(points, np.float64))
+    return np.asarray(points, np.float64)
 
 
 def normalised_cloud(points: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -108,13 +116,36 @@ def twin_distance(
     alignment (module doc), measured from the first ``config.probes`` points of each to all
     the points of the other: about 0 for one mesh sampled twice."""
     config = config or TwinConfig()
-    ca, cb = _Cloud(a, config.probes), _Cloud(b, config.probes)
+    return _best_alignment(_Cloud(a, config.probes), _Cloud(b, config.probes), AXIS_FRAMES, config)[0]
+
+
+def rigid_alignment(
+    a: NormalisedMesh, b: NormalisedMesh, config: TwinConfig | None = None
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """``(distance, rotation, shift)``: the rigid motion ``x @ rotation + shift`` (a turn,
+    never a mirror) that takes mesh ``a``'s surface onto ``b``'s, both in their normalised
+    frames (e.g. two copies of one scan from sources with other axes and units), and the
+    symmetric chamfer distance it leaves, in normalised units: :func:`twin_distance`'s
+    search over the 24 turns of the axes, on the surfaces as they are (not rescaled or
+    turned to their principal axes)."""
+    config = config or TwinConfig()
+    ca, cb = (_Cloud(_surface(mesh, config.samples, config.seed), config.probes) for mesh in (a, b))
+    return _best_alignment(ca, cb, AXIS_TURNS, config)
+
+
+def _best_alignment(
+    a: _Cloud, b: _Cloud, frames: NDArray[np.float64], config: TwinConfig
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """``(chamfer, rotation, shift)`` of the best alignment of ``a`` onto ``b``: each of
+    ``frames`` scored unmoved, the best ``config.icp_starts`` refined by ICP."""
     zero = np.zeros(3)
-    coarse = sorted((_chamfer(ca, cb, frame, zero), i) for i, frame in enumerate(AXIS_FRAMES))
-    best = coarse[0][0]
+    coarse = sorted((_chamfer(a, b, frame, zero), i) for i, frame in enumerate(frames))
+    best = (coarse[0][0], frames[coarse[0][1]], zero)
     for _, i in coarse[:config.icp_starts]:
-        rotation, shift = _icp(ca, cb, AXIS_FRAMES[i], config.icp_iterations)
-        best = min(best, _chamfer(ca, cb, rotation, shift))
+        rotation, shift = _icp(a, b, frames[i], config.icp_iterations)
+        distance = _chamfer(a, b, rotation, shift)
+        if distance < best[0]:
+            best = (distance, rotation, shift)
     return best
 
 
