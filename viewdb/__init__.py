@@ -69,7 +69,7 @@ _LAZY: dict[str, str] = {
     "ColourMatch": "search.colour_index",
     "Candidate": "search.plans",
     "ShiftWindow": "search.shifts",
-    "SearchHit": "storage.stored_catalogue",
+    "SearchHit": "recognition.results",
     "CheckReport": "storage.integrity",
 }
 
@@ -88,7 +88,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .recognition.local_tier import LocalServerTier
     from .recognition.options import QueryOptions
     from .recognition.regions import Box, Point, Region, parse_box, parse_point
-    from .recognition.results import ObjectResult, QueryMatch, QueryResult
+    from .recognition.results import ObjectResult, QueryMatch, QueryResult, SearchHit
     from .recognition.retrieval import Recognition
     from .recognition.server_tier import Exchange, ServerTier
     from .search.colour_index import ColourMatch
@@ -96,7 +96,6 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from .search.plans import Candidate
     from .search.shifts import ShiftWindow
     from .storage.integrity import CheckReport
-    from .storage.stored_catalogue import SearchHit
 
     __version__: str
 

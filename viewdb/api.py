@@ -44,7 +44,7 @@ from .recognition.options import QueryOptions
 from .recognition.overlay import draw_result
 from .recognition.pipeline import run_query, segment_photo
 from .recognition.regions import Box, Point, Prompts
-from .recognition.results import QueryResult
+from .recognition.results import QueryResult, SearchHit
 from .recognition.retrieval import Recognition, recognise_curve
 from .recognition.server_tier import ServerTier
 from .search.knn import SearchStats, TierArrays
@@ -54,7 +54,7 @@ from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
 from .storage.store import Store
-from .storage.stored_catalogue import SearchHit, StoredCatalogue
+from .storage.stored_catalogue import StoredCatalogue
 from .storage.tiers import TIERS
 
 __all__ = ["DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"]

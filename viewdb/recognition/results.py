@@ -1,4 +1,5 @@
-"""What a query returns: each recognised object with its view, scores and pose
+"""What a search and a query return: an object a curve's k-NN search found
+(:class:`SearchHit`), each recognised object with its view, scores and pose
 (:class:`QueryMatch`), each object of a photo of several with its matches
 (:class:`ObjectResult`), and the whole answer (:class:`QueryResult`, whose ``to_dict`` is
 the ``viewdb query --json`` shape of the public contract)."""
@@ -16,7 +17,7 @@ from ..errors import QueryError
 from ..pose.estimate import PoseEstimate
 from .regions import Region
 
-__all__ = ["ObjectResult", "QueryMatch", "QueryResult"]
+__all__ = ["ObjectResult", "QueryMatch", "QueryResult", "SearchHit"]
 
 
 @dataclass(frozen=True)
@@ -152,3 +153,20 @@ class QueryResult:
             raise QueryError("an overlay needs the meshes: query the full database file, not a client "
                              "file with a server")
         return self.drawer(self, top, config)
+
+
+@dataclass(frozen=True)
+class SearchHit:
+    """One object found by a k-NN search, with its best stored view."""
+
+    object: str
+    distance: float
+    azimuth: float
+    elevation: float
+    #: The query matches the stored view's mirror (its reversed curve).
+    mirrored: bool
+    #: The view is a perspective silhouette from this many bounding radii (None: an
+    #: orthographic view).
+    camera_distance: float | None = None
+    #: The query curve matched started at this sample (a shift search; None: as given).
+    shift: int | None = None

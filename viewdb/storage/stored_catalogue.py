@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, TypeVar
@@ -40,7 +40,7 @@ from .appearances import decode_record, decode_signature
 from .store import ObjectRow, Store
 from .tiers import TIERS, TierReader
 
-__all__ = ["SearchHit", "StoredCatalogue"]
+__all__ = ["StoredCatalogue"]
 
 #: How many decoded meshes a catalogue keeps in memory: at least the k results a query
 #: re-ranks by silhouette fit (each fitted quickly, the best two again), and as many as the
@@ -72,23 +72,6 @@ def cached(cache: OrderedDict[_K, _V], key: _K, make: Callable[[], _V], limit: i
     while len(cache) > limit:
         cache.popitem(last=False)
     return value
-
-
-@dataclass(frozen=True)
-class SearchHit:
-    """One object found by a k-NN search, with its best stored view."""
-
-    object: str
-    distance: float
-    azimuth: float
-    elevation: float
-    #: The query matches the stored view's mirror (its reversed curve).
-    mirrored: bool
-    #: The view is a perspective silhouette from this many bounding radii (None: an
-    #: orthographic view).
-    camera_distance: float | None = None
-    #: The query curve matched started at this sample (a shift search; None: as given).
-    shift: int | None = None
 
 
 class StoredCatalogue:
