@@ -125,7 +125,7 @@ def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_p
     for plan in ("server", "cs1"):
         status, answer = post_photo(server.url, demo_photo, plan=plan, k="2")
         assert status == 200, answer
-        local = db.query(str(demo_photo), k=2, plan=plan, pose_top=None).to_dict()  # the page poses all k
+        local = db.query(str(demo_photo), k=2, plan=plan).to_dict()  # the library's defaults pose the top
         shown = [{k: v for k, v in r.items() if k not in ("overlay", "thumbnail", "colour")}
                  for r in answer["results"]]
         assert shown == local["results"], plan
@@ -144,9 +144,15 @@ def test_query_answers_what_the_library_answers_plus_pictures(server, db, demo_p
                      photo.shape[1::-1], interpolation=cv2.INTER_NEAREST) > 0
     drawn = layer[:, :, 3] > 0
     assert (drawn & mug).sum() > 0.9 * mug.sum()  # the overlay covers the mug
-    # the other results' overlays are drawn on request, as the library draws them
-    second = answer["results"][1]
+    # another result is posed when asked for (pose_top reaching it, as in the library), and
+    # its overlay drawn on request, as the library draws it
+    assert answer["results"][1]["pose"] is None and "pose_error" not in answer["results"][1]
+    status, again = post_photo(server.url, demo_photo, k="2", pose_top="2")
+    assert status == 200, again
+    second = again["results"][1]
+    assert second["pose"] == db.query(str(demo_photo), k=2, pose_top=2).to_dict()["results"][1]["pose"]
     assert second["overlay"] is None and second["pose"] is not None
+    assert again["results"][0]["pose"] == top["pose"]  # posing another leaves the best one as it was
     size = {"width": answer["photo"]["source_width"], "height": answer["photo"]["source_height"]}
     status, png = request(server.url, "POST", "/overlay", {"result": second, **size}, token=TOKEN)
     assert status == 200
@@ -351,9 +357,14 @@ def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo
         assert "round trip" in browser.find_element(By.ID, "timing").text
         # no prompt: one ranking, no object sections, no region outlines
         assert not browser.find_elements(By.CSS_SELECTOR, ".found.several, #marks rect")
-        # choosing another result shows its overlay, drawn on request
+        # as the library, the query posed its best result only; choosing another poses it and
+        # shows its overlay, drawn on request
+        assert len(browser.find_elements(By.CSS_SELECTOR, ".ranking li")) == 5  # the library's k
         second = browser.find_elements(By.CSS_SELECTOR, ".ranking li")[1]
+        assert "not posed yet" in second.text
         second.click()
+        wait(browser, lambda d: "pose: azimuth" in d.find_elements(By.CSS_SELECTOR, ".ranking li")[1].text)
+        second = browser.find_elements(By.CSS_SELECTOR, ".ranking li")[1]
         assert second.get_attribute("aria-selected") == "true"
         wait(browser, lambda d: js(d, "const i = document.querySelector('#layers img');"
                                       "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))

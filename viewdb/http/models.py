@@ -243,9 +243,9 @@ class WebQueryFormModel(BaseModel):
     photo: bytes = Field(description="the photo (any format the query accepts: JPEG, PNG, WebP, ...)",
                          json_schema_extra={"format": "binary"})
     plan: str = Field(default="server", description="server, cs1, cs2 or fast")
-    k: int = Field(default=3, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
-    pose_top: int | None = Field(default=None, ge=0, description="how many of the best results to pose "
-                                                                 "(default all k: the page shows each pose)")
+    k: int = Field(default=5, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
+    pose_top: int | None = Field(default=1, ge=0, description="how many of the best results to pose, as "
+                                                              "in the library (the page asks again for another)")
     box: list[str] = Field(default=[], description="an object's box `x1,y1,x2,y2` in the photo's pixels; "
                                                      "repeat the field for several objects")
     point: list[str] = Field(default=[], description="a pixel `x,y` on an object; repeatable")

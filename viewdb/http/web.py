@@ -1,6 +1,7 @@
 """The web page of ``viewdb serve`` and the endpoints behind it.
 
-``POST /query``  a photo (multipart field ``photo``) and options (``plan``, ``k``; for
+``POST /query``  a photo (multipart field ``photo``) and options (``plan``, ``k``,
+                 ``pose_top``, each defaulting as in the library; for
                  several objects ``box`` and ``point``, each repeatable, or ``all`` and
                  ``max_objects``, as ``viewdb query``'s options): the
                  whole query runs on the server (:meth:`viewdb.ViewDB.query` on the full
@@ -54,6 +55,7 @@ from ..config import OverlayConfig, SegmentationConfig, WebConfig
 from ..errors import ImageError, QueryError, ViewDBError
 from ..recognition.image import DEFAULTS as IMAGE_LIMITS
 from ..recognition.image import load_image
+from ..recognition.options import QueryOptions
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.regions import Prompts
 from ..recognition.verify import physical_view
@@ -63,6 +65,8 @@ from . import models
 __all__ = ["STATIC", "add_page", "web_router"]
 
 T = TypeVar("T")
+#: The library's query defaults, which are the page's.
+QUERY_DEFAULTS = QueryOptions()
 Runner = Callable[[Callable[[ViewDB], T]], Awaitable[tuple[T, float]]]
 
 #: The page's files (package data).
@@ -188,11 +192,12 @@ def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], confi
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
-                 max_pixels: int = IMAGE_LIMITS.max_pixels, pose_top: int | None = None,
+                 max_pixels: int = IMAGE_LIMITS.max_pixels, pose_top: int | None = QUERY_DEFAULTS.pose_top,
                  prompts: dict[str, Any] | None = None) -> dict[str, Any]:
     """What ``POST /query`` answers (see the module doc); runs on the worker's thread.
     A photo of more than ``max_pixels`` pixels is refused from its header; the best
-    ``pose_top`` results are posed (None: all k, since the page shows each one's pose).
+    ``pose_top`` results are posed, as the library poses them (the page asks again, with a
+    larger ``pose_top``, for a result that was not posed).
     ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
     rgb, alpha = _decode(data, name, max_pixels)
     image = rgb if alpha is None else np.dstack([rgb, alpha])
@@ -305,8 +310,8 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             plan = str(form.get("plan") or "server")
             if plan not in PLANS:
                 raise HTTPException(422, f"plan must be server, cs1, cs2 or fast, got {plan[:40]!r}")
-            k = _int_field(form, "k", 3, 1, config.max_k)
-            pose_top = _int_field(form, "pose_top", k, 0, config.max_k)
+            k = _int_field(form, "k", min(QUERY_DEFAULTS.k, config.max_k), 1, config.max_k)
+            pose_top = _int_field(form, "pose_top", QUERY_DEFAULTS.pose_top or k, 0, config.max_k)
             prompts = _prompt_fields(form)
             name = _upload_name(upload)
             data = await upload.read()

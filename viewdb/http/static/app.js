@@ -16,6 +16,7 @@ const state = {
   drag: null, // the box being drawn
   answer: null,
   groups: [], // the answer's objects (one without prompts), each with its ranking and overlay
+  asked: null, // what the answer was asked with: {file, fields}, to ask again for another pose
 };
 
 const $ = (id) => document.getElementById(id);
@@ -349,15 +350,10 @@ async function recognise() {
     say("Choose or take a photo first.", true);
     return;
   }
-  const form = new FormData();
-  form.append("photo", file, file.name || "photo.jpg");
-  form.append("plan", $("plan").value);
-  form.append("k", $("k").value || "3");
   const { boxes, points } = state.prompts;
-  for (const box of boxes) form.append("box", box.join(","));
-  for (const point of points) form.append("point", point.join(","));
   const every = $("every").checked;
-  if (every) form.append("all", "true");
+  const fields = { plan: $("plan").value, k: $("k").value, boxes: [...boxes], points: [...points], every };
+  const form = queryForm(file, fields);
   if (!state.photo || state.photo.file !== file) choosePhoto(file);
   const photo = state.photo;
   const sent = { prompts: boxes.length + points.length, width: photo ? photo.width : 0, height: photo ? photo.height : 0 };
@@ -371,6 +367,7 @@ async function recognise() {
     const answer = await response.json();
     if (state.photo !== photo) return; // another photo was chosen meanwhile
     say("");
+    state.asked = { file, fields };
     showAnswer(answer, performance.now() - started, sent);
   } catch (error) {
     if (error instanceof NeedsToken) {
@@ -387,6 +384,19 @@ async function recognise() {
   } finally {
     $("go").disabled = false;
   }
+}
+
+// the form of POST /query; pose_top as the library's default unless given
+function queryForm(file, fields, poseTop = null) {
+  const form = new FormData();
+  form.append("photo", file, file.name || "photo.jpg");
+  form.append("plan", fields.plan);
+  if (fields.k) form.append("k", fields.k);
+  if (poseTop != null) form.append("pose_top", String(poseTop));
+  for (const box of fields.boxes) form.append("box", box.join(","));
+  for (const point of fields.points) form.append("point", point.join(","));
+  if (fields.every) form.append("all", "true");
+  return form;
 }
 
 function number(value, digits = 3) {
@@ -453,6 +463,39 @@ function showAnswer(answer, roundTripMs, sent) {
   if (several) caption(`${plural(state.groups.length, "object", "objects")}, each with its best result in its pose`);
 }
 
+// the query poses its best result, as the library does; another is posed when it is
+// chosen, by asking again with pose_top reaching it (posing does not reorder the ranking)
+function poseOnRequest(group, index, announce) {
+  const answer = state.answer;
+  const result = group.results[index];
+  const tell = (text) => { if (announce) caption(text); };
+  group.layer.hidden = true;
+  tell(`Posing ${result.rank}. ${result.object}…`);
+  if (result.posing) return;
+  result.posing = true;
+  const { file, fields } = state.asked;
+  api("query", { method: "POST", body: queryForm(file, fields, result.rank) })
+    .then((response) => response.json())
+    .then((again) => {
+      const entries = group.region ? ((again.objects || [])[group.index] || {}).results : again.results;
+      const posed = (entries || [])[index];
+      const same = posed && posed.object === result.object && posed.view.azimuth === result.view.azimuth
+        && posed.view.elevation === result.view.elevation;
+      result.pose = same ? posed.pose : null;
+      result.pose_error = !same ? "asked again, the query answered otherwise"
+        : posed.pose ? null : posed.pose_error || "the query did not pose it";
+      result.overlay = same ? posed.overlay : null;
+      const item = resultItem(group, result, index);
+      item.setAttribute("aria-selected", String(group.selected === result));
+      group.list.children[index].replaceWith(item);
+      if (state.answer === answer && group.selected === result) select(group, index, announce);
+    })
+    .catch((error) => {
+      if (!(error instanceof NeedsToken)) tell(`${result.object} could not be posed: ${error.message}`);
+    })
+    .finally(() => { result.posing = false; });
+}
+
 function regionText(group) {
   const prompt = group.region.prompt;
   const from = !prompt ? "found on its own"
@@ -482,7 +525,7 @@ function resultItem(group, result, i) {
     `matched view ${degrees(view.azimuth)}, ${degrees(view.elevation)}${view.mirrored ? " (mirrored)" : ""}`,
     pose ? `pose: azimuth ${degrees(pose.azimuth)}, elevation ${degrees(pose.elevation)}, ` +
            `turn ${degrees(pose.inplane)} (${pose.method}${pose.method === "sift" ? `, ${pose.inliers} inliers` : ""})`
-         : `no pose${result.pose_error ? `: ${result.pose_error}` : ""}`,
+         : result.pose_error ? `no pose: ${result.pose_error}` : "not posed yet: choose it to pose it",
   ];
   return el("li", { "aria-selected": "false", tabindex: "0", "data-object": result.object,
                     onclick: () => select(group, i), onkeydown: (e) => { if (e.key === "Enter") select(group, i); } },
@@ -502,6 +545,10 @@ function select(group, index, announce = true) {
   const who = `${group.region ? `Object ${group.index + 1}: ` : ""}${result.rank}. ${result.object}`;
   const tell = (text) => { if (announce) caption(text); };
   group.selected = result;
+  if (!result.pose && !result.pose_error && state.asked) {
+    poseOnRequest(group, index, announce);
+    return;
+  }
   if (!result.pose) {
     layer.hidden = true;
     layer.removeAttribute("src");
