@@ -10,7 +10,9 @@ Recognition aside: every annotated object of the real photo sets (``../shared/re
 
 * from the **cut-out** a box query makes of it (each photo queried once with all its
   visible-part boxes, default options: the mask the answer reports), and
-* from its **true visible silhouette** (rendered from the ground truth, occluders removed).
+* from its **true visible silhouette** (rendered from the ground truth, occluders removed);
+* and, for a photo with a depth image (the YCB-Video frames), from the cut-out again with
+  the depth image (``depth=``), which sets the pose's distance.
 
 Per set and visibility band it reports ADD(-S) within 0.1 × diameter, the median
 symmetry-aware rotation error and the median cut IoU. The gap between the two rows is what
@@ -40,14 +42,17 @@ from support.real import (
 from viewdb.bench.groundtruth import Frame, mask_iou, visible_masks
 
 
-def _posed(db: viewdb.ViewDB, frame: Frame, inst, mask: np.ndarray, symmetric: bool) -> dict:
-    """The known object posed from ``mask`` (no recognition), with its errors."""
+def _posed(db: viewdb.ViewDB, frame: Frame, inst, mask: np.ndarray, symmetric: bool,
+           depth: bool = False) -> dict:
+    """The known object posed from ``mask`` (no recognition), with its errors; ``depth``:
+    with the frame's depth image."""
     if not mask.any():
         return {"posed": False, "why": "empty mask"}
     start = time.perf_counter()
+    with_depth = {"depth": frame.depth, "depth_scale": frame.depth_scale} if depth else {}
     try:
         est = db.estimate_pose(frame.photo, inst.mesh.stem, frame.intrinsics,
-                               mask=mask.astype(np.uint8) * 255)
+                               mask=mask.astype(np.uint8) * 255, **with_depth)
     except viewdb.ViewDBError as exc:
         return {"posed": False, "why": str(exc)}
     seconds = time.perf_counter() - start
@@ -74,6 +79,8 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
                      "band": band_of(vis), "cut_iou": mask_iou(cut, visible) if cut is not None else 0.0,
                      "from_cut": _posed(db, frame, inst, cut, sym) if cut is not None else {"posed": False},
                      "from_truth": _posed(db, frame, inst, visible, sym)})
+        if frame.depth is not None and cut is not None:
+            rows[-1]["from_cut_depth"] = _posed(db, frame, inst, cut, sym, depth=True)
     return rows
 
 
@@ -83,10 +90,13 @@ def summarise(rows: list[dict]) -> dict:
         if not group:
             return out
         out["median_cut_iou"] = median([r["cut_iou"] for r in group])
-        for key in ("from_cut", "from_truth"):
+        for key in ("from_cut", "from_cut_depth", "from_truth"):
+            if not all(key in r for r in group):
+                continue
             posed = [r[key] for r in group if r[key].get("posed")]
             out[key] = {"add": sum(bool(p["add_ok"]) for p in posed),
                         "median_rotation_deg": median([p["rotation_deg"] for p in posed]),
+                        "median_translation_mm": median([p["translation_mm"] for p in posed]),
                         "median_seconds": median([p["seconds"] for p in posed])}
         return out
 
@@ -95,22 +105,29 @@ def summarise(rows: list[dict]) -> dict:
 
 def markdown(summary: dict, catalogue: str) -> str:
     lines = [f"Catalogue: `{catalogue}`; each object posed as the object it is, default options.", "",
-             "| set | objects | n | median cut IoU | ADD(-S) from the cut | from the true silhouette "
-             "| median rot. err (°): cut / true | s per pose (median) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| set | objects | n | median cut IoU | ADD(-S) from the cut | from the cut + depth "
+             "| from the true silhouette | median rot. err (°): cut / true "
+             "| median transl. err (mm): cut / cut + depth / true | s per pose (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
 
     def deg(x: float | None) -> str:
         return "–" if x is None else f"{x:.1f}"
+
+    def mm(entry: dict | None) -> str:
+        return "–" if entry is None else deg(entry["median_translation_mm"])
 
     for set_name, groups in summary.items():
         for group, s in groups.items():
             if not s["n"]:
                 continue
-            cut, truth = s["from_cut"], s["from_truth"]
+            cut, depth, truth = s["from_cut"], s.get("from_cut_depth"), s["from_truth"]
             seconds = truth["median_seconds"]
             lines.append(f"| {set_name} | {group} | {s['n']} | {s['median_cut_iou']:.2f} | "
-                         f"{share(cut['add'], s['n'])} | {share(truth['add'], s['n'])} | "
+                         f"{share(cut['add'], s['n'])} | "
+                         f"{'–' if depth is None else share(depth['add'], s['n'])} | "
+                         f"{share(truth['add'], s['n'])} | "
                          f"{deg(cut['median_rotation_deg'])} / {deg(truth['median_rotation_deg'])} | "
+                         f"{mm(cut)} / {mm(depth)} / {mm(truth)} | "
                          f"{'–' if seconds is None else f'{seconds:.2f}'} |")
     return "\n".join(lines) + "\n"
 

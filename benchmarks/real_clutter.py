@@ -8,7 +8,9 @@ The photo sets with official 6-D ground truth in ``../shared/real`` (``$VIEWDB_S
 fractions and visible-part boxes) and ``ycb_video_2frames`` (two YCB-Video frames, boxes
 from their ``*-box.txt``). Each photo is queried **once, with default options**, with the
 boxes of all its annotated objects as prompts and the photo's intrinsics, as an
-application with a detector would: ``db.query(photo, boxes=..., intrinsics=K)``.
+application with a detector would: ``db.query(photo, boxes=..., intrinsics=K)``. A photo
+with a depth image (the YCB-Video frames) is queried a second time with it (``depth=``),
+its rows in the set ``NAME + depth``.
 
 Per object:
 
@@ -85,8 +87,8 @@ def _cause(row: dict) -> str | None:
 
 def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str],
               overlays: Path | None, **options) -> list[dict]:
-    """Query one photo with all its boxes (``options``: other query options than the
-    defaults, for studies); a row per annotated object."""
+    """Query one photo with all its boxes (``options``: its depth image, or other query
+    options than the defaults, for studies); a row per annotated object."""
     masks = visible_masks(frame)
     # a box under 4 pixels wide or high (a sliver at the photo's edge) is degenerate: it
     # is refused alone, and the others are queried
@@ -102,7 +104,8 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
     wall = time.perf_counter() - start
     if result is not None and overlays is not None:
         overlays.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(overlays / f"{set_name}_{frame.name}.png"), result.overlay()[:, :, ::-1])
+        picture = overlays / f"{set_name.replace(' + ', '_')}_{frame.name}.png"
+        cv2.imwrite(str(picture), result.overlay()[:, :, ::-1])
     rows = []
     for i, (inst, (whole, visible)) in enumerate(zip(frame.instances, masks, strict=True)):
         exact = inst.mesh.stem
@@ -138,13 +141,14 @@ def summarise(rows: list[dict]) -> dict:
         top5 = sum(r["rank_same"] is not None and r["rank_same"] <= 5 for r in group)
         add = sum(bool(r["pose"].get("add_ok")) for r in group)
         rot = [r["pose"]["rotation_deg"] for r in group if r["pose"].get("posed")]
+        shift = [r["pose"]["translation_mm"] for r in group if r["pose"].get("posed")]
         causes: dict[str, int] = {}
         for r in group:
             if r["cause"]:
                 causes[r["cause"]] = causes.get(r["cause"], 0) + 1
         refused = sum(r["error"] is not None for r in group)
         return {"n": n, "first": first, "top5": top5, "add": add, "refused": refused,
-                "median_rotation_deg": median(rot),
+                "median_rotation_deg": median(rot), "median_translation_mm": median(shift),
                 "median_cut_iou": float(np.median([r["cut_iou"] for r in group])),
                 "median_seconds": float(np.median([r["seconds"] for r in group])), "causes": causes}
 
@@ -155,17 +159,18 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
     lines = [f"Catalogue: `{catalogue}`, {objects} objects; every photo queried once with the boxes of its "
              "annotated objects and its intrinsics, default options.", "",
              "| set | objects | n | right object first | in the top 5 | ADD(-S) < 0.1 d "
-             "| median rot. err (°) | median cut IoU | s per object (median) "
+             "| median rot. err (°) | median transl. err (mm) | median cut IoU | s per object (median) "
              "| misses: cut / search / re-ranking / pose |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for set_name, groups in summary.items():
         for group, s in groups.items():
             if not s["n"]:
                 continue
             c = s["causes"]
             rot = "–" if s["median_rotation_deg"] is None else f"{s['median_rotation_deg']:.1f}"
+            shift = "–" if s["median_translation_mm"] is None else f"{s['median_translation_mm']:.1f}"
             lines.append(f"| {set_name} | {group} | {s['n']} | {share(s['first'], s['n'])} | "
-                         f"{share(s['top5'], s['n'])} | {share(s['add'], s['n'])} | {rot} | "
+                         f"{share(s['top5'], s['n'])} | {share(s['add'], s['n'])} | {rot} | {shift} | "
                          f"{s['median_cut_iou']:.2f} | {s['median_seconds']:.2f} | "
                          f"{' / '.join(str(c.get(k, 0)) for k in ('cut', 'search', 're-ranking', 'pose'))} |")
     return "\n".join(lines) + "\n"
@@ -181,10 +186,15 @@ def main() -> None:
     with viewdb.open(args.db, create=False, read_only=True) as db:
         objects = len(db.objects())
         for set_name, symmetric, frame in each_frame(args.sets, args.frames, "real_clutter"):
-            new = run_frame(db, set_name, frame, symmetric, args.overlays)
-            rows += new
-            done = ", ".join(f"{r['object']} {r['rank_same'] or '-'}" for r in new)
-            print(f"{set_name} {frame.name}: {done} ({new[0]['seconds']:.2f} s per object)", flush=True)
+            inputs = [(set_name, {})]
+            if frame.depth is not None:  # the same photo again, with its depth image
+                depth = {"depth": frame.depth, "depth_scale": frame.depth_scale}
+                inputs.append((f"{set_name} + depth", depth))
+            for name, given in inputs:
+                new = run_frame(db, name, frame, symmetric, args.overlays, **given)
+                rows += new
+                done = ", ".join(f"{r['object']} {r['rank_same'] or '-'}" for r in new)
+                print(f"{name} {frame.name}: {done} ({new[0]['seconds']:.2f} s per object)", flush=True)
     summary = summarise(rows)
     write_results(args.out, "real_clutter", summary, rows, markdown(summary, str(args.db), objects))
 

@@ -454,6 +454,12 @@ def query(
                                   dir_okay=False)
     ] = None,
     label: Annotated[int | None, typer.Option(help="The object's label in --label-map.", min=1)] = None,
+    depth: Annotated[Path | None, typer.Option(
+        help="With --intrinsics: the photo's depth image, aligned pixel for pixel (16-bit PNG or "
+             "TIFF, float TIFF, .npy); it sets each pose's distance.", dir_okay=False)] = None,
+    depth_scale: Annotated[float, typer.Option(
+        help="One depth unit in the meshes' units (0.001: millimetres against meshes in metres).",
+        callback=_number(1e-12, 1e12))] = viewdb_config.DEFAULT_DEPTH_SCALE,
     rerank: Annotated[bool, typer.Option(
         "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
                          "silhouette fit.")] = False,
@@ -495,15 +501,11 @@ def query(
     server for the rest (and the pose). --box, --point (each repeatable) and --all
     recognise several objects of one photo; the JSON then lists them in "objects".
     """
-    if plan not in ("server", "cs1", "cs2", "fast"):
-        raise typer.BadParameter("must be server, cs1, cs2 or fast", param_hint="--plan")
-    if fast_shortlist is not None and plan != "fast":
-        raise typer.BadParameter("goes with --plan fast", param_hint="--fast-shortlist")
-    if (label_map is None) != (label is None):
-        raise typer.BadParameter("--label-map and --label go together", param_hint="--label")
-    if label_map is not None and mask is not None:
-        raise typer.BadParameter("give --mask or --label-map, not both", param_hint="--mask")
+    _check_query_options(plan, fast_shortlist, mask, label_map, label)
     cam = _intrinsics(intrinsics)
+    if depth is not None and cam is None:
+        raise typer.BadParameter("needs --intrinsics: it sets a perspective pose's distance",
+                                 param_hint="--depth")
     if upright and roll is not None:
         raise typer.BadParameter("give --roll DEG or --upright, not both", param_hint="--upright")
     roll = 0.0 if upright else roll
@@ -517,6 +519,8 @@ def query(
                                          param_hint="--server")
             if rerank:
                 raise typer.BadParameter("--rerank needs the meshes: use --db", param_hint="--rerank")
+            if depth is not None:
+                raise typer.BadParameter("--depth needs the meshes: use --db", param_hint="--depth")
             with _open_read(client) as side, \
                     viewdb.RemoteServer(server, token=token, config=_client_limits(timeout)) as remote:
                 result = side.query(image, k=k, plan=plan, server=remote, mask=mask, band=band,
@@ -532,9 +536,10 @@ def query(
                 try:
                     result = vdb.query(image, k=k, plan=plan, client=side, mask=mask, band=band,
                                        rotations=rotations, pose=not no_pose, intrinsics=cam,
-                                       label_map=label_map, label=label, rerank=rerank,
-                                       colour=not no_colour, verify=not no_verify, pose_top=pose_top,
-                                       roll=roll, fast_shortlist=fast_shortlist, **prompts)
+                                       label_map=label_map, label=label, depth=depth,
+                                       depth_scale=depth_scale, rerank=rerank, colour=not no_colour,
+                                       verify=not no_verify, pose_top=pose_top, roll=roll,
+                                       fast_shortlist=fast_shortlist, **prompts)
                     if overlay is not None:
                         _write_png(overlay, result.overlay())
                 finally:
@@ -544,6 +549,19 @@ def query(
         _echo_json(result.to_dict())
         return
     _print_result(result)
+
+
+def _check_query_options(plan: str, fast_shortlist: int | None, mask: Path | None, label_map: Path | None,
+                         label: int | None) -> None:
+    """Usage errors of ``viewdb query``'s plan and segmentation options."""
+    if plan not in ("server", "cs1", "cs2", "fast"):
+        raise typer.BadParameter("must be server, cs1, cs2 or fast", param_hint="--plan")
+    if fast_shortlist is not None and plan != "fast":
+        raise typer.BadParameter("goes with --plan fast", param_hint="--fast-shortlist")
+    if (label_map is None) != (label is None):
+        raise typer.BadParameter("--label-map and --label go together", param_hint="--label")
+    if label_map is not None and mask is not None:
+        raise typer.BadParameter("give --mask or --label-map, not both", param_hint="--mask")
 
 
 @contextmanager

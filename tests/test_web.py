@@ -247,6 +247,51 @@ def test_objects_and_their_stored_views(server, db):
     assert status == 200
 
 
+def _with_depth(url: str, photo: Path, depth: bytes, **fields: str) -> tuple[int, object]:
+    body, headers = multipart(fields, {"photo": (photo.name, photo.read_bytes(), "image/png"),
+                                       "depth": ("depth.png", depth, "image/png")})
+    return request(url, "POST", "/query", body, headers=headers, token=TOKEN)
+
+
+def test_a_depth_image_and_intrinsics_go_with_the_photo(server, db, demo_photo):
+    """The form's ``intrinsics``, ``depth`` and ``depth_scale`` reach the query as the
+    library's keywords do: the answer is the library's."""
+    height, width = cv2.imread(str(demo_photo)).shape[:2]
+    depth = np.full((height, width), 3000, np.uint16)  # a flat wall 3 m away, in millimetres
+    depth_png = cv2.imencode(".png", depth)[1].tobytes()
+    camera = (500.0, 500.0, width / 2, height / 2)
+    status, answer = _with_depth(server.url, demo_photo, depth_png, k="2",
+                                 intrinsics=",".join(str(v) for v in camera), depth_scale="0.001")
+    assert status == 200, answer
+    local = db.query(str(demo_photo), k=2, intrinsics=camera, depth=depth, depth_scale=0.001).to_dict()
+    shown = [{k: v for k, v in r.items() if k not in ("overlay", "thumbnail", "colour")}
+             for r in answer["results"]]
+    assert shown == local["results"]
+    top = local["results"][0]
+    assert top["pose"]["depth_pixels"] > 0 and answer["intrinsics"] == list(camera)
+    assert answer["results"][0]["overlay"] is not None
+    # a pinhole pose is drawn on request through the intrinsics the answer carries
+    size = {"width": width, "height": height}
+    status, png = request(server.url, "POST", "/overlay", {"result": top, **size, "intrinsics": list(camera)},
+                          token=TOKEN)
+    assert status == 200 and png.startswith(b"\x89PNG")
+    status, reply = request(server.url, "POST", "/overlay", {"result": top, **size}, token=TOKEN)
+    assert status == 422 and "intrinsics" in reply["error"], reply
+    # the form's bad camera fields: one line each, and nothing read from the server's disk
+    cases = [(dict(k="2"), "depth needs intrinsics"),
+             (dict(intrinsics="/etc/passwd"), "intrinsics must be fx,fy,cx,cy"),
+             (dict(intrinsics="1,2,3"), "intrinsics must be four numbers"),
+             (dict(intrinsics="500,500,80,60", depth_scale="-1"), "depth_scale must be a positive number")]
+    for fields, want in cases:
+        status, reply = _with_depth(server.url, demo_photo, depth_png, **fields)
+        assert status == 422 and want in reply["error"] and "\n" not in reply["error"], (fields, reply)
+    status, reply = _with_depth(server.url, demo_photo, b"not a depth image", intrinsics="500,500,80,60")
+    assert status == 422 and "depth.png: cannot decode the depth image" in reply["error"], reply
+    small = cv2.imencode(".png", np.full((20, 30), 3000, np.uint16))[1].tobytes()
+    status, reply = _with_depth(server.url, demo_photo, small, intrinsics="500,500,80,60")
+    assert status == 422 and "the depth image is 30x20 pixels" in reply["error"], reply
+
+
 def test_bad_input_gets_a_one_line_error_and_the_server_stays_up(server, demo_photo, bad_files):
     cases = [
         (post_photo(server.url, bad_files["notes"]), 422, "notes.txt: not an image file"),
@@ -371,6 +416,42 @@ def test_upload_the_demo_photo_and_see_the_mug_posed(browser, server, demo_photo
         browser.set_window_size(390, 844)
         wait(browser, lambda d: js(d, "return window.innerWidth") <= 400)
         no_horizontal_scroll(browser)
+
+
+def test_a_depth_image_chosen_on_the_page_sets_the_pose(browser, server, demo_photo, tmp_path):
+    """The camera's intrinsics typed in and a depth image chosen beside the photo: the
+    top result's pose comes in the camera's frame, at the depth's distance, and is drawn;
+    a depth image of another size is a readable message."""
+    from selenium.webdriver.common.by import By
+
+    height, width = cv2.imread(str(demo_photo)).shape[:2]
+    depth = tmp_path / "depth.png"
+    cv2.imwrite(str(depth), np.full((height, width), 3000, np.uint16))
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.full((20, 30), 3000, np.uint16))
+    with screenshot_on_failure(browser, "depth"):
+        browser.set_window_size(1200, 900)
+        open_page(browser, server.url)
+        browser.find_element(By.CSS_SELECTOR, "#camera summary").click()
+        browser.find_element(By.ID, "intrinsics").send_keys(f"500,500,{width / 2},{height / 2}")
+        browser.find_element(By.ID, "depth").send_keys(str(depth))
+        upload(browser, demo_photo)
+        wait(browser, lambda d: d.find_elements(By.CSS_SELECTOR, ".ranking li"))
+        first = browser.find_element(By.CSS_SELECTOR, ".ranking li")
+        assert "1. mug" in first.text and "pose: azimuth" in first.text, first.text
+        wait(browser, lambda d: js(d, "return document.querySelector('#layers img').naturalWidth") > 0)
+        answer = js(browser, "return state.answer")
+        assert answer["intrinsics"] == [500.0, 500.0, width / 2, height / 2]
+        assert answer["results"][0]["pose"]["depth_pixels"] > 0
+        # a pinhole pose is drawn on request (POST /overlay) through the answer's intrinsics
+        js(browser, "const g = state.groups[0]; g.results[0].overlay = null; select(g, 0);")
+        wait(browser, lambda d: js(d, "const i = document.querySelector('#layers img');"
+                                      "return !i.hidden && i.src.startsWith('blob:') && i.naturalWidth > 0"))
+        browser.find_element(By.ID, "depth").clear()
+        browser.find_element(By.ID, "depth").send_keys(str(small))
+        upload(browser, demo_photo)
+        text = message(browser)
+        assert "the depth image is 30x20 pixels" in text, text
 
 
 def test_bad_photos_show_a_message_and_the_server_stays_up(browser, server, bad_files):

@@ -26,6 +26,7 @@ from .catalogue.render import RenderedView, get_renderer
 from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
 from .config import (
+    DEFAULT_DEPTH_SCALE,
     BuildConfig,
     ClientFileConfig,
     OverlayConfig,
@@ -39,6 +40,8 @@ from .pose.estimate import PoseEstimate
 from .pose.intrinsics import Intrinsics, parse_intrinsics
 from .pose.matched import pose_known
 from .recognition.client_tier import ClientTier, nearest_objects
+from .recognition.depth_image import load_depth
+from .recognition.image import LoadedImage, load_image
 from .recognition.local_tier import LocalServerTier
 from .recognition.options import QueryOptions
 from .recognition.overlay import draw_result
@@ -229,7 +232,7 @@ class ViewDB:
     # ------------------------------------------------------------------ queries
     def query(
         self,
-        image: str | Path | NDArray[Any],
+        image: str | Path | NDArray[Any] | LoadedImage,
         *,
         k: int = 5,
         plan: str = "server",
@@ -242,6 +245,8 @@ class ViewDB:
         intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
         label_map: NDArray[Any] | str | Path | None = None,
         label: int | None = None,
+        depth: NDArray[Any] | str | Path | None = None,
+        depth_scale: float = DEFAULT_DEPTH_SCALE,
         rerank: bool = False,
         colour: bool = True,
         verify: bool = True,
@@ -270,7 +275,11 @@ class ViewDB:
         are posed by SIFT or by outline. ``intrinsics`` (``(fx, fy, cx, cy)``, a 3×3 matrix,
         or a JSON/YAML file) give a perspective pose in that camera's OpenCV frame, in the
         mesh file's own frame and units; with them ``rerank`` re-ranks the k results by the
-        IoU of their perspective silhouette fit. ``shifts`` searches these circular shifts of
+        IoU of their perspective silhouette fit. ``depth`` (with ``intrinsics``): the photo's
+        depth image, aligned pixel for pixel, a file or an array, one unit of it
+        ``depth_scale`` of the meshes' units (default 0.001: millimetres against meshes in
+        metres); it sets each perspective pose's distance
+        (:mod:`viewdb.pose.depth_distance`). ``shifts`` searches these circular shifts of
         the upright curve in one search instead of ``rotations`` turned silhouettes
         (:class:`~viewdb.search.shifts.ShiftWindow`); ``roll`` (a gravity hint, degrees) only
         those near that in-plane turn. ``options`` gives all of these as one
@@ -296,22 +305,37 @@ class ViewDB:
         options = _query_options(options, keywords)
         prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
+        if depth is not None:
+            image = self._with_depth(image, depth, depth_scale, options, server)
         result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
                            mask=mask, label_map=label_map, label=label, prompts=prompts)
         if server is not None or self.role != "full":
             return result
         return replace(result, drawer=partial(self._draw, intrinsics=options.camera))
 
+    def _with_depth(self, image: str | Path | NDArray[Any] | LoadedImage, depth: NDArray[Any] | str | Path,
+                    scale: float, options: QueryOptions, server: ServerTier | None) -> LoadedImage:
+        """The photo loaded with its depth image (:meth:`query`'s ``depth``)."""
+        if options.camera is None:
+            raise QueryError("`depth` needs the camera's `intrinsics`: it sets a perspective pose's distance")
+        if server is not None or self.role != "full":
+            raise QueryError("`depth` is used where the meshes are: query the full file (over HTTP, its "
+                             "server's POST /query), not a client file")
+        loaded = image if isinstance(image, LoadedImage) else load_image(image)
+        return replace(loaded, depth=load_depth(depth, (loaded.height, loaded.width), scale))
+
     def _draw(self, result: QueryResult, top: int, config: OverlayConfig | None, *,
               intrinsics: Intrinsics | None) -> NDArray[np.uint8]:
         """A result of a query on this file drawn over its photo (:meth:`QueryResult.overlay`)."""
         assert result.photo is not None
+        return draw_result(result.photo, result, self._catalogue.mesh, self.placement, intrinsics, top,
+                           config)
 
-        def placement(name: str) -> tuple[NDArray[np.float64], float]:
-            info = self._catalogue.object(name)
-            return np.asarray(info.centre, dtype=np.float64), float(info.scale)
-
-        return draw_result(result.photo, result, self._catalogue.mesh, placement, intrinsics, top, config)
+    def placement(self, name: str) -> tuple[NDArray[np.float64], float]:
+        """``(centre, scale)`` of the object ``name``: its mesh file's units are
+        ``centre + scale · normalised`` (a pose in mesh units drawn from the normalised mesh)."""
+        info = self._catalogue.object(name)
+        return np.asarray(info.centre, dtype=np.float64), float(info.scale)
 
     def recognise(
         self, curve: NDArray[np.floating], k: int = 5, *, band: int = 6, plan: str = "server",
@@ -402,23 +426,28 @@ class ViewDB:
 
     def estimate_pose(
         self,
-        image: str | Path | NDArray[Any],
+        image: str | Path | NDArray[Any] | LoadedImage,
         name: str,
         intrinsics: Intrinsics | str | Path | Sequence[Any],
         *,
         mask: NDArray[Any] | str | Path | None = None,
         label_map: NDArray[Any] | str | Path | None = None,
         label: int | None = None,
+        depth: NDArray[Any] | str | Path | None = None,
+        depth_scale: float = DEFAULT_DEPTH_SCALE,
     ) -> PoseEstimate:
         """The pose of the known object ``name`` in a calibrated photo, from its silhouette
         alone (no recognition): model-to-camera in the OpenCV frame, in the mesh file's own
-        frame and units (:func:`viewdb.pose.matched.pose_known`)."""
+        frame and units (:func:`viewdb.pose.matched.pose_known`); its distance from
+        ``depth``, as in :meth:`query`."""
         if (label_map is None) != (label is None):
             raise QueryError("a label map and a label go together: give both or neither")
         if label_map is not None and mask is not None:
             raise QueryError("give either a mask or a label map, not both")
         camera = parse_intrinsics(intrinsics)
         self.object(name)  # NotFound for an unknown name
+        if depth is not None:
+            image = self._with_depth(image, depth, depth_scale, QueryOptions(intrinsics=camera), None)
         _, _, query = segment_photo(image, mask=mask, label_map=label_map, label=label)
         return pose_known(self._catalogue, query, name, camera)
 

@@ -338,6 +338,11 @@ class AppearanceConfig:
                              "opposite_cost >= 0")
 
 
+#: One unit of a query's depth image in the meshes' units, by default: millimetres
+#: against meshes in metres (:mod:`viewdb.recognition.depth_image`).
+DEFAULT_DEPTH_SCALE = 0.001
+
+
 @dataclass(frozen=True)
 class ImageConfig:
     """Limits on query images (:mod:`viewdb.recognition.image`, the HTTP query decoder)."""

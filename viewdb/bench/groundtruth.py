@@ -81,6 +81,11 @@ class Frame:
     width: int
     height: int
     instances: tuple[Instance, ...]
+    #: Its depth image, aligned with the photo, or None.
+    depth: Path | None = None
+    #: One unit of ``depth`` in the meshes' units (``gt.json``'s ``depth_scale`` is units
+    #: per metre, its meshes in metres).
+    depth_scale: float | None = None
 
     @property
     def intrinsics(self) -> tuple[float, float, float, float]:
@@ -110,8 +115,9 @@ def read_frames(folder: Path) -> list[Frame]:
             image = cv2.imread(str(photo), cv2.IMREAD_UNCHANGED)
             assert image is not None, f"cannot read {photo}"
             height, width = image.shape[:2]
+        depth = folder / entry["depth"] if "depth" in entry else None
         frames.append(Frame(name, photo, np.asarray(entry["K"], np.float64), int(width), int(height),
-                            tuple(instances)))
+                            tuple(instances), depth, 1.0 / float(entry["depth_scale"]) if depth else None))
     return frames
 
 

@@ -244,14 +244,23 @@ class WebQueryFormModel(BaseModel):
                          json_schema_extra={"format": "binary"})
     plan: str = Field(default="server", description="server, cs1, cs2 or fast")
     k: int = Field(default=5, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
-    pose_top: int | None = Field(default=1, ge=0, description="how many of the best results to pose, as "
-                                                              "in the library (the page asks again for another)")
+    pose_top: int | None = Field(default=1, ge=0, description="how many of the best results to pose, "
+                                                              "as in the library (the page asks again "
+                                                              "for another)")
     box: list[str] = Field(default=[], description="an object's box `x1,y1,x2,y2` in the photo's pixels; "
                                                      "repeat the field for several objects")
     point: list[str] = Field(default=[], description="a pixel `x,y` on an object; repeatable")
     all: bool = Field(default=False, description="every object that stands out from the background")
     max_objects: int | None = Field(default=None, ge=1, description="with `all`: at most this many "
                                                                      "objects, the largest")
+    intrinsics: str | None = Field(default=None, description="`fx,fy,cx,cy` in pixels: poses in that "
+                                                             "camera's OpenCV frame, in the meshes' units")
+    depth: bytes | None = Field(default=None, json_schema_extra={"format": "binary"},
+                                description="with `intrinsics`: the photo's depth image, aligned pixel for "
+                                            "pixel (16-bit PNG or TIFF, float TIFF, .npy); it sets each "
+                                            "pose's distance")
+    depth_scale: float = Field(default=0.001, gt=0, description="one depth unit in the meshes' units "
+                                                                "(0.001: millimetres against metres)")
 
 
 class WebViewModel(BaseModel):
@@ -312,6 +321,8 @@ class WebQueryReplyModel(BaseModel):
     segmentation: str
     transfer: dict[str, int]
     photo: WebPhotoModel
+    intrinsics: list[float] | None = Field(default=None, description="the form's intrinsics, when given "
+                                                                     "(to draw a pinhole pose with)")
     objects: list[WebObjectResultModel] | None = Field(
         default=None, description="a query with prompts or `all`: each object (then `results` is empty)")
 

@@ -51,8 +51,10 @@ from starlette.exceptions import HTTPException
 
 from ..api import ViewDB
 from ..camera import normalise_angle
-from ..config import OverlayConfig, SegmentationConfig, WebConfig
+from ..config import OverlayConfig, SegmentationConfig, WebConfig, finite
 from ..errors import ImageError, QueryError, ViewDBError
+from ..pose.intrinsics import Intrinsics, check_intrinsics
+from ..recognition.depth_image import decode_depth
 from ..recognition.image import DEFAULTS as IMAGE_LIMITS
 from ..recognition.image import load_image
 from ..recognition.options import QueryOptions
@@ -180,15 +182,18 @@ def _colour(rank: int | None, drawing: OverlayConfig) -> tuple[int, int, int]:
     return drawing.colours[((rank or 1) - 1) % len(drawing.colours)]
 
 
-def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], config: WebConfig) -> bytes | None:
+def draw_layer(db: ViewDB, result: dict[str, Any], shape: tuple[int, int], config: WebConfig,
+               intrinsics: Intrinsics | None = None) -> bytes | None:
     """One result's overlay (a transparent PNG the size the photo is shown at), in the
-    colour of its rank; None when it has no pose."""
+    colour of its rank; None when it has no pose. A pinhole pose is drawn through the
+    query's ``intrinsics``."""
     pose = OverlayPose.from_json(result)
     if pose is None:
         return None
     drawing = _drawing(config)
     drawing = replace(drawing, colours=(_colour(pose.rank, drawing),))
-    return _encode(overlay_layer(shape, [pose], db.mesh, config=drawing), ".png")
+    return _encode(overlay_layer(shape, [pose], db.mesh, intrinsics=intrinsics, placement=db.placement,
+                                 config=drawing), ".png")
 
 
 def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: WebConfig,
@@ -198,7 +203,8 @@ def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: 
     A photo of more than ``max_pixels`` pixels is refused from its header; the best
     ``pose_top`` results are posed, as the library poses them (the page asks again, with a
     larger ``pose_top``, for a result that was not posed).
-    ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``."""
+    ``prompts``: the query's ``boxes``, ``points``, ``every`` and ``max_objects``, and its
+    ``intrinsics``, ``depth`` and ``depth_scale``."""
     rgb, alpha = _decode(data, name, max_pixels)
     image = rgb if alpha is None else np.dstack([rgb, alpha])
     try:
@@ -214,21 +220,24 @@ def answer_query(db: ViewDB, data: bytes, name: str, plan: str, k: int, config: 
                        "source_width": int(rgb.shape[1]), "source_height": int(rgb.shape[0]),
                        "src": _data_url("image/jpeg", _encode(shown, ".jpg", quality))}
     hashes = {o.name: o.content_hash for o in db.objects()}
+    camera = (prompts or {}).get("intrinsics")
+    if camera is not None:
+        result["intrinsics"] = [float(v) for v in camera]
     for entries in [result["results"], *(o["results"] for o in result.get("objects") or [])]:
-        _dress(db, entries, rgb.shape[:2], hashes, config, drawing)
+        _dress(db, entries, rgb.shape[:2], hashes, config, drawing, camera)
     result["timing_ms"]["overlay"] = round((time.perf_counter() - start) * 1e3, 3)
     return _finite(result)
 
 
 def _dress(db: ViewDB, entries: list[dict[str, Any]], shape: tuple[int, int], hashes: dict[str, str],
-           config: WebConfig, drawing: OverlayConfig) -> None:
+           config: WebConfig, drawing: OverlayConfig, intrinsics: Intrinsics | None) -> None:
     """Each result of one object with its colour, thumbnail and (the best posed one's) overlay."""
     drawn = False
     for entry in entries:
         entry["colour"] = "#{:02x}{:02x}{:02x}".format(*_colour(entry.get("rank"), drawing))
         entry["overlay"] = None
         if not drawn and entry.get("pose"):  # the best posed result's; the others on request
-            png = draw_layer(db, entry, shape, config)
+            png = draw_layer(db, entry, shape, config, intrinsics)
             entry["overlay"] = None if png is None else _data_url("image/png", png)
             drawn = True
         view = entry["view"]
@@ -249,6 +258,51 @@ def _prompt_fields(form: Any) -> dict[str, Any]:
         return {}
     return {"boxes": list(prompts.boxes), "points": list(prompts.points), "every": prompts.every,
             "max_objects": prompts.max_objects}
+
+
+async def _camera_fields(form: Any) -> dict[str, Any]:
+    """The ``intrinsics`` (``fx,fy,cx,cy``), ``depth`` (a file) and ``depth_scale`` fields
+    of the form, parsed (:meth:`viewdb.ViewDB.query`'s keywords)."""
+    out: dict[str, Any] = {}
+    text = str(form.get("intrinsics") or "").strip()
+    if text:  # numbers only: never a path on the server
+        try:
+            out["intrinsics"] = check_intrinsics([float(v) for v in text.split(",")])
+        except ValueError:
+            raise HTTPException(422, "intrinsics must be fx,fy,cx,cy (four numbers), "
+                                     f"got {text[:60]!r}") from None
+        except ViewDBError as exc:
+            raise HTTPException(422, f"intrinsics: {exc.message}") from None
+    upload = form.get("depth")
+    if isinstance(upload, UploadFile):
+        name = _upload_name(upload)
+        try:
+            out["depth"] = decode_depth(await upload.read(), name)
+        except ImageError as exc:
+            raise HTTPException(422, str(exc)) from None
+        if "intrinsics" not in out:
+            raise HTTPException(422, "depth needs intrinsics (fx,fy,cx,cy): it sets a perspective "
+                                     "pose's distance")
+    elif upload is not None and str(upload) != "":
+        raise HTTPException(422, "depth must be a file (a 16-bit PNG or TIFF, a float TIFF or a .npy)")
+    raw = str(form.get("depth_scale") or "").strip()
+    if raw:
+        try:
+            out["depth_scale"] = finite(float(raw), "depth_scale", 1e-12, 1e12)
+        except ValueError:
+            raise HTTPException(422, f"depth_scale must be a positive number, got {raw[:40]!r}") from None
+    return out
+
+
+def _overlay_intrinsics(data: dict[str, Any]) -> Intrinsics | None:
+    """A ``POST /overlay`` body's ``intrinsics`` (those ``POST /query`` answered with), checked."""
+    values = data.get("intrinsics")
+    if values is None:
+        return None
+    try:
+        return check_intrinsics(values)
+    except ViewDBError as exc:
+        raise HTTPException(422, exc.message) from None
 
 
 def _overlay_request(data: Any, max_pixels: int = IMAGE_LIMITS.max_pixels
@@ -302,7 +356,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
                  openapi_extra=models.multipart_body(models.WebQueryFormModel),
                  summary="Recognise the object in a photo and pose it, with pictures to show it")
     async def query(request: Request) -> dict[str, Any]:
-        form = await request.form(max_files=1, max_fields=8 + 2 * SegmentationConfig().max_prompts)
+        form = await request.form(max_files=2, max_fields=10 + 2 * SegmentationConfig().max_prompts)
         try:
             upload = form.get("photo")
             if not isinstance(upload, UploadFile):
@@ -313,6 +367,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             k = _int_field(form, "k", min(QUERY_DEFAULTS.k, config.max_k), 1, config.max_k)
             pose_top = _int_field(form, "pose_top", QUERY_DEFAULTS.pose_top or k, 0, config.max_k)
             prompts = _prompt_fields(form)
+            camera = await _camera_fields(form)
             name = _upload_name(upload)
             data = await upload.read()
         finally:
@@ -321,7 +376,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             raise HTTPException(422, f"{name}: empty file, not an image")
         try:
             out, _ = await run(lambda db: answer_query(db, data, name, plan, k, config, max_pixels,
-                                                       pose_top, prompts))
+                                                       pose_top, {**prompts, **camera}))
         except ImageError as exc:
             raise HTTPException(422, str(exc)) from exc
         return out
@@ -336,7 +391,8 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
         except (ValueError, RecursionError) as exc:
             raise HTTPException(400, f"body is not valid JSON: {exc}") from exc
         result, shape = _overlay_request(data, max_pixels)
-        png, _ = await run(lambda db: draw_layer(db, result, shape, config))
+        camera = _overlay_intrinsics(data)
+        png, _ = await run(lambda db: draw_layer(db, result, shape, config, camera))
         return Response(png, media_type="image/png")
 
 

@@ -29,6 +29,7 @@ from ..catalogue.reading import CandidatePose, CatalogueReader
 from ..config import MatchedPoseConfig, SilhouetteConfig
 from ..errors import QueryError, ViewDBError
 from ..search.plans import Candidate
+from .depth_distance import distance_from_depth
 from .estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, estimate_pose, sift_estimate
 from .frames import GL_TO_CV, inplane_angle, rodrigues, rotation_to_view
 from .intrinsics import Intrinsics
@@ -142,7 +143,7 @@ def pose_match(
         directions = list(dict.fromkeys((p.azimuth % 360.0, p.elevation % 360.0) for p in poses))
         estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search, starts,
                                    posing=posing, directions=directions)
-        return in_mesh_units(catalogue, match.object, estimate)
+        return in_mesh_units(catalogue, match.object, estimate, query, intrinsics)
     candidates, pruned = [], []
     for p in poses:
         try:
@@ -159,7 +160,7 @@ def pose_match(
             estimate = pose_silhouette(catalogue, match.object, query, config, intrinsics, search,
                                        [(estimate.rotation, estimate.translation), *starts],
                                        estimate.candidate, posing)
-        return in_mesh_units(catalogue, match.object, estimate)
+        return in_mesh_units(catalogue, match.object, estimate, query, intrinsics)
     if estimate.method == "shape":
         estimate = refine_shape(catalogue, match.object, query, candidates[estimate.candidate], estimate,
                                 config, posing)
@@ -219,9 +220,16 @@ def grid_silhouette(
     return np.ascontiguousarray(mask[:, ::-1]) if mirrored else mask
 
 
-def in_mesh_units(catalogue: CatalogueReader, name: str, estimate: PoseEstimate) -> PoseEstimate:
-    """A pinhole pose in the mesh file's own frame and units (``t = scale·t_n − R·centre``)."""
+def in_mesh_units(catalogue: CatalogueReader, name: str, estimate: PoseEstimate,
+                  query: QueryView | None = None, intrinsics: Intrinsics | None = None) -> PoseEstimate:
+    """A pinhole pose in the mesh file's own frame and units (``t = scale·t_n − R·centre``);
+    with a ``query`` that has a depth image (and the ``intrinsics``), first moved to the
+    distance the depth measures (:mod:`viewdb.pose.depth_distance`)."""
     info = catalogue.object(name)
+    if query is not None and query.depth is not None and intrinsics is not None:
+        triangles = get_pinhole_renderer().triangles(catalogue.mesh(name))
+        estimate = distance_from_depth(estimate, triangles, query.mask, query.depth / float(info.scale),
+                                       intrinsics)
     t = to_mesh_units(estimate.rotation, estimate.translation, info.centre, info.scale)
     return replace(estimate, translation=t, units="mesh")
 
@@ -417,4 +425,4 @@ def pose_known(
     catalogue.object(name)  # NotFound for an unknown name
     estimate = pose_silhouette(catalogue, name, query, config or PoseConfig(), intrinsics, None, (),
                                0, posing)
-    return in_mesh_units(catalogue, name, estimate)
+    return in_mesh_units(catalogue, name, estimate, query, intrinsics)

@@ -28,6 +28,10 @@ class QueryView:
     #: Pixels that may hide the object (e.g. other labelled objects), bool (H, W) or None:
     #: the perspective silhouette fit leaves them out.
     ignore: NDArray[np.bool_] | None = field(default=None, repr=False)
+    #: Each pixel's depth in the meshes' own units (NaN: no reading), float (H, W), or
+    #: None: a pinhole pose's distance is then set from the depth
+    #: (:mod:`viewdb.pose.depth_distance`).
+    depth: NDArray[np.float64] | None = field(default=None, repr=False)
     #: What :func:`~viewdb.pose.estimate.estimate_pose` derives from the query (SIFT
     #: features, outline, internal edges), kept for its next calls: a query's results and
     #: their refinements are posed against the same photo. So a QueryView's arrays must not
@@ -105,3 +109,5 @@ class PoseEstimate:
     #: "normalised" (model space of the views) or "mesh" (the mesh file's own frame and
     #: units, ``original = centre + scale · normalised``): the units of ``translation``.
     units: str = "normalised"
+    #: The pixels of a depth image that set the translation's length (None: no depth).
+    depth_pixels: int | None = None

@@ -69,6 +69,9 @@ class LoadedImage:
     alpha: NDArray[np.uint8] | None = field(repr=False)
     #: The file it was loaded from, or None for an array.
     path: str | None = None
+    #: Its depth image, aligned pixel for pixel, in the meshes' units (NaN: no reading),
+    #: or None (:func:`viewdb.recognition.depth_image.load_depth`).
+    depth: NDArray[np.float64] | None = field(default=None, repr=False)
 
     @property
     def width(self) -> int:

@@ -127,7 +127,7 @@ def segment_photo(
         assert label is not None
         mask, ignore = label_mask(label_map, label, loaded)
     seg = segment(loaded, mask)
-    return loaded, seg, QueryView(loaded.rgb, pose_mask(seg, mask, label_map), ignore)
+    return loaded, seg, QueryView(loaded.rgb, pose_mask(seg, mask, label_map), ignore, loaded.depth)
 
 
 def segment_query(
@@ -170,7 +170,7 @@ def _upright_only(options: QueryOptions) -> bool:
 def region_shape(loaded: LoadedImage, region: Region, samples: int, options: QueryOptions) -> QueryShape:
     """Stages 1–2 for one object of a photo of several: the other objects may hide it."""
     pose_mask = region.mask if region.pose_mask is None else region.pose_mask
-    view = QueryView(loaded.rgb, pose_mask, region.others)
+    view = QueryView(loaded.rgb, pose_mask, region.others, loaded.depth)
     return shape_of(loaded, region.segmentation, view, samples, options.rotations,
                     options.recognition.hidden_min_share, _upright_only(options))
 

@@ -78,6 +78,8 @@ class QueryMatch:
                 "rotation": [[float(x) for x in row] for row in p.rotation],
                 "translation": [float(x) for x in p.translation],
             }
+            if p.depth_pixels is not None:
+                out["pose"]["depth_pixels"] = int(p.depth_pixels)
         if self.pose_error is not None:
             out["pose_error"] = self.pose_error
         return out

@@ -352,7 +352,9 @@ async function recognise() {
   }
   const { boxes, points } = state.prompts;
   const every = $("every").checked;
-  const fields = { plan: $("plan").value, k: $("k").value, boxes: [...boxes], points: [...points], every };
+  const fields = { plan: $("plan").value, k: $("k").value, boxes: [...boxes], points: [...points], every,
+                   intrinsics: $("intrinsics").value.trim(), depth: $("depth").files[0] || null,
+                   depthScale: $("depth-scale").value.trim() };
   const form = queryForm(file, fields);
   if (!state.photo || state.photo.file !== file) choosePhoto(file);
   const photo = state.photo;
@@ -396,6 +398,9 @@ function queryForm(file, fields, poseTop = null) {
   for (const box of fields.boxes) form.append("box", box.join(","));
   for (const point of fields.points) form.append("point", point.join(","));
   if (fields.every) form.append("all", "true");
+  if (fields.intrinsics) form.append("intrinsics", fields.intrinsics);
+  if (fields.depth) form.append("depth", fields.depth, fields.depth.name || "depth.png");
+  if (fields.depth && fields.depthScale) form.append("depth_scale", fields.depthScale);
   return form;
 }
 
@@ -564,7 +569,8 @@ function select(group, index, announce = true) {
   // only each object's best posed result comes with its overlay; the server draws the others on request
   layer.hidden = true;
   tell(`Drawing ${result.object}…`);
-  const body = JSON.stringify({ result, width: answer.photo.source_width, height: answer.photo.source_height });
+  const body = JSON.stringify({ result, width: answer.photo.source_width, height: answer.photo.source_height,
+                                intrinsics: answer.intrinsics || null });
   api("overlay", { method: "POST", body, headers: { "Content-Type": "application/json" } })
     .then((response) => response.blob())
     .then((blob) => {
