@@ -26,7 +26,7 @@ import numpy as np
 
 import viewdb
 from support.real import add_set_arguments, band_of, each_frame, median, share, write_results
-from viewdb.bench.groundtruth import TWINS, Frame
+from viewdb.bench.groundtruth import TWINS, Frame, visible_masks
 
 #: An answer's box must overlap the object's visible box by this IoU to find it.
 MIN_BOX_IOU = 0.5
@@ -61,6 +61,17 @@ def match(answers: list[tuple[str, tuple[int, int, int, int]]], frame: Frame) ->
     return found, used.count(False)
 
 
+def visibilities(frame: Frame) -> list[float]:
+    """Each annotated object's visible fraction: the set's, else the share of its
+    silhouette that the other annotated objects leave visible."""
+    if all(inst.visibility is not None for inst in frame.instances):
+        return [float(inst.visibility) for inst in frame.instances]
+    masks = visible_masks(frame)
+    return [inst.visibility if inst.visibility is not None
+            else float(np.count_nonzero(visible) / max(1, np.count_nonzero(whole)))
+            for inst, (whole, visible) in zip(frame.instances, masks, strict=True)]
+
+
 def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame) -> dict:
     """One photo's query for every object: what it found, its false answers, its time."""
     start = time.perf_counter()
@@ -72,10 +83,11 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame) -> dict:
         answers, error = [], str(exc)
     seconds = time.perf_counter() - start
     found, false = match(answers, frame)
-    objects = [{"object": inst.name, "visibility": inst.visibility, "band": band_of(inst.visibility or 0.0),
-                "found": hit} for inst, hit in zip(frame.instances, found, strict=True)]
+    objects = [{"object": inst.name, "visibility": vis, "band": band_of(vis), "found": hit}
+               for inst, vis, hit in zip(frame.instances, visibilities(frame), found, strict=True)]
     return {"set": set_name, "frame": frame.name, "seconds": seconds, "error": error,
-            "answers": [{"object": n, "box": list(b)} for n, b in answers], "false": false, "objects": objects}
+            "answers": [{"object": n, "box": list(b)} for n, b in answers], "false": false,
+            "objects": objects}
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -88,7 +100,8 @@ def summarise(rows: list[dict]) -> dict:
         for band in sorted({o["band"] for o in objects}):
             group = [o for o in objects if o["band"] == band]
             bands[band] = {"n": len(group), "found": sum(o["found"] for o in group)}
-        out[set_name] = {"photos": len(mine), "visible ≥ 50 %": {"n": len(half), "found": sum(o["found"] for o in half)},
+        out[set_name] = {"photos": len(mine),
+                         "visible ≥ 50 %": {"n": len(half), "found": sum(o["found"] for o in half)},
                          "bands": bands, "false_per_photo": sum(r["false"] for r in mine) / len(mine),
                          "answers_per_photo": sum(len(r["answers"]) for r in mine) / len(mine),
                          "median_seconds": median([r["seconds"] for r in mine]),
@@ -106,7 +119,8 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
         half = s["visible ≥ 50 %"]
         bands = "; ".join(f"{band}: {b['found']}/{b['n']}" for band, b in s["bands"].items())
         lines.append(f"| {set_name} | {s['photos']} | {share(half['found'], half['n'])} | {bands} | "
-                     f"{s['false_per_photo']:.2f} | {s['answers_per_photo']:.2f} | {s['median_seconds']:.2f} |")
+                     f"{s['false_per_photo']:.2f} | {s['answers_per_photo']:.2f} | "
+                     f"{s['median_seconds']:.2f} |")
     return "\n".join(lines) + "\n"
 
 

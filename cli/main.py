@@ -648,6 +648,8 @@ def _print_result(result: viewdb.QueryResult) -> None:
     if result.objects is None:
         _results_table(result.results)
         return
+    if not result.objects:
+        _say("no object found: nothing in the photo stands out as an object")
     for i, o in enumerate(result.objects, 1):
         region = o.region
         prompt = f" from {region.prompt}" if region.prompt is not None else (

@@ -520,7 +520,7 @@ def run_regions(
     regions = find_regions(loaded, prompts, label_map=label_map, config=segmentation)
     segmented = time.perf_counter()
     objects = []
-    totals: dict[str, float] = {}
+    totals: dict[str, float] = dict.fromkeys(("client", "server", "colour", "verify", "pose"), 0.0)
     for region in regions:
         t0 = time.perf_counter()
         shape = region_shape(loaded, region, samples, options)

@@ -44,7 +44,8 @@ turns the prompts, or ``every`` object, or every label of a label map, into one
   8-connected regions; the largest ``max_objects`` that are large enough
   (``min_object_fraction``, ``min_object_pixels``) are each refined by GrabCut
   (:func:`~viewdb.recognition.segmentation.grabcut_from`). Objects that touch are one
-  region: the background must show between them.
+  region: the background must show between them. A photo where nothing stands out has
+  no region: asking for every object is answered with none, not refused.
 * **label map** with ``every``: one region per label present.
 
 Where the objects of several prompts overlap, a pixel claimed by two goes to the one
@@ -53,7 +54,7 @@ behind only in part), and each region knows the pixels of the others
 (:attr:`Region.others`): what may hide it, for the completed outline and the pose.
 
 A prompt outside the photo, a box narrower or lower than ``min_box_side`` pixels, more
-than ``max_prompts`` prompts, or a prompt that finds no object raise
+than ``max_prompts`` prompts, or a prompt (a box, a point) that finds no object raise
 :class:`~viewdb.errors.ImageError`, one line naming the photo, the prompt and the
 problem.
 """
@@ -527,7 +528,7 @@ def segment_point(image: LoadedImage, point: Point, cfg: SegmentationConfig, oth
 # ---------------------------------------------------------------------- every object
 def segment_every(image: LoadedImage, max_objects: int, cfg: SegmentationConfig) -> list[Segmentation]:
     """Every separate object that stands out from the border's colours (module doc), the
-    largest first."""
+    largest first; none (an empty list) when nothing does."""
     fg = colour_foreground(image.rgb, "grabcut", cfg)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(fg.found.astype(np.uint8), connectivity=8)
     small_area = fg.found.size
@@ -542,8 +543,6 @@ def segment_every(image: LoadedImage, max_objects: int, cfg: SegmentationConfig)
             out.append(Segmentation(mask, method, check_object(mask, method, image.path, cfg), image.path))
         except ImageError:
             continue  # GrabCut shrank it below the minimum
-    if not out:
-        raise ImageError("no object found: nothing stands out from the background", image.path)
     return out
 
 
