@@ -128,7 +128,7 @@ def main() -> None:
             rendered_error = view_error(rendered_top.pose, spec) if rendered_top.pose else math.nan
             walk = grid = walk_ms = math.nan
             if top.pose.method == "shape":
-                shape = segment_query(photo, samples, 12)
+                shape = segment_query(photo, samples, viewdb.QueryOptions().rotations)
                 match = Candidate(top.object, top.distance, top.azimuth, top.elevation, top.mirrored)
                 curve = shape.by_angle.get(top.inplane)
                 forget(db)

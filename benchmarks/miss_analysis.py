@@ -1,7 +1,7 @@
 """Why photos are not recognised: every miss of the synthetic photo benchmark, classified.
 
     python benchmarks/miss_analysis.py DB [--seeds 1-6] [--photos 40] [--plan server]
-                                          [--rotations 12] [--pool 5] [--shortlist 10]
+                                          [--rotations 8] [--pool 5] [--shortlist 10]
                                           [--min-iou 0.9] [--twin-threshold 0.03]
 
 The photos are those of ``benchmarks/photo_accuracy.py`` (:func:`viewdb.bench.photos.photo_series`:
@@ -154,7 +154,7 @@ def main() -> None:
     parser.add_argument("--seeds", default="1-6", help="photo seeds, e.g. 1-6 or 1,3 (default 1-6)")
     parser.add_argument("--photos", type=int, default=40, help="photos per seed")
     parser.add_argument("--plan", default="server")
-    parser.add_argument("--rotations", type=int, default=12)
+    parser.add_argument("--rotations", type=int, default=viewdb.QueryOptions().rotations)
     parser.add_argument("--pool", type=int, default=RecognitionConfig().pool,
                         help="objects the plan finds for the colour and shape re-rankings")
     parser.add_argument("--shortlist", type=int, default=MissConfig().shortlist)

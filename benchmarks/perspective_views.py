@@ -113,7 +113,8 @@ def main() -> None:
             jpeg = encode_jpeg(render_photo(db.mesh(name), spec), spec.jpeg_quality)
             photo = cv2.cvtColor(cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR),
                                  cv2.COLOR_BGR2RGB)
-            turns = rotated_curves(segment(load_image(photo), None).mask, SAMPLES, 12)
+            turns = rotated_curves(segment(load_image(photo), None).mask, SAMPLES,
+                                   viewdb.QueryOptions().rotations)
             for key, tier in tiers.items():
                 best: dict[str, float] = {}
                 for _, q in turns:

@@ -2,14 +2,14 @@
 
     python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]
-                                           [--unverified] [--iou-rerank] [--rotations 12]
+                                           [--unverified] [--iou-rerank] [--rotations 8]
                                            [--shifts all|step=S|roll=DEG]
 
 Each photo is a random object of DB seen from a random direction off the grid through a
 perspective camera, with random lighting, a plain random background, pixel noise and
 JPEG compression (:mod:`viewdb.bench.photos`, the same generator as ``viewdb bench``'s
 photo protocol; same seed ⇒ same photos). The photo is segmented automatically, as a user's
-would be, and queried with every plan (12 in-plane turns; ``--shifts``: one search over
+would be, and queried with every plan (8 in-plane turns; ``--shifts``: one search over
 circular shifts of the upright curve instead, every shift, every S-th, or those near the
 in-plane turn a gravity hint gives, :class:`viewdb.search.shifts.ShiftWindow`); reported per plan: the CMC
 (rank 1..k identification rate) and the median query time; ``--true-mask`` also queries
@@ -94,7 +94,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("-k", type=int, default=5)
     parser.add_argument("--plans", default="server,cs1,cs2")
-    parser.add_argument("--rotations", type=int, default=12,
+    parser.add_argument("--rotations", type=int, default=viewdb.QueryOptions().rotations,
                         help="in-plane turns of the silhouette tried (1: upright only; the photos "
                              "are upright, as a camera that knows gravity would take them)")
     parser.add_argument("--shifts", default=None,

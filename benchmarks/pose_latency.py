@@ -103,7 +103,7 @@ def inputs_of(db, photos):
         if not result.results:
             continue
         top = result.results[0]
-        shape = segment_query(photo, samples, 12)
+        shape = segment_query(photo, samples, viewdb.QueryOptions().rotations)
         match = Candidate(top.object, top.distance, top.azimuth, top.elevation, top.mirrored)
         out.append((kind, spec, shape.view, match, shape.by_angle.get(top.inplane)))
     return out

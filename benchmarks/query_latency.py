@@ -110,7 +110,7 @@ def brute_force(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], band: i
     samples = db.config.features.curve_samples
     out = []
     for _, photo in photos:
-        shape = segment_query(photo, samples, 12)
+        shape = segment_query(photo, samples, viewdb.QueryOptions().rotations)
         start = time.perf_counter()
         for _, curve in shape.curves:
             scan_all(curve, tier.curves, band)
@@ -140,7 +140,7 @@ def search_cpu(db: viewdb.ViewDB, photos: list[tuple[str, np.ndarray]], k: int, 
     stacked, one_by_one, same = [], [], 0
     for i, (_, photo) in enumerate(photos):
         try:
-            curves = segment_query(photo, samples, 12).curves
+            curves = segment_query(photo, samples, viewdb.QueryOptions().rotations).curves
         except viewdb.ViewDBError:
             continue
         answers = {}

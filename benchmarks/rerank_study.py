@@ -142,7 +142,8 @@ def main() -> None:
     parser.add_argument("--seeds", default="1-6")
     parser.add_argument("--photos", type=int, default=40)
     parser.add_argument("--shortlist", type=int, default=30)
-    parser.add_argument("--rotations", type=int, default=12, help="in-plane turns searched (1: upright)")
+    parser.add_argument("--rotations", type=int, default=viewdb.QueryOptions().rotations,
+                        help="in-plane turns searched (1: upright)")
     parser.add_argument("--pools", default="5,10,15,20")
     parser.add_argument("--colour-weights", default="0,0.5,1,2")
     parser.add_argument("--shape-weights", default="0,4,8,12")

@@ -431,7 +431,7 @@ def query(
     ] = None,
     rotations: Annotated[
         int, typer.Option(help="In-plane turns of the silhouette tried (1 = upright only).", min=1, max=72)
-    ] = 12,
+    ] = 8,
     band: Annotated[int, typer.Option(help="DTW band in curve samples.", min=0, max=64)] = 6,
     roll: Annotated[float | None, typer.Option(
         help="Gravity hint: the camera's roll in degrees (the in-plane turn that makes the photo "
@@ -852,7 +852,7 @@ def demo(
     photo = folder / "query.png"
     _demo_photo(db_path, "mug" if any(m.stem == "mug" for m in models) else first, photo)
     _say(f"viewdb demo: querying {photo} (an off-grid view, turned and scaled, on a grey background)")
-    query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=12, band=6,
+    query(photo, db_path, k=3, plan="cs1", client=None, mask=None, rotations=8, band=6,
           roll=None, upright=False, no_pose=False, pose_top=1, intrinsics=None, label_map=None, label=None,
           rerank=False, as_json=False)
 

@@ -240,7 +240,7 @@ class ViewDB:
         server: ServerTier | None = None,
         mask: NDArray[Any] | str | Path | None = None,
         band: int = 6,
-        rotations: int = 12,
+        rotations: int = 8,
         pose: bool = True,
         intrinsics: Intrinsics | str | Path | Sequence[Any] | None = None,
         label_map: NDArray[Any] | str | Path | None = None,

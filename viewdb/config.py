@@ -850,9 +850,9 @@ class FastConfig:
     #: views name ``shortlist`` distinct objects (asked again, for twice as many, otherwise).
     views_per_object: int = 8
     #: The query's curves (its in-plane turns) whose embeddings lie within this distance
-    #: of each other ask the index once, by their mean: a photo's 12 turns embed alike
+    #: of each other ask the index once, by their mean: a photo's turns embed alike
     #: (0.009 apart at the median, 0.024 at most, on 80 synthetic photos) and their mean
-    #: shortlists as well as each turn on its own, at one twelfth of the asking.
+    #: shortlists as well as each turn on its own (12 turns, at one twelfth of the asking).
     merge_radius: float = 0.03
     #: A shortlist the index would need more than this share of its views for (most of a
     #: small catalogue's objects) is ranked exactly instead: every view's embedding

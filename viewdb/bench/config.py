@@ -79,7 +79,7 @@ class BenchConfig:
     #: Sakoe–Chiba band of the DTW (samples).
     band: int = 6
     #: In-plane turns tried per photo query (the query engine's default).
-    rotations: int = 12
+    rotations: int = 8
     #: Timing experiment on these protocols (Fig. 7 uses the paper's).
     timing_protocols: tuple[str, ...] = field(default=("grid",))
 

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from ..api import ViewDB
 from ..catalogue.features import distance_curve
 from ..errors import FeatureError, ViewDBError
+from ..recognition.options import QueryOptions
 from ..recognition.pipeline import segment_query
 from .photos import PhotoSpec, draw_photo_spec, encode_jpeg, render_photo
 
@@ -121,7 +122,8 @@ def photo_queries(
     return out
 
 
-def turned_stacks(db: ViewDB, photos: list[NDArray[np.uint8]], turns: int = 12) -> list[NDArray[np.float64]]:
+def turned_stacks(db: ViewDB, photos: list[NDArray[np.uint8]], turns: int = QueryOptions().rotations
+                  ) -> list[NDArray[np.float64]]:
     """Each photo's ``turns`` in-plane turned query curves, ``(turns, N)``, as a query's
     search receives them; a photo that cannot be segmented is left out."""
     samples = db.config.features.curve_samples

@@ -36,8 +36,10 @@ class QueryOptions:
     #: as well in less time but puts a real photo's sugar box third
     #: (docs/results/synthetic-photos.md#the-dtw-band).
     band: int = 6
-    #: In-plane turns of the silhouette searched (evenly spaced; 1 = upright only).
-    rotations: int = 12
+    #: In-plane turns of the silhouette searched (evenly spaced; 1 = upright only). 8, not
+    #: 12: as accurate on the synthetic and the real photos, a fifth quicker
+    #: (docs/results/real-clutter.md#recognition-and-pose-from-the-box).
+    rotations: int = 8
     #: Instead of ``rotations``: one search over these circular shifts of the upright
     #: curve (:class:`~viewdb.search.shifts.ShiftWindow`; ``ShiftWindow()``: every turn).
     shifts: ShiftWindow | None = None
