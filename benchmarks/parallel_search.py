@@ -4,7 +4,7 @@
                                             [--whole [--roll DEG]]
 
 The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.photo_series`),
-segmented and turned as a query does (12 in-plane turns); each photo's stack of turned curves is
+segmented and turned as a query does (its default in-plane turns); each photo's stack of turned curves is
 then searched on the file's full tier (:func:`viewdb.search.knn.knn_stack`, k objects) once per
 thread count, one right after the other (the order alternating from photo to photo). Printed per
 thread count: the median and p95 wall time of a search, the CPU time it took (all threads),

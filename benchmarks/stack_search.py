@@ -1,10 +1,10 @@
-"""The search of a photo's 12 in-plane turns, this tree against another, on the same curves.
+"""The search of a photo's in-plane turns, this tree against another, on the same curves.
 
     python benchmarks/stack_search.py DB --baseline TREE [--seeds 2-3] [--photos 8] [-k 5]
                                          [--threads 1,2] [--rounds 2]
 
 The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.seed_photos`),
-segmented and turned as a query does; each photo's stack of 12 turned curves is searched on the
+segmented and turned as a query does; each photo's stack of turned curves (the query's default count) is searched on the
 file's full tier (:func:`viewdb.search.knn.knn_stack`, k objects, the query's block of one curve)
 by a fresh process of each tree, the trees taking turns ``--rounds`` times. Printed per tree and
 thread count: the median and mean wall time of a search over the photos (the fastest of its
@@ -55,7 +55,7 @@ json.dump(out, sys.stdout)
 
 
 def photo_stacks(db_path: str, seeds: str, count: int) -> np.ndarray:
-    """Each photo's 12 turned query curves (:func:`viewdb.bench.queries.turned_stacks`)."""
+    """Each photo's turned query curves (:func:`viewdb.bench.queries.turned_stacks`)."""
     import viewdb
     from viewdb.bench.photos import seed_photos
     from viewdb.bench.queries import turned_stacks
