@@ -3,12 +3,13 @@
     python benchmarks/stack_search.py DB --baseline TREE [--seeds 2-3] [--photos 8] [-k 5]
                                          [--threads 1,2] [--rounds 2]
 
-The photos are those of ``benchmarks/query_latency.py`` (:func:`viewdb.bench.photos.seed_photos`),
-segmented and turned as a query does; each photo's stack of turned curves (the query's
-default count) is searched on the file's full tier (:func:`viewdb.search.knn.knn_stack`, k
-objects, the query's block of one curve) by a fresh process of each tree, the trees taking
-turns ``--rounds`` times. Printed per tree and thread count: the median and mean wall time of a search over the photos (the fastest of its
-rounds per photo), the median of the views bounded, and the median per-photo ratio against the
+The photos are those of ``benchmarks/query_latency.py``
+(:func:`viewdb.bench.photos.seed_photos`), segmented and turned as a query does; each photo's
+stack of turned curves (the query's default count) is searched on the file's full tier
+(:func:`viewdb.search.knn.knn_stack`, k objects, the query's block of one curve) by a fresh
+process of each tree, the trees taking turns ``--rounds`` times. Printed per tree and thread
+count: the median and mean wall time of a search over the photos (the fastest of its rounds
+per photo), the median of the views bounded, and the median per-photo ratio against the
 baseline tree; then whether both trees gave the same answers (objects, distances, views,
 orientations and turns). ``TREE`` is a checkout of the project (e.g. ``git worktree add``).
 Give the load average with the figures.
