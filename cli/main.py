@@ -669,7 +669,7 @@ def _results_table(results: list[viewdb.QueryMatch]) -> None:
             "-" if r.shape_fit is None else f"{r.shape_fit:.3f}", f"{r.score:.3f}",
             f"{r.azimuth:g}/{r.elevation:g}{' mirrored' if r.mirrored else ''}"
             + ("" if r.camera_distance is None else f" at {r.camera_distance:g} r"),
-            f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else (r.pose_error or "-"),
+            f"{p.azimuth:.1f}/{p.elevation:.1f}/{p.inplane:.1f}" if p else as_flags(r.pose_error or "-"),
             p.method if p else "-", str(p.inliers) if p else "-",
         ])
     _table(["rank", "object", "distance", "colour", "fit", "score", "view h/v", "pose h/v/in-plane",
