@@ -19,13 +19,12 @@ false answers per photo, and seconds per photo (median). The table goes to
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
 import viewdb
-from support.real import add_set_arguments, band_of, each_frame, median, share, write_results
+from support.real import band_of, each_frame, median, set_arguments, share, write_results
 from viewdb.bench.groundtruth import TWINS, Frame, visible_masks
 
 #: An answer's box must overlap the object's visible box by this IoU to find it.
@@ -125,10 +124,7 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_set_arguments(parser, "detection")
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = set_arguments("detection", __doc__)
     rows: list[dict] = []
     with viewdb.open(args.db, create=False, read_only=True) as db:
         objects = len(db.objects())

@@ -22,20 +22,19 @@ table goes to ``OUT/pose_from_cut.md``, the rows to ``OUT/pose_from_cut.json``.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
 import viewdb
 from support.real import (
-    add_set_arguments,
     band_of,
     by_group,
     each_frame,
     is_symmetric,
     median,
     pose_row,
+    set_arguments,
     share,
     write_results,
 )
@@ -133,10 +132,7 @@ def markdown(summary: dict, catalogue: str) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_set_arguments(parser, "pose_from_cut")
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = set_arguments("pose_from_cut", __doc__)
     rows: list[dict] = []
     with viewdb.open(args.db, create=False, read_only=True) as db:
         for set_name, symmetric, frame in each_frame(args.sets, args.frames, "pose_from_cut"):

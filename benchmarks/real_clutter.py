@@ -38,7 +38,6 @@ photo's answers.
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -47,13 +46,13 @@ import numpy as np
 
 import viewdb
 from support.real import (
-    add_set_arguments,
     band_of,
     by_group,
     each_frame,
     is_symmetric,
     median,
     pose_row,
+    set_arguments,
     share,
     twin_pose,
     write_results,
@@ -177,11 +176,8 @@ def markdown(summary: dict, catalogue: str, objects: int) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_set_arguments(parser, "real_clutter")
-    parser.add_argument("--overlays", type=Path, default=None, help="draw each photo's answers here")
-    args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = set_arguments("real_clutter", __doc__, lambda parser: parser.add_argument(
+        "--overlays", type=Path, default=None, help="draw each photo's answers here"))
     rows: list[dict] = []
     with viewdb.open(args.db, create=False, read_only=True) as db:
         objects = len(db.objects())

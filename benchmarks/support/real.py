@@ -74,13 +74,21 @@ def twin_pose(db, twin: str, exact: str, rotation, translation) -> tuple[np.ndar
     return r_e, float(info_e.scale) * t_en - r_e @ np.asarray(info_e.centre)
 
 
-def add_set_arguments(parser: argparse.ArgumentParser, name: str) -> None:
-    """The options every real-set benchmark takes: ``--db``, ``--sets``, ``--frames`` and
-    ``--out`` (default ``benchmarks/out/NAME``)."""
+def set_arguments(name: str, doc: str, extra: Callable[[argparse.ArgumentParser], None] | None = None
+                  ) -> argparse.Namespace:
+    """The command line of the real-set benchmark ``name`` (``doc``: its module doc): ``--db``,
+    ``--sets``, ``--frames`` and ``--out`` (default ``benchmarks/out/NAME``, made), and what
+    ``extra`` adds."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--db", type=Path, required=True, help="the catalogue (every real mesh ingested)")
     parser.add_argument("--sets", default=",".join(SETS), help="photo sets of ../shared/real")
     parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each set")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / name)
+    if extra is not None:
+        extra(parser)
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    return args
 
 
 def each_frame(sets: str, frames: int | None, name: str) -> Iterator[tuple[str, set[str], Frame]]:
