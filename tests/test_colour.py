@@ -220,3 +220,36 @@ def test_only_meshes_with_colour_of_their_own_carry_colour(twins_db, tiered_db):
         assert not carries_colour(db.mesh("l_bracket"))  # an STL: no colour at all
         assert db.server_tier().view_colours([("l_bracket", 0.0, 0.0)]) == [None]
         assert carries_colour(db.mesh("mug"))
+
+
+# ---------------------------------------------------------------- busy surroundings
+def test_surround_spread_tells_a_plain_table_from_a_cluttered_desk():
+    """The ring around a box: a plain, lightly noisy table reads under the
+    ``busy_surround`` threshold, a patchwork of other objects' colours above it; the box's
+    own pixels never count, and a box at the photo's edge is measured on what is left."""
+    from viewdb.bench.photos import table_photo
+    from viewdb.recognition.regions import surround_spread
+
+    threshold = RecognitionConfig().busy_surround
+    plain, _ = table_photo([], (320, 240), [])
+    box = (120, 80, 200, 160)
+    assert surround_spread(plain, box) < threshold
+    rng = np.random.default_rng(3)
+    patches = rng.integers(0, 256, (12, 16, 3), dtype=np.uint8)
+    busy = np.asarray(cv2.resize(patches, (320, 240), interpolation=cv2.INTER_NEAREST), np.uint8)
+    assert surround_spread(busy, box) > threshold
+    # whatever the box holds, only its ring counts
+    inside = busy.copy()
+    inside[80:160, 120:200] = plain[80:160, 120:200]
+    assert surround_spread(inside, box) == pytest.approx(surround_spread(busy, box))
+    edged = plain.copy()
+    edged[80:160, 120:200] = busy[80:160, 120:200]
+    assert surround_spread(edged, box) < threshold
+    assert surround_spread(busy, (0, 0, 40, 30)) > threshold  # clipped at the corner
+    assert surround_spread(plain, (0, 0, 320, 240)) == 0.0  # no ring at all
+
+
+@pytest.mark.parametrize("name", ["prompt_outline_weight", "busy_outline_weight", "busy_surround"])
+def test_outline_weights_cannot_be_negative(name):
+    with pytest.raises(ValueError, match=name):
+        RecognitionConfig(**{name: -0.1})

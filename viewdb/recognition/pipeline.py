@@ -52,7 +52,7 @@ from .client_tier import ClientTier
 from .colour import colour_distance, colour_signature, core_signature, has_colour, rerank
 from .image import LoadedImage, load_image
 from .options import QueryOptions
-from .regions import Prompts, Region, find_regions
+from .regions import Prompts, Region, find_regions, surround_spread
 from .results import ObjectResult, QueryMatch, QueryResult
 from .retrieval import merge, recognise_curve
 from .segmentation import Segmentation, label_mask, segment
@@ -316,12 +316,13 @@ def _colour_matches(
 
 def _by_colour_channel(
     pooled: list[Pooled], shape: QueryShape, options: QueryOptions, query: NDArray[np.float32],
-    matches: list[ColourMatch], server: ServerTier, traffic: _Traffic,
+    matches: list[ColourMatch], server: ServerTier, traffic: _Traffic, busy: bool = False,
 ) -> tuple[list[Pooled], Scores]:
     """Stage 4 for an object cut from a prompt: the outline's pool and the colour
     channel's ``matches`` (:mod:`viewdb.search.colour_index`) for its signature
     ``query``, each searched exactly, ranked by colour distance plus
-    ``prompt_outline_weight`` × log(outline distance / the best one's). An object whose
+    ``prompt_outline_weight`` (``busy_outline_weight`` for an object in ``busy``
+    surroundings) × log(outline distance / the best one's). An object whose
     mesh has no colour counts ``uncoloured_distance``; a coloured one the channel did not
     name, the larger of that and the channel's last distance."""
     recognition = options.recognition
@@ -340,7 +341,7 @@ def _by_colour_channel(
             counted[name] = neutral if signature is None else max(neutral, matches[-1].distance)
             shown[name] = None if signature is None else colour_distance(query, signature)
     nearest = max(min(c.distance for c, _ in pooled), 1e-12)
-    weight = recognition.prompt_outline_weight
+    weight = recognition.busy_outline_weight if busy else recognition.prompt_outline_weight
     scores = [counted[c.object] + weight * float(np.log(max(c.distance, nearest) / nearest))
               for c, _ in pooled]
     order = sorted(range(len(pooled)), key=lambda i: (scores[i], pooled[i][0].object))
@@ -419,13 +420,14 @@ def _colour_channel(options: QueryOptions, prompted: bool, recolour: bool) -> bo
 
 def _recognise(
     shape: QueryShape, options: QueryOptions, server: ServerTier, client: ClientTier | None,
-    traffic: _Traffic, prompted: bool = False,
+    traffic: _Traffic, prompted: bool = False, busy: bool = False,
 ) -> tuple[list[QueryMatch], dict[str, float]]:
     """Stages 3–5 for one segmented object: its matches and each stage's time (ms).
     ``prompted``: the object was cut from a prompt (a box, a point), so its outline is
     less sure: in a photo with colour it is ranked by its colours first (the colour
     channel, :func:`_by_colour_channel`), else the pool is deeper
-    (``recognition.prompt_pool``)."""
+    (``recognition.prompt_pool``); ``busy``: its surroundings are busy, so its outline
+    counts less still there."""
     start = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
     query, named = (_colour_matches(shape, options, server, traffic)
@@ -438,7 +440,7 @@ def _recognise(
     channel = bool(named) and bool(ranked)
     if channel:
         assert query is not None
-        ranked, colours = _by_colour_channel(ranked, shape, options, query, named, server, traffic)
+        ranked, colours = _by_colour_channel(ranked, shape, options, query, named, server, traffic, busy)
     elif recolour and ranked:
         ranked, colours = _by_colour(ranked, shape, server, traffic)
     coloured = time.perf_counter()
@@ -524,7 +526,9 @@ def run_regions(
     for region in regions:
         t0 = time.perf_counter()
         shape = region_shape(loaded, region, samples, options)
-        matches, timing = _recognise(shape, options, server, client, traffic, region.prompt is not None)
+        prompted = region.prompt is not None
+        busy = prompted and surround_spread(loaded.rgb, region.box) >= options.recognition.busy_surround
+        matches, timing = _recognise(shape, options, server, client, traffic, prompted, busy)
         timing["segment"] = (time.perf_counter() - t0) * 1e3 - timing["total"]  # its curves
         timing["total"] += timing["segment"]
         for key, value in timing.items():

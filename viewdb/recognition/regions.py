@@ -86,7 +86,7 @@ from .segmentation import (
     segment,
 )
 
-__all__ = ["Box", "Point", "Prompts", "Region", "find_regions", "parse_box", "parse_point"]
+__all__ = ["Box", "Point", "Prompts", "Region", "find_regions", "parse_box", "parse_point", "surround_spread"]
 
 _NUMBER = r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*"
 
@@ -464,6 +464,24 @@ def colour_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int]) -> flo
     if len(inner) < 2:
         return 0.0
     return float(np.sqrt(max(0.0, float(np.trace(np.cov(inner.T))))))
+
+
+def surround_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int], share: float = 0.3) -> float:
+    """How busy an object's surroundings are: the root of the trace of the CIE Lab
+    covariance of the pixels in a ring around ``box`` (reaching ``share`` of its longer
+    side beyond it, at least 4 pixels; clipped to the photo). A plain table or wall gives
+    about 10, a cluttered desk 20 to 50; 0 when the ring has fewer than 3 pixels."""
+    h, w = rgb.shape[:2]
+    x1, y1, x2, y2 = box
+    margin = max(4, round(share * max(x2 - x1, y2 - y1)))
+    cx1, cy1, cx2, cy2 = max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
+    crop = np.ascontiguousarray(rgb[cy1:cy2, cx1:cx2, :3])
+    ring = np.ones(crop.shape[:2], dtype=bool)
+    ring[max(0, y1 - cy1):max(0, y2 - cy1), max(0, x1 - cx1):max(0, x2 - cx1)] = False
+    if np.count_nonzero(ring) < 3:
+        return 0.0
+    lab = cv2.cvtColor(crop.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)[ring]
+    return float(np.sqrt(max(0.0, float(np.trace(np.cov(lab.T))))))
 
 
 def _checked(mask: NDArray[np.bool_], method: str, prompt: Prompt | None, image: LoadedImage,
