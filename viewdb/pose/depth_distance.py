@@ -7,7 +7,8 @@ and the direction of its translation are kept; the translation is scaled by the 
 ``λ`` that lays the posed mesh's visible surface on the measured depths:
 
 * the mesh is drawn at the pose as a cloud of points sampled evenly over its surface
-  (nearest point per pixel): each covered pixel of the object's mask has a depth
+  (:func:`surface_points`, turned into the camera once; the nearest point per pixel,
+  :func:`surface_depth`): each covered pixel of the object's mask has a depth
   ``z = t_z + δ``, ``δ`` that surface point's depth relative to the model origin's;
 * scaling the translation by ``λ`` moves the surface to ``λ·t_z + δ``, so each pixel with
   a reading ``d`` asks for ``λ = (d − δ) / t_z``; the median of these answers (pixels of
@@ -31,7 +32,7 @@ from ..errors import QueryError
 from .intrinsics import Intrinsics
 from .views import PoseEstimate
 
-__all__ = ["distance_from_depth", "surface_depth"]
+__all__ = ["distance_from_depth", "surface_depth", "surface_points"]
 
 #: Covered mask pixels with a reading needed to trust the depth.
 MIN_PIXELS = 30
@@ -42,30 +43,32 @@ _POINTS_PER_PIXEL = 3.0
 _MIN_POINTS, _MAX_POINTS = 20_000, 400_000
 
 
-def surface_depth(triangles: MeshTriangles, rotation: NDArray[np.floating],
-                  translation: NDArray[np.floating], intrinsics: Intrinsics, shape: tuple[int, int],
-                  points: int) -> NDArray[np.float64]:
-    """The depth (camera z) of the mesh's nearest surface at each pixel of an image of
-    ``shape``, the mesh at ``(rotation, translation)`` in the pinhole camera; NaN where no
-    point lands. ``points`` surface points, sampled evenly by area with a fixed seed."""
+def surface_points(triangles: MeshTriangles, count: int) -> NDArray[np.float64]:
+    """``count`` points spread evenly by area over the mesh's surface (a fixed seed), and
+    its vertices: ``(count + V, 3)`` in model units; none when the mesh has no area."""
     v, f = triangles.vertices, triangles.faces
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    out = np.full(shape, np.nan)
     if not len(f) or area.sum() <= 0:
-        return out
+        return np.zeros((0, 3))
     rng = np.random.default_rng(0)
-    face = rng.choice(len(f), size=points, p=area / area.sum())
-    root, share = np.sqrt(rng.random(points)), rng.random(points)  # uniform over each triangle
+    face = rng.choice(len(f), size=count, p=area / area.sum())
+    root, share = np.sqrt(rng.random(count)), rng.random(count)  # uniform over each triangle
     cloud = ((1 - root)[:, None] * a[face] + (root * (1 - share))[:, None] * b[face]
              + (root * share)[:, None] * c[face])
-    r, t = np.asarray(rotation, np.float64), np.asarray(translation, np.float64)
-    cam = np.concatenate([cloud, v]) @ r.T + t
-    z = cam[:, 2]
+    return np.concatenate([cloud, v])
+
+
+def surface_depth(points: NDArray[np.floating], intrinsics: Intrinsics, shape: tuple[int, int]
+                  ) -> NDArray[np.float64]:
+    """The depth (camera z) of the nearest of ``points`` (in the camera frame, OpenCV) at
+    each pixel of an image of ``shape`` through the pinhole camera; NaN where none lands."""
+    out = np.full(shape, np.nan)
+    z = points[:, 2]
     front = z > 1e-9
     fx, fy, cx, cy = (float(x) for x in intrinsics)
-    u = np.round(fx * cam[front, 0] / z[front] + cx).astype(np.int64)
-    w = np.round(fy * cam[front, 1] / z[front] + cy).astype(np.int64)
+    u = np.round(fx * points[front, 0] / z[front] + cx).astype(np.int64)
+    w = np.round(fy * points[front, 1] / z[front] + cy).astype(np.int64)
     inside = (u >= 0) & (u < shape[1]) & (w >= 0) & (w < shape[0])
     flat = np.full(shape[0] * shape[1], np.inf)
     np.minimum.at(flat, w[inside] * shape[1] + u[inside], z[front][inside])
@@ -86,13 +89,14 @@ def distance_from_depth(estimate: PoseEstimate, triangles: MeshTriangles, mask: 
     if not len(ys):
         return estimate
     box = (int(ys.max() - ys.min() + 1) * int(xs.max() - xs.min() + 1))
-    points = int(min(_MAX_POINTS, max(_MIN_POINTS, _POINTS_PER_PIXEL * box)))
-    rotation = np.asarray(estimate.rotation, np.float64)
+    count = int(min(_MAX_POINTS, max(_MIN_POINTS, _POINTS_PER_PIXEL * box)))
+    # the surface turned into the camera once: only the distance changes below
+    turned = surface_points(triangles, count) @ np.asarray(estimate.rotation, np.float64).T
     translation = np.asarray(estimate.translation, np.float64)
     factor, used = 1.0, 0
     for _ in range(2):
         t = translation * factor
-        rendered = surface_depth(triangles, rotation, t, intrinsics, mask.shape, points)
+        rendered = surface_depth(turned + t, intrinsics, mask.shape)
         both = mask & np.isfinite(rendered) & np.isfinite(depth)
         used = int(both.sum())
         if used < MIN_PIXELS or t[2] <= 0:
