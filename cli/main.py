@@ -459,7 +459,8 @@ def query(
              "TIFF, float TIFF, .npy); it sets each pose's distance.", dir_okay=False)] = None,
     depth_scale: Annotated[float, typer.Option(
         help="One depth unit in the meshes' units (0.001: millimetres against meshes in metres).",
-        callback=_number(1e-12, 1e12))] = viewdb_config.DEFAULT_DEPTH_SCALE,
+        callback=_number(viewdb_config.LIMITS.min_depth_scale, viewdb_config.LIMITS.max_depth_scale)
+    )] = viewdb_config.DEFAULT_DEPTH_SCALE,
     rerank: Annotated[bool, typer.Option(
         "--rerank", help="With --intrinsics: re-rank the k results by the IoU of their perspective "
                          "silhouette fit.")] = False,

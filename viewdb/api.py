@@ -306,7 +306,7 @@ class ViewDB:
         prompts = Prompts.of(boxes, points, every, max_objects)
         server_tier, client_tier = self._tiers(options.plan, client, server)
         if depth is not None:
-            image = self._with_depth(image, depth, depth_scale, options, server)
+            image = self._with_depth(image, depth, depth_scale, options.camera, remote=server is not None)
         result = run_query(image, options, server_tier, client_tier, self.config.features.curve_samples,
                            mask=mask, label_map=label_map, label=label, prompts=prompts)
         if server is not None or self.role != "full":
@@ -314,11 +314,12 @@ class ViewDB:
         return replace(result, drawer=partial(self._draw, intrinsics=options.camera))
 
     def _with_depth(self, image: str | Path | NDArray[Any] | LoadedImage, depth: NDArray[Any] | str | Path,
-                    scale: float, options: QueryOptions, server: ServerTier | None) -> LoadedImage:
-        """The photo loaded with its depth image (:meth:`query`'s ``depth``)."""
-        if options.camera is None:
+                    scale: float, camera: Intrinsics | None, *, remote: bool = False) -> LoadedImage:
+        """The photo loaded with its depth image (:meth:`query`'s ``depth``); ``remote``:
+        the pose is asked of a server."""
+        if camera is None:
             raise QueryError("`depth` needs the camera's `intrinsics`: it sets a perspective pose's distance")
-        if server is not None or self.role != "full":
+        if remote or self.role != "full":
             raise QueryError("`depth` is used where the meshes are: query the full file (over HTTP, its "
                              "server's POST /query), not a client file")
         loaded = image if isinstance(image, LoadedImage) else load_image(image)
@@ -447,7 +448,7 @@ class ViewDB:
         camera = parse_intrinsics(intrinsics)
         self.object(name)  # NotFound for an unknown name
         if depth is not None:
-            image = self._with_depth(image, depth, depth_scale, QueryOptions(intrinsics=camera), None)
+            image = self._with_depth(image, depth, depth_scale, camera)
         _, _, query = segment_photo(image, mask=mask, label_map=label_map, label=label)
         return pose_known(self._catalogue, query, name, camera)
 

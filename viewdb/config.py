@@ -51,6 +51,10 @@ class InputLimits:
     #: Side of a rendered view, pixels.
     min_image_size: int = 16
     max_image_size: int = 4096
+    #: One unit of a depth image in the meshes' units (a positive length: from a
+    #: nanometre-scale unit against metres to a kilometre against micrometres, and then some).
+    min_depth_scale: float = 1e-12
+    max_depth_scale: float = 1e12
 
 
 #: The limits in force.

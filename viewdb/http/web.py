@@ -51,7 +51,7 @@ from starlette.exceptions import HTTPException
 
 from ..api import ViewDB
 from ..camera import normalise_angle
-from ..config import OverlayConfig, SegmentationConfig, WebConfig, finite
+from ..config import LIMITS, OverlayConfig, SegmentationConfig, WebConfig, finite
 from ..errors import ImageError, QueryError, ViewDBError
 from ..pose.intrinsics import Intrinsics, check_intrinsics
 from ..recognition.depth_image import decode_depth
@@ -288,7 +288,8 @@ async def _camera_fields(form: Any) -> dict[str, Any]:
     raw = str(form.get("depth_scale") or "").strip()
     if raw:
         try:
-            out["depth_scale"] = finite(float(raw), "depth_scale", 1e-12, 1e12)
+            out["depth_scale"] = finite(float(raw), "depth_scale", LIMITS.min_depth_scale,
+                                        LIMITS.max_depth_scale)
         except ValueError:
             raise HTTPException(422, f"depth_scale must be a positive number, got {raw[:40]!r}") from None
     return out

@@ -18,7 +18,6 @@ pixel, as RGB-D drivers deliver it) and uses it to fix how far away a posed obje
 from __future__ import annotations
 
 import io
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import DEFAULT_DEPTH_SCALE
+from ..config import DEFAULT_DEPTH_SCALE, LIMITS, finite
 from ..errors import ImageError
 from ..paths import open_regular
 from .image import describe_error
@@ -41,9 +40,8 @@ def load_depth(source: str | os.PathLike[str] | NDArray[Any], shape: tuple[int, 
     units (depth × ``scale``; NaN where there is no reading), checked to be the size of
     the photo (``shape``, its ``(height, width)``). ``ImageError`` naming the file for an
     unreadable file, a colour image, another size, or no reading at all; ``ValueError``
-    for a ``scale`` that is not a positive finite number."""
-    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
-        raise ValueError(f"`depth_scale` must be a positive number, got {scale!r}")
+    for a ``scale`` outside ``LIMITS``' depth scales."""
+    scale = finite(scale, "`depth_scale`", LIMITS.min_depth_scale, LIMITS.max_depth_scale)
     name = None if isinstance(source, np.ndarray) else str(source)
     raw = source if isinstance(source, np.ndarray) else _read(Path(source))
     if raw.ndim == 3 and raw.shape[2] == 1:
