@@ -263,6 +263,20 @@ def _box_pixels(box: Box, shape: tuple[int, int]) -> tuple[int, int, int, int]:
     return x1, y1, x2, y2
 
 
+def _grown(box: tuple[int, int, int, int], margin: int, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """``box`` grown by ``margin`` pixels on every side, clipped to a photo of ``shape``."""
+    x1, y1, x2, y2 = box
+    h, w = shape
+    return max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
+
+
+def _lab_spread(lab: NDArray[Any]) -> float:
+    """The root of the trace of the covariance of Lab colours ``(n, 3)``; 0 for fewer than 2."""
+    if len(lab) < 2:
+        return 0.0
+    return float(np.sqrt(max(0.0, float(np.trace(np.cov(np.asarray(lab).T))))))
+
+
 def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
                  seed: tuple[int, int] | None = None, others: Sequence[Box] = (),
                  margin: float | None = None, texture: bool = False, core: float = 0.0) -> NDArray[np.bool_]:
@@ -277,7 +291,7 @@ def _grabcut_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig,
     x1, y1, x2, y2 = _box_pixels(box, (h, w))
     share = cfg.box_margin if margin is None else margin
     margin = max(cfg.box_min_margin, round(share * max(x2 - x1, y2 - y1)))
-    cx1, cy1, cx2, cy2 = max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
+    cx1, cy1, cx2, cy2 = _grown((x1, y1, x2, y2), margin, (h, w))
     crop = rgb[cy1:cy2, cx1:cx2]
     init: NDArray[np.uint8] = np.full(crop.shape[:2], cv2.GC_BGD, np.uint8)
     init[y1 - cy1:y2 - cy1, x1 - cx1:x2 - cx1] = cv2.GC_PR_FGD
@@ -381,7 +395,7 @@ def _border_box(rgb: NDArray[np.uint8], box: Box, cfg: SegmentationConfig) -> ND
     h, w = rgb.shape[:2]
     x1, y1, x2, y2 = _box_pixels(box, (h, w))
     margin = max(cfg.box_min_margin, round(cfg.box_margin * max(x2 - x1, y2 - y1)))
-    cx1, cy1, cx2, cy2 = max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
+    cx1, cy1, cx2, cy2 = _grown((x1, y1, x2, y2), margin, (h, w))
     crop = np.ascontiguousarray(rgb[cy1:cy2, cx1:cx2])
     fg = colour_foreground(crop, "grabcut", cfg)
     inside = np.zeros(fg.found.shape, dtype=bool)
@@ -460,10 +474,7 @@ def colour_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int]) -> flo
     crop = rgb[top:min(h, y2 + 3), left:min(w, x2 + 3)]
     lab = cv2.GaussianBlur(cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_RGB2LAB).astype(np.float32),
                            (0, 0), 1.0)
-    inner = lab[y1 - top:y2 - top, x1 - left:x2 - left].reshape(-1, 3)
-    if len(inner) < 2:
-        return 0.0
-    return float(np.sqrt(max(0.0, float(np.trace(np.cov(inner.T))))))
+    return _lab_spread(lab[y1 - top:y2 - top, x1 - left:x2 - left].reshape(-1, 3))
 
 
 def surround_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int], share: float = 0.3) -> float:
@@ -474,14 +485,13 @@ def surround_spread(rgb: NDArray[np.uint8], box: tuple[int, int, int, int], shar
     h, w = rgb.shape[:2]
     x1, y1, x2, y2 = box
     margin = max(4, round(share * max(x2 - x1, y2 - y1)))
-    cx1, cy1, cx2, cy2 = max(0, x1 - margin), max(0, y1 - margin), min(w, x2 + margin), min(h, y2 + margin)
+    cx1, cy1, cx2, cy2 = _grown((x1, y1, x2, y2), margin, (h, w))
     crop = np.ascontiguousarray(rgb[cy1:cy2, cx1:cx2, :3])
     ring = np.ones(crop.shape[:2], dtype=bool)
     ring[max(0, y1 - cy1):max(0, y2 - cy1), max(0, x1 - cx1):max(0, x2 - cx1)] = False
     if np.count_nonzero(ring) < 3:
         return 0.0
-    lab = cv2.cvtColor(crop.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)[ring]
-    return float(np.sqrt(max(0.0, float(np.trace(np.cov(lab.T))))))
+    return _lab_spread(cv2.cvtColor(crop.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)[ring])
 
 
 def _checked(mask: NDArray[np.bool_], method: str, prompt: Prompt | None, image: LoadedImage,
