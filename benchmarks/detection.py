@@ -21,10 +21,8 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 import viewdb
-from support.real import band_of, each_frame, median, set_arguments, share, write_results
+from support.real import band_of, each_frame, median, set_arguments, share, visibility, write_results
 from viewdb.bench.groundtruth import TWINS, Frame, visible_masks
 
 #: An answer's box must overlap the object's visible box by this IoU to find it.
@@ -61,14 +59,12 @@ def match(answers: list[tuple[str, tuple[int, int, int, int]]], frame: Frame) ->
 
 
 def visibilities(frame: Frame) -> list[float]:
-    """Each annotated object's visible fraction: the set's, else the share of its
-    silhouette that the other annotated objects leave visible."""
+    """Each annotated object's visible fraction (:func:`support.real.visibility`; the
+    masks are rendered only for a set that gives none)."""
     if all(inst.visibility is not None for inst in frame.instances):
         return [float(inst.visibility) for inst in frame.instances]
-    masks = visible_masks(frame)
-    return [inst.visibility if inst.visibility is not None
-            else float(np.count_nonzero(visible) / max(1, np.count_nonzero(whole)))
-            for inst, (whole, visible) in zip(frame.instances, masks, strict=True)]
+    return [visibility(inst, whole, visible)
+            for inst, (whole, visible) in zip(frame.instances, visible_masks(frame), strict=True)]
 
 
 def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame) -> dict:

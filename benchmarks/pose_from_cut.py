@@ -36,6 +36,7 @@ from support.real import (
     pose_row,
     set_arguments,
     share,
+    visibility,
     write_results,
 )
 from viewdb.bench.groundtruth import Frame, mask_iou, visible_masks
@@ -70,8 +71,7 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
         cuts = {}
     rows = []
     for i, (inst, (whole, visible)) in enumerate(zip(frame.instances, masks, strict=True)):
-        vis = inst.visibility if inst.visibility is not None else (
-            float(np.count_nonzero(visible) / max(1, np.count_nonzero(whole))))
+        vis = visibility(inst, whole, visible)
         sym = is_symmetric(inst, symmetric)
         cut = cuts.get(i)
         rows.append({"set": set_name, "frame": frame.name, "object": inst.name, "visibility": vis,

@@ -55,6 +55,7 @@ from support.real import (
     set_arguments,
     share,
     twin_pose,
+    visibility,
     write_results,
 )
 from viewdb.bench.groundtruth import TWINS, Frame, mask_iou, visible_masks
@@ -109,8 +110,7 @@ def run_frame(db: viewdb.ViewDB, set_name: str, frame: Frame, symmetric: set[str
     for i, (inst, (whole, visible)) in enumerate(zip(frame.instances, masks, strict=True)):
         exact = inst.mesh.stem
         same = (exact, *TWINS.get(exact, ()))
-        vis = inst.visibility if inst.visibility is not None else (
-            float(np.count_nonzero(visible) / max(1, np.count_nonzero(whole))))
+        vis = visibility(inst, whole, visible)
         row: dict = {"set": set_name, "frame": frame.name, "object": inst.name, "visibility": vis,
                      "band": band_of(vis), "box": list(inst.box), "seconds": wall / len(frame.instances),
                      "error": error, "rank": None, "rank_same": None, "top": None, "cut_iou": 0.0,

@@ -28,6 +28,14 @@ def band_of(visibility: float) -> str:
     return next(name for lo, hi, name in BANDS if lo <= visibility < hi)
 
 
+def visibility(inst: Instance, whole: np.ndarray, visible: np.ndarray) -> float:
+    """An annotated object's visible fraction: the set's, else the share of its
+    silhouette ``whole`` that is ``visible`` (the other annotated objects removed)."""
+    if inst.visibility is not None:
+        return float(inst.visibility)
+    return float(np.count_nonzero(visible) / max(1, np.count_nonzero(whole)))
+
+
 def symmetric_names(folder: Path) -> set[str]:
     """The objects a set's ``gt.json`` lists as symmetric."""
     return set(json.loads((folder / "gt.json").read_text()).get("symmetric", []))
