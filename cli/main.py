@@ -237,9 +237,12 @@ def ingest(
             if p.outcome is not None and p.outcome.status == "failed":
                 _say(f"viewdb: {as_flags(str(p.outcome.error))}", err)
 
+        def on_look(done: int, total: int) -> None:
+            bar.update(task, total=total, completed=done, description="fitting the look model")
+
         report = target.ingest(files, jobs=jobs, skim=not no_skim, progress=on_progress,
                                max_faces=max_faces or None,
-                               allow_missing_textures=allow_missing_textures, ray=ray)
+                               allow_missing_textures=allow_missing_textures, ray=ray, look_progress=on_look)
     _print_ingest(report, as_json)
 
 

@@ -24,11 +24,13 @@ import viewdb
 from benchmarks.support.serving import ServerProcess, multipart, request
 from tests.conftest import mixed_query_curves
 from viewdb.bench.photos import composite_photo
+from viewdb.catalogue.look import LOOK_DIMS, look_features
 from viewdb.http import models
 from viewdb.http.wire import (
     ColourRankingReply,
     ColourReply,
     FitReply,
+    LookReply,
     PoseReply,
     PoseRequest,
     decode_query,
@@ -137,6 +139,10 @@ def test_a_box_prompted_query_over_http_equals_the_local_one(tiered_db, files, r
         here, _ = full.server_tier().colour_ranking(colour_signature(
             img, full.query(img, boxes=[box], pose=False).objects[0].region.mask), 4)
         assert ranked == here and ranked[0].object == "mug"
+        look = look_features(img[box[1]:box[3], box[0]:box[2]])
+        theirs, _ = remote.looks(look)
+        ours, _ = full.server_tier().looks(look)
+        assert theirs == pytest.approx(ours) and "mug" in ours and min(ours.values()) == 0.0
 
 
 def test_refine_and_walk_over_http_equal_the_local_server_half(tiered_db, files, remote):
@@ -687,6 +693,9 @@ BODY_MODELS = {
         "signature": _plausible_or(st.lists(st.floats(0, 1), min_size=256, max_size=256),
                                    st.lists(NASTY_FLOATS, max_size=260)),
         "n": _plausible_or(st.integers(1, 10), st.integers(-3, 10**6) | st.text(max_size=3))}),
+    "/looks": st.fixed_dictionaries({
+        "look": _plausible_or(st.lists(st.floats(0, 1), min_size=LOOK_DIMS, max_size=LOOK_DIMS),
+                              st.lists(NASTY_FLOATS, max_size=LOOK_DIMS + 4))}),
     "/fits": st.fixed_dictionaries({"image": _query_png(), "views": st.lists(st.fixed_dictionaries(
         {"object": _plausible_or(st.sampled_from(OBJECTS), NAMES), "azimuth": _plausible_or(ANGLES),
          "elevation": _plausible_or(ANGLES)}), min_size=1, max_size=3)}),
@@ -742,7 +751,7 @@ BODY_MODELS["/query"] = _query_form()
 #: The documented model of each endpoint's body: every one is fuzzed.
 DOCUMENTED = {"/refine": models.RefineRequestModel, "/walk": models.WalkRequestModel,
               "/pose": models.PoseRequestModel, "/colours": models.ColourRequestModel,
-              "/colour-ranking": models.ColourRankingRequestModel,
+              "/colour-ranking": models.ColourRankingRequestModel, "/looks": models.LookRequestModel,
               "/fits": models.FitRequestModel, "/overlay": models.OverlayRequestModel,
               "/query": models.WebQueryFormModel}
 
@@ -796,6 +805,9 @@ def test_fuzz_every_body_model_gets_a_reply_or_a_4xx_never_a_500(server, path, d
         found = ColourRankingReply.from_dict(reply).matches
         assert len(found) <= body["n"] and all(0 <= m.distance <= 1 for m in found)
         assert [m.distance for m in found] == sorted(m.distance for m in found)
+    elif path == "/looks":
+        distances = LookReply.from_dict(reply).distances
+        assert all(d >= 0 for d in distances.values())
     elif path == "/query":
         assert 1 <= len(reply["results"]) and reply["image"] and "\x1b" not in reply["image"]
     else:

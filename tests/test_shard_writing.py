@@ -96,6 +96,15 @@ def test_ingest_into_new_shards_places_each_object_and_keeps_the_manifest(tmp_pa
                 assert sorted(shard.views(name)) == sorted(db.views(name))
                 for at in db.views(name):
                     np.testing.assert_array_equal(shard.view(name, *at).curve, db.view(name, *at).curve)
+        # one look model over every shard's objects, in each: the single file's
+        single_model = db._catalogue.look_model()
+        assert single_model is not None
+        probe = np.random.default_rng(0).random(single_model.mean.shape).astype(np.float32)
+        for path in manifest.files:
+            with viewdb.open(path, read_only=True) as shard:
+                key, model = shard._catalogue.shard_look()
+                assert key == db._catalogue.look_key() and shard._catalogue.look_model() is None
+                assert model.distances(probe) == pytest.approx(single_model.distances(probe))
 
     # through the CLI: re-running is a no-op, a new object lands in its shard
     code = main(["ingest", *map(str, [sample("cone"), sample("torus")]), "--shards", str(folder), "--json"])
@@ -105,6 +114,11 @@ def test_ingest_into_new_shards_places_each_object_and_keeps_the_manifest(tmp_pa
     manifest = read_manifest(folder)
     assert sum(manifest.objects) == len(SMALL) + 1
     assert manifest.objects[shard_of("torus", 3)] == 1 + sum(shard_of(n, 3) == shard_of("torus", 3) for n in SMALL)
+    keys = set()
+    for path in manifest.files:  # fitted again over the six objects, in every shard
+        with viewdb.open(path, read_only=True) as shard:
+            keys.add(shard._catalogue.shard_look()[0])
+    assert len(keys) == 1 and keys != {key}
 
 
 def test_a_stale_manifest_is_repaired_and_misplaced_objects_refused(small_db, tmp_path):

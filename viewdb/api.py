@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from .catalogue.describe import ObjectDescription
 from .catalogue.ingest import IngestProgress, IngestReport, IngestTarget, Upgrade, checked_options, run_ingest
+from .catalogue.look_training import fit_catalogue_looks, look_key
 from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
@@ -56,11 +57,12 @@ from .search.shifts import ShiftWindow
 from .storage.export import export_client
 from .storage.integrity import CheckReport, check_store, missing_schema
 from .storage.schema import SCHEMA_REVISION
-from .storage.store import Store
+from .storage.store import Store, StoredLook
 from .storage.stored_catalogue import StoredCatalogue
 from .storage.tiers import TIERS
 
-__all__ = ["DatabaseInfo", "ViewDB", "describe_paths", "open", "render_model"]
+__all__ = ["DatabaseInfo", "ViewDB", "describe_paths", "fit_shared_looks", "open", "render_model",
+           "share_looks"]
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,7 @@ class ViewDB:
         allow_missing_textures: bool = False,
         ray: str | None = None,
         ray_config: RayIngestConfig | None = None,
+        look_progress: Callable[[int, int], None] | None = None,
     ) -> IngestReport:
         """Add mesh files; an object is named after its file's stem.
 
@@ -171,12 +174,23 @@ class ViewDB:
         ``"HOST:PORT"``: a head node) describes the objects as Ray tasks across the
         cluster instead of in ``jobs`` local processes; this process still writes each one
         (:mod:`viewdb.catalogue.distributed`). Ray is the optional extra ``viewdb[ray]``.
+
+        When it ends it writes the tier files and fits the look model again if any object
+        changed (:meth:`fit_look_model`; ``look_progress(done, total)`` follows it).
         """
         options = checked_options(jobs, max_faces, allow_missing_textures)
         report = run_ingest(list(paths), self.config, self.ingest_target(), jobs=jobs, skim=skim,
                             progress=progress, options=options, ray=ray, ray_config=ray_config)
         self.write_tier_files()
+        self.fit_look_model(look_progress)
         return report
+
+    def fit_look_model(self, progress: Callable[[int, int], None] | None = None) -> bool:
+        """Fit the look model (:mod:`viewdb.catalogue.look_training`: every coloured
+        object's renders in synthetic clutter) and store it in the file, unless the stored
+        one was fitted for these objects and reads. With fewer than two coloured objects
+        there is none (any stored one is removed). Returns whether it fitted one. Needs GL."""
+        return fit_shared_looks([self], progress)
 
     def ingest_target(self) -> IngestTarget:
         """What an ingest into this file needs to know (the objects stored, what older
@@ -527,6 +541,44 @@ def _same(a: object, b: object) -> bool:
         return bool(a == b)
     except (TypeError, ValueError):
         return False
+
+
+def fit_shared_looks(dbs: Sequence[ViewDB], progress: Callable[[int, int], None] | None = None) -> bool:
+    """Fit one look model over the objects of every file of ``dbs`` (one file, or the
+    shards of one catalogue) and store it in each, unless each already holds the model of
+    these objects; writable full files only. Returns whether it fitted one."""
+    if any(db.read_only or db.role != "full" for db in dbs):
+        return False
+    hashes: dict[str, str] = {}
+    owner: dict[str, StoredCatalogue] = {}
+    coloured: set[str] = set()
+    for db in dbs:
+        held = db._store.object_hashes()
+        hashes.update(held)
+        owner.update(dict.fromkeys(held, db._catalogue))
+        coloured |= set(db._catalogue.colour_index().objects)
+    key = look_key(hashes)
+    held_looks = [db._catalogue.shard_look() for db in dbs]
+    if all(found is not None and found[0] == key for found in held_looks):
+        return False
+    model = fit_catalogue_looks(lambda name: owner[name].mesh(name), list(hashes), coloured, progress)
+    for db in dbs:
+        stored = None if model is None else StoredLook(key, db._catalogue.look_key(), model.to_bytes())
+        db._store.set_look_model(stored)
+        db._catalogue.forget_look()
+    return model is not None
+
+
+def share_looks(source: ViewDB, parts: Sequence[ViewDB]) -> bool:
+    """Store the look model of ``source`` in each of ``parts`` (its shards, which together
+    hold its objects), when the model is valid for ``source``. Returns whether it did."""
+    found = source._catalogue.shard_look()
+    if found is None or found[0] != source._catalogue.look_key():
+        return False
+    for db in parts:
+        db._store.set_look_model(StoredLook(found[0], db._catalogue.look_key(), found[1].to_bytes()))
+        db._catalogue.forget_look()
+    return True
 
 
 def _query_options(options: QueryOptions | None, keywords: dict[str, Any]) -> QueryOptions:

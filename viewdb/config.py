@@ -16,7 +16,7 @@ from typing import Any
 
 __all__ = [
     "LIMITS", "AppearanceConfig", "BuildConfig", "ClientFileConfig", "FeatureConfig", "HttpConfig",
-    "ImageConfig", "IndexConfig",
+    "ImageConfig", "IndexConfig", "LookConfig",
     "InputLimits", "MatchedPoseConfig", "OverlayConfig", "PerspectiveConfig", "PoseConfig", "RayIngestConfig",
     "RecognitionConfig",
     "RenderConfig", "SearchConfig", "SegmentationConfig", "ShardConfig", "SiftConfig", "SilhouetteConfig",
@@ -887,6 +887,40 @@ class FastConfig:
 
 
 @dataclass(frozen=True)
+class LookConfig:
+    """How an ingest fits the look model (:mod:`viewdb.catalogue.look_training`,
+    :mod:`viewdb.catalogue.look`): every coloured object rendered from ``views``
+    directions, each pasted ``samples`` times into synthetic clutter, its colours cast.
+    All of it makes the model: a model fitted with other settings is fitted again."""
+
+    #: Directions each object is rendered from (random over the sphere, seeded).
+    views: int = 48
+    #: Training crops per coloured object.
+    samples: int = 200
+    #: Side of each render, in pixels.
+    image_size: int = 128
+    #: Spread of each channel's gain (a camera's colour cast), as a share.
+    colour_cast: float = 0.25
+    #: Shrinkage of the within-object covariance (:func:`~viewdb.catalogue.look.fit_look_model`).
+    shrinkage: float = 0.03
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        integer(self.views, "views", 1, 10_000)
+        integer(self.samples, "samples", 1, 100_000)
+        integer(self.image_size, "image_size", 32, 1024)
+        if not 0.0 <= self.colour_cast <= 1.0:
+            raise ValueError(f"colour_cast must be in [0, 1], got {self.colour_cast}")
+        if not 0.0 <= self.shrinkage <= 1.0:
+            raise ValueError(f"shrinkage must be in [0, 1], got {self.shrinkage}")
+
+    def key(self) -> str:
+        """What makes a model, beside the catalogue's objects."""
+        return (f"look1-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
+                f"-k{self.shrinkage}-r{self.seed}")
+
+
+@dataclass(frozen=True)
 class RecognitionConfig:
     """Tunables of the query pipeline (:mod:`viewdb.recognition.pipeline`)."""
 
@@ -939,6 +973,14 @@ class RecognitionConfig:
     #: object came first for 29 % / 34 % / 35 % / 35 % with shares 0 / 0.05 / 0.1 / 0.2,
     #: in the best 5 for 62 % / 66 % / 69 % / 66 % (docs/results/real-clutter.md). 0: the whole cut-out.
     colour_core: float = 0.1
+    #: How much a coloured object's look distance (:mod:`viewdb.catalogue.look`: the
+    #: cut-out's box against a model fitted at ingest to the catalogue's renders in
+    #: synthetic clutter) adds to its colour channel score, counted from the look distance
+    #: at quantile ``look_reference`` of the catalogue's coloured objects (an object whose
+    #: mesh has no colour counts that reference: its render says nothing of the real
+    #: print). Measured in docs/results/real-clutter.md#the-look. 0: looks not used.
+    look_weight: float = 0.1
+    look_reference: float = 0.02
     #: An occluder's pixels inside the silhouette's convex hull make a completed query
     #: shape only when they are at least this share of the silhouette's area
     #: (:func:`viewdb.recognition.shapes.completed_mask`).
@@ -978,9 +1020,11 @@ class RecognitionConfig:
             raise ValueError(f"pool and prompt_pool must be at least 1, got {self.pool}, {self.prompt_pool}")
         if self.colour_pool < 0:
             raise ValueError(f"colour_pool must be at least 0, got {self.colour_pool}")
-        for name in ("prompt_outline_weight", "busy_outline_weight", "busy_surround"):
+        for name in ("prompt_outline_weight", "busy_outline_weight", "busy_surround", "look_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be at least 0, got {getattr(self, name)}")
+        if not 0.0 <= self.look_reference <= 1.0:
+            raise ValueError(f"look_reference must be in [0, 1], got {self.look_reference}")
         if not 0.0 <= self.colour_core <= 0.5:
             raise ValueError(f"colour_core must be in [0, 0.5], got {self.colour_core}")
         if not 0.0 <= self.uncoloured_distance <= 1.0:

@@ -10,6 +10,8 @@ from .wire import (
     ColourRequest,
      FitReply,
     FitRequest,
+    LookReply,
+    LookRequest,
     PoseReply,
     PoseRequest,
 )
@@ -22,6 +24,8 @@ __all__ = [
     "ColourRequest",
     "FitReply",
     "FitRequest",
+    "LookReply",
+    "LookRequest",
     "PoseReply",
     "PoseRequest",
     "RefineRequest",

@@ -12,6 +12,7 @@ Endpoints (the JSON bodies are the messages of :mod:`viewdb.search.plans` and
 ``POST /pose``    the pose of given matches from the segmented query image
 ``POST /colours`` the colour signatures of stored views (the client re-ranks by colour)
 ``POST /colour-ranking`` the objects whose stored colours lie nearest a cut-out's
+``POST /looks``   each coloured object's look distance to a cut-out's box (the look model)
 ``POST /fits``    how well stored views fit the segmented query's shape (the client
                   re-ranks by them, :mod:`viewdb.recognition.verify`)
 ``GET /info``     what the database holds, its build settings and the server's limits
@@ -75,6 +76,8 @@ from .wire import (
     ColourRequest,
     FitReply,
     FitRequest,
+    LookReply,
+    LookRequest,
     PoseReply,
     PoseRequest,
     decode_query,
@@ -436,6 +439,15 @@ def _image_routes(router: APIRouter, guarded: list[Any], run: Callable[..., Any]
         found, ms = await run(lambda db: db.server_tier().colour_ranking(req.signature, req.n)[0])
         return ColourRankingReply(found, {"server_ms": ms}).to_dict()
 
+    @router.post("/looks", dependencies=guarded, openapi_extra=_body(models.LookRequestModel),
+                 responses={200: {"model": models.LookReplyModel}, **_ERRORS},
+                 summary="Each coloured object's look distance to a cut-out's box (the look model)")
+    async def looks(request: Request) -> dict[str, Any]:
+        data = await _json(request)
+        req = _parse(lambda: LookRequest.from_dict(data))
+        found, ms = await run(lambda db: db.server_tier().looks(req.look)[0])
+        return LookReply(found, {"server_ms": ms}).to_dict()
+
     @router.post("/fits", dependencies=guarded, openapi_extra=_body(models.FitRequestModel),
                  responses={200: {"model": models.FitReplyModel}, **_ERRORS},
                  summary="Shape fits of stored views to the segmented query image, to re-rank results")
@@ -454,7 +466,8 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
                              routes=app.routes)
         components = schema.setdefault("components", {}).setdefault("schemas", {})
         for model in (models.RefineRequestModel, models.WalkRequestModel, models.PoseRequestModel,
-                      models.ColourRequestModel, models.ColourRankingRequestModel, models.FitRequestModel,
+                      models.ColourRequestModel, models.ColourRankingRequestModel, models.LookRequestModel,
+                      models.FitRequestModel,
                       models.WebQueryFormModel, models.OverlayRequestModel):
             doc = model.model_json_schema(ref_template="#/components/schemas/{model}")
             components.update(doc.pop("$defs", {}))

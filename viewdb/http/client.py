@@ -49,6 +49,8 @@ from .wire import (
     ColourRequest,
     FitReply,
     FitRequest,
+    LookReply,
+    LookRequest,
     PoseReply,
     PoseRequest,
     shrink_query,
@@ -312,6 +314,16 @@ class RemoteServer:
                 return [], Exchange(0, 0, 0.0, 0.0)
             raise
         return _parse_reply(ColourRankingReply.from_dict, reply, self.url).matches, exchange
+
+    def looks(self, look: np.ndarray) -> tuple[dict[str, float], Exchange]:
+        """The server's look distances; a server that predates them (404) has none."""
+        try:
+            reply, exchange = self.request("POST", "/looks", LookRequest(look).to_dict())
+        except ServerError as exc:
+            if exc.status == 404:
+                return {}, Exchange(0, 0, 0.0, 0.0)
+            raise
+        return _parse_reply(LookReply.from_dict, reply, self.url).distances, exchange
 
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]

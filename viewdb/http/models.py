@@ -13,6 +13,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..catalogue.look import LOOK_DIMS
 from ..config import LIMITS
 from ..search.plans import MAX_BAND, MAX_CURVES, MAX_K
 
@@ -212,6 +213,19 @@ class ColourMatchModel(_Strict):
 
 class ColourRankingReplyModel(_Strict):
     matches: list[ColourMatchModel]
+    stats: dict[str, float]
+
+
+class LookRequestModel(_Strict):
+    """The look of a cut-out's box: each coloured object's look distance to it."""
+
+    look: list[float] = Field(min_length=LOOK_DIMS, max_length=LOOK_DIMS,
+                              description="the box's look (viewdb.catalogue.look.look_features)")
+
+
+class LookReplyModel(_Strict):
+    distances: dict[str, float] = Field(
+        description="per coloured object, its look distance (0 the nearest; empty: no look model)")
     stats: dict[str, float]
 
 

@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from ..catalogue.look import LOOK_DIMS
 from ..config import ImageConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
@@ -43,7 +44,7 @@ from ..typed import Intrinsics
 
 __all__ = [
     "ColourRankingReply", "ColourRankingRequest", "ColourReply", "ColourRequest", "FitReply", "FitRequest",
-    "PoseReply", "PoseRequest",
+    "LookReply", "LookRequest", "PoseReply", "PoseRequest",
     "decode_query", "encode_query",
     "pose_from_dict", "pose_to_dict", "shrink_query",
 ]
@@ -390,6 +391,42 @@ class ColourRankingReply:
             except KeyError as exc:
                 raise QueryError(f"match lacks {exc.args[0]!r}") from exc
         return cls(matches, stats_from_dict(data.get("stats")))
+
+
+@dataclass(frozen=True)
+class LookRequest:
+    """Client → server: the look of a cut-out's box (:func:`viewdb.catalogue.look.look_features`)."""
+
+    look: np.ndarray = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"look": [float(x) for x in np.asarray(self.look, np.float32).ravel()]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> LookRequest:
+        if not isinstance(data, dict) or not isinstance(data.get("look"), list):
+            raise QueryError("request must be an object with a look list")
+        if len(data["look"]) != LOOK_DIMS:
+            raise QueryError(f"a look must be a list of {LOOK_DIMS} numbers, got {len(data['look'])}")
+        return cls(np.array([json_number(x, "look") for x in data["look"]], np.float32))
+
+
+@dataclass(frozen=True)
+class LookReply:
+    """Server → client: each coloured object's look distance (none without a look model)."""
+
+    distances: dict[str, float]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"distances": dict(self.distances), "stats": dict(self.stats)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> LookReply:
+        if not isinstance(data, dict) or not isinstance(data.get("distances"), dict):
+            raise QueryError("reply must be an object with a distances object")
+        return cls({str(k): json_number(v, "distance") for k, v in data["distances"].items()},
+                   stats_from_dict(data.get("stats")))
 
 
 @dataclass(frozen=True)

@@ -124,6 +124,16 @@ class LocalServerTier:
                               {"signature": np.asarray(signature).tolist(), "n": n},
                               lambda found: [m.to_dict() for m in found])
 
+    def looks(self, look: NDArray[np.float32]) -> tuple[dict[str, float], Exchange]:
+        """Each coloured object's look distance (:meth:`StoredCatalogue.look_model`; none
+        without a valid model)."""
+        self._full_tier_only()
+
+        def distances() -> dict[str, float]:
+            model = self.catalogue.look_model()
+            return {} if model is None else model.distances(look)
+        return self._exchange(distances, {"look": np.asarray(look).tolist()}, dict)
+
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..catalogue.features import distance_curve, sample_bearings
+from ..catalogue.look import look_features
 from ..config import RecognitionConfig, SegmentationConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseEstimate, QueryView
@@ -52,7 +53,7 @@ from .client_tier import ClientTier
 from .colour import colour_distance, colour_signature, core_signature, has_colour, rerank
 from .image import LoadedImage, load_image
 from .options import QueryOptions
-from .regions import Prompts, Region, find_regions, surround_spread
+from .regions import Box, Point, Prompts, Region, find_regions, surround_spread
 from .results import ObjectResult, QueryMatch, QueryResult
 from .retrieval import merge, recognise_curve
 from .segmentation import Segmentation, label_mask, segment
@@ -304,19 +305,41 @@ def _search_objects(
 
 def _colour_matches(
     shape: QueryShape, options: QueryOptions, server: ServerTier, traffic: _Traffic,
-) -> tuple[NDArray[np.float32], list[ColourMatch]]:
-    """The cut-out's colour signature and the colour channel's objects for it
+    box: tuple[int, int, int, int] | None = None,
+) -> tuple[NDArray[np.float32], list[ColourMatch], dict[str, float]]:
+    """The cut-out's colour signature, the colour channel's objects for it
     (:attr:`~viewdb.config.RecognitionConfig.colour_pool`; none when the catalogue has
-    no coloured object, or the server predates the channel)."""
+    no coloured object, or the server predates the channel) and each coloured object's
+    look distance to the pixels of ``box`` (default: the cut-out's box; none without a
+    look model, :mod:`viewdb.catalogue.look`)."""
     query = core_signature(shape.view.color, shape.view.mask, options.recognition.colour_core)
     matches, exchange = server.colour_ranking(query, options.recognition.colour_pool)
     traffic.exchanged(exchange)
-    return query, matches
+    looks: dict[str, float] = {}
+    crop = _box_pixels(shape.view, box)
+    if matches and options.recognition.look_weight > 0 and crop is not None:
+        looks, exchange = server.looks(look_features(crop))
+        traffic.exchanged(exchange)
+    return query, matches, looks
+
+
+def _box_pixels(view: QueryView, box: tuple[int, int, int, int] | None) -> NDArray[np.uint8] | None:
+    """The photo's pixels in ``box`` (default: the mask's box), or None when under 2 × 2."""
+    if box is None:
+        ys, xs = np.nonzero(view.mask)
+        if not len(ys):
+            return None
+        box = (int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
+    height, width = view.color.shape[:2]
+    x1, y1 = max(box[0], 0), max(box[1], 0)
+    x2, y2 = min(box[2], width), min(box[3], height)
+    return view.color[y1:y2, x1:x2] if x2 - x1 >= 2 and y2 - y1 >= 2 else None
 
 
 def _by_colour_channel(
     pooled: list[Pooled], shape: QueryShape, options: QueryOptions, query: NDArray[np.float32],
     matches: list[ColourMatch], server: ServerTier, traffic: _Traffic, busy: bool = False,
+    looks: dict[str, float] | None = None,
 ) -> tuple[list[Pooled], Scores]:
     """Stage 4 for an object cut from a prompt: the outline's pool and the colour
     channel's ``matches`` (:mod:`viewdb.search.colour_index`) for its signature
@@ -324,7 +347,9 @@ def _by_colour_channel(
     ``prompt_outline_weight`` (``busy_outline_weight`` for an object in ``busy``
     surroundings) × log(outline distance / the best one's). An object whose
     mesh has no colour counts ``uncoloured_distance``; a coloured one the channel did not
-    name, the larger of that and the channel's last distance."""
+    name, the larger of that and the channel's last distance. With ``looks`` (each
+    coloured object's look distance), each adds ``look_weight`` × its look distance
+    less the ``look_reference`` quantile of them (an object without one adds 0)."""
     recognition = options.recognition
     searched = {c.object for c, _ in pooled}
     pooled = pooled + _search_objects(shape, options, [m.object for m in matches if m.object not in searched],
@@ -344,6 +369,10 @@ def _by_colour_channel(
     weight = recognition.busy_outline_weight if busy else recognition.prompt_outline_weight
     scores = [counted[c.object] + weight * float(np.log(max(c.distance, nearest) / nearest))
               for c, _ in pooled]
+    if looks:
+        reference = float(np.quantile(list(looks.values()), recognition.look_reference))
+        scores = [score + recognition.look_weight * (looks.get(c.object, reference) - reference)
+                  for score, (c, _) in zip(scores, pooled, strict=True)]
     order = sorted(range(len(pooled)), key=lambda i: (scores[i], pooled[i][0].object))
     by_object = {c.object: (shown[c.object], s) for (c, _), s in zip(pooled, scores, strict=True)}
     return [pooled[i] for i in order], by_object
@@ -421,6 +450,7 @@ def _colour_channel(options: QueryOptions, prompted: bool, recolour: bool) -> bo
 def _recognise(
     shape: QueryShape, options: QueryOptions, server: ServerTier, client: ClientTier | None,
     traffic: _Traffic, prompted: bool = False, busy: bool = False,
+    box: tuple[int, int, int, int] | None = None,
 ) -> tuple[list[QueryMatch], dict[str, float]]:
     """Stages 3–5 for one segmented object: its matches and each stage's time (ms).
     ``prompted``: the object was cut from a prompt (a box, a point), so its outline is
@@ -430,8 +460,8 @@ def _recognise(
     counts less still there."""
     start = time.perf_counter()
     recolour = options.colour and has_colour(shape.image.rgb)
-    query, named = (_colour_matches(shape, options, server, traffic)
-                    if _colour_channel(options, prompted, recolour) else (None, []))
+    query, named, looks = (_colour_matches(shape, options, server, traffic, box)
+                           if _colour_channel(options, prompted, recolour) else (None, [], {}))
     asked = time.perf_counter()
     pool = pool_size(options, prompted, recolour, channel=bool(named))
     ranked, client_ms, server_ms = _search(shape, options, pool, server, client, traffic)
@@ -440,7 +470,8 @@ def _recognise(
     channel = bool(named) and bool(ranked)
     if channel:
         assert query is not None
-        ranked, colours = _by_colour_channel(ranked, shape, options, query, named, server, traffic, busy)
+        ranked, colours = _by_colour_channel(ranked, shape, options, query, named, server, traffic, busy,
+                                             looks)
     elif recolour and ranked:
         ranked, colours = _by_colour(ranked, shape, server, traffic)
     coloured = time.perf_counter()
@@ -456,6 +487,14 @@ def _recognise(
     return matches, {"client": client_ms, "server": server_ms, "colour": colour_ms,
                      "verify": (recognised - coloured) * 1e3, "pose": (end - recognised) * 1e3,
                      "total": (end - start) * 1e3}
+
+
+def _prompt_box(prompt: Box | Point | None) -> tuple[int, int, int, int] | None:
+    """A box prompt's pixels (whole pixels it touches); None for another prompt."""
+    if not isinstance(prompt, Box):
+        return None
+    return (int(np.floor(prompt.x1)), int(np.floor(prompt.y1)),
+            int(np.ceil(prompt.x2)), int(np.ceil(prompt.y2)))
 
 
 def _image_name(image: str | Path | NDArray[Any] | LoadedImage, loaded: LoadedImage) -> str:
@@ -528,7 +567,8 @@ def run_regions(
         shape = region_shape(loaded, region, samples, options)
         prompted = region.prompt is not None
         busy = prompted and surround_spread(loaded.rgb, region.box) >= options.recognition.busy_surround
-        matches, timing = _recognise(shape, options, server, client, traffic, prompted, busy)
+        box = _prompt_box(region.prompt)
+        matches, timing = _recognise(shape, options, server, client, traffic, prompted, busy, box)
         timing["segment"] = (time.perf_counter() - t0) * 1e3 - timing["total"]  # its curves
         timing["total"] += timing["segment"]
         for key, value in timing.items():

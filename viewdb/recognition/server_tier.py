@@ -72,6 +72,13 @@ class ServerTier(Protocol):
         nearest first, each with its nearest view."""
         ...
 
+    def looks(self, look: NDArray[np.float32]) -> tuple[dict[str, float], Exchange]:
+        """Each coloured object's look distance to ``look`` (a cut-out's box's
+        :func:`~viewdb.catalogue.look.look_features`), from the file's look model
+        (:meth:`~viewdb.storage.stored_catalogue.StoredCatalogue.look_model`); none
+        without a valid one."""
+        ...
+
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:

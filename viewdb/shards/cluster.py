@@ -287,6 +287,17 @@ class ShardedServerTier:
             return merge_colour_matches([[ColourMatch.from_dict(m) for m in part] for part in parts], n)
         return self._timed(ask)
 
+    def looks(self, look: NDArray[np.float32]) -> tuple[dict[str, float], Exchange]:
+        """The look distances of the model every shard holds (fitted over all of them when
+        they were written); none unless every shard holds a valid one for the same
+        catalogue."""
+        def ask() -> dict[str, float]:
+            shards = list(range(len(self.actors)))
+            parts = self._each(shards, lambda s: self.actors[s].call.remote("looks", look))
+            keys = {None if part is None else part[0] for part in parts}
+            return dict(parts[0][1]) if len(keys) == 1 and None not in keys else {}
+        return self._timed(ask)
+
     def fits(
         self, query: QueryView, views: Sequence[tuple[str, float, float]]
     ) -> tuple[list[float | None], Exchange]:

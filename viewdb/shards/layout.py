@@ -146,7 +146,7 @@ def split_catalogue(
             keep = [n for n in names if shard_of(n, shards) == i]
             target = partial / shard_file(i)
             _write_shard(source, target, set(keep))
-            _write_derived(target)
+            _write_derived(target, source)
             files.append(out / target.name)
             counts.append(len(keep))
             if progress is not None:
@@ -202,13 +202,16 @@ def _write_shard(source: Path, target: Path, keep: set[str]) -> None:
         conn.close()
 
 
-def _write_derived(target: Path) -> None:
+def _write_derived(target: Path, source: Path) -> None:
     """The shard's tier files and its ``fast`` index, next to it, as an ingest ends
-    (a shard is opened read-only, and never writes them itself)."""
+    (a shard is opened read-only, and never writes them itself), and the look model of
+    ``source`` (it serves every shard)."""
     from ..api import open as open_db
+    from ..api import share_looks
 
-    with open_db(target, create=False) as db:
+    with open_db(target, create=False) as db, open_db(source, create=False, read_only=True) as whole:
         db.write_tier_files()
+        share_looks(whole, [db])
 
 
 def _rebuild_tier(conn: sqlite3.Connection, tier: str) -> None:

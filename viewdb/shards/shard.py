@@ -88,6 +88,12 @@ class Shard:
         found, _ = self.tier.colour_ranking(signature, n)
         return [m.to_dict() for m in found]
 
+    def looks(self, look: NDArray[np.float32]) -> tuple[str, dict[str, float]] | None:
+        """Each coloured object's look distance by this shard's look model, and the key of
+        the catalogue the model serves; None without a valid model."""
+        found = self.tier.catalogue.shard_look()
+        return None if found is None else (found[0], found[1].distances(look))
+
     def fits(self, query: QueryView, views: Sequence[tuple[str, float, float]]) -> list[float | None]:
         return self.tier.view_fits(query, views)
 

@@ -26,7 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..api import ViewDB
+from ..api import ViewDB, fit_shared_looks
 from ..api import open as open_db
 from ..catalogue.describe import ObjectDescription
 from ..catalogue.ingest import (
@@ -151,14 +151,18 @@ class ShardFiles:
         allow_missing_textures: bool = False,
         ray: str | None = None,
         ray_config: RayIngestConfig | None = None,
+        look_progress: Callable[[int, int], None] | None = None,
     ) -> IngestReport:
         """:meth:`viewdb.ViewDB.ingest` into the shards: each object goes to the shard the
-        placement rule names, and is written there in one transaction."""
+        placement rule names, and is written there in one transaction. When it ends, one
+        look model is fitted over every shard's objects and stored in each
+        (:func:`viewdb.api.fit_shared_looks`)."""
         options = checked_options(jobs, max_faces, allow_missing_textures)
         report = run_ingest(list(paths), self.config, self.target(), jobs=jobs, skim=skim,
                             progress=progress, options=options, ray=ray, ray_config=ray_config)
         for db in self.dbs:
             db.write_tier_files()
+        fit_shared_looks(self.dbs, look_progress)
         self._count([{o.name for o in db.objects()} for db in self.dbs])  # from the files themselves
         return report
 

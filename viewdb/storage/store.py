@@ -7,11 +7,12 @@ job; :class:`Store` is a database with its rows. ``Store(path, read_only=True)``
 
 from __future__ import annotations
 
+import base64
 import itertools
 import json
 import sqlite3
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any, TypeVar
 
@@ -33,7 +34,7 @@ from .tiers import delete_groups, orthographic_angles, write_groups
 
 _T = TypeVar("_T")
 
-__all__ = ["ObjectRow", "Store", "ViewRow"]
+__all__ = ["ObjectRow", "Store", "StoredLook", "ViewRow"]
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,17 @@ def _symmetry_columns(desc: Any) -> dict[str, Any]:
     }
 
 
+@dataclass(frozen=True)
+class StoredLook:
+    """A look model's bytes and what it was fitted for: ``key``, the catalogue it serves
+    (this file, or every shard of a sharded catalogue), and ``own``, this file's objects
+    when it was stored (:func:`viewdb.catalogue.look_training.look_key`)."""
+
+    key: str
+    own: str
+    model: bytes = field(repr=False)
+
+
 class Store(Database):
     """An open database file and its rows (the connections: :class:`Database`)."""
 
@@ -103,6 +115,31 @@ class Store(Database):
                 sa.insert(s.settings).values(key="build", value=json.dumps(config.to_dict()))
             )
             conn.execute(sa.insert(s.settings).values(key="role", value=json.dumps(role)))
+
+    def look_model(self) -> StoredLook | None:
+        """The stored look model (:mod:`viewdb.catalogue.look`) with the keys it was
+        fitted for, or None (also when damaged: never trusted)."""
+        with self.read() as conn:
+            row = conn.execute(
+                sa.select(s.settings.c.value).where(s.settings.c.key == "look_model")
+            ).first()
+        if row is None:
+            return None
+        try:
+            stored = json.loads(row[0])
+            return StoredLook(str(stored["key"]), str(stored["own"]),
+                              base64.b64decode(stored["model"], validate=True))
+        except (ValueError, KeyError, TypeError):
+            return None
+
+    def set_look_model(self, look: StoredLook | None) -> None:
+        """Store ``look``, replacing any other; None removes it."""
+        with self.transaction() as conn:
+            conn.execute(sa.delete(s.settings).where(s.settings.c.key == "look_model"))
+            if look is not None:
+                value = json.dumps({"key": look.key, "own": look.own,
+                                    "model": base64.b64encode(look.model).decode("ascii")})
+                conn.execute(sa.insert(s.settings).values(key="look_model", value=value))
 
     def mark_generation(self) -> None:
         """Give a file written before index generations one

@@ -26,6 +26,8 @@ from ..camera import camera_direction, grid_views, normalise_angle
 from ..catalogue.appearance import BINS, Appearance, appearance_of, carries_colour, turned_view
 from ..catalogue.describe import describe_view
 from ..catalogue.features import mirror_curve
+from ..catalogue.look import LookModel
+from ..catalogue.look_training import look_key
 from ..catalogue.mesh import NormalisedMesh, mesh_from_glb
 from ..catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from ..catalogue.render import RenderedView, get_renderer
@@ -95,6 +97,8 @@ class StoredCatalogue:
         self._reader: TierReader | None = None
         self._role: str | None = None
         self._colour_index: ColourIndex | None = None
+        #: The look model read and its catalogue key (``False``: not read yet; None: none valid).
+        self._look: tuple[str, LookModel] | None | bool = False
 
     @property
     def path(self) -> Path:
@@ -118,6 +122,7 @@ class StoredCatalogue:
             self._reader.written()
         self._curves.clear()
         self._colour_index = None
+        self._look = False
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         caches: list[OrderedDict[Any, Any]] = [self._regenerated, self._renders, *self._derived.values()]
@@ -145,6 +150,36 @@ class StoredCatalogue:
             rows = np.asarray(signatures, np.float64).reshape(len(names), BINS * BINS)
             self._colour_index = ColourIndex(names, np.asarray(views, np.float64).reshape(-1, 2), rows)
         return self._colour_index
+
+    def look_key(self) -> str:
+        """What a look model of this file's objects is fitted for
+        (:func:`~viewdb.catalogue.look_training.look_key`)."""
+        return look_key(self._store.object_hashes())
+
+    def forget_look(self) -> None:
+        """Read the look model afresh next time (it was written again)."""
+        self._look = False
+
+    def look_model(self) -> LookModel | None:
+        """The look model (:mod:`viewdb.catalogue.look`) stored by the last ingest, or None
+        when there is none or it was fitted for other objects (never trusted stale)."""
+        found = self.shard_look()
+        return found[1] if found is not None and found[0] == self.look_key() else None
+
+    def shard_look(self) -> tuple[str, LookModel] | None:
+        """The stored look model and the key of the catalogue it serves, when this file's
+        objects are still those it was stored with (read once). A shard's model serves
+        every shard: the sharded tier checks that all of them serve the same catalogue."""
+        if self._look is False:
+            stored = self._store.look_model()
+            found = None
+            if stored is not None and stored.own == self.look_key():
+                try:
+                    found = (stored.key, LookModel.from_bytes(stored.model))
+                except ValueError:
+                    found = None
+            self._look = found
+        return self._look if isinstance(self._look, tuple) else None
 
     def derived(self, kind: str, key: tuple[Any, ...], make: Callable[[], _V], limit: int) -> _V:
         """A bounded cache of what later stages derive from this file's data (e.g. colour

@@ -1,0 +1,200 @@
+"""Fit the look model (:mod:`viewdb.catalogue.look`) from the catalogue's own renders.
+
+Each coloured object is rendered from :attr:`~viewdb.config.LookConfig.views` random
+directions. Each training crop (:func:`clutter_crop`) pastes one of them, turned in its
+plane, scaled and with its colours cast (a camera's gain per channel, brightness,
+saturation, gamma), into synthetic clutter: a smooth random colour field under one to
+four renders of any catalogue object, and, more often than not, another render over part
+of it. The crop is the box of what stays visible, blurred and noisy as a photo is, so
+the model learns what survives a cluttered box: the object's colours and texture, not
+its background's. Nothing is downloaded: the catalogue is the training set.
+
+Needs GL (pyrender) for the renders: an ingest fits the model; a query only reads it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Mapping, Sequence
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import LookConfig, RenderConfig
+from .look import LookModel, fit_look_model, look_features
+from .mesh import NormalisedMesh
+from .render import Renderer
+
+__all__ = ["clutter_crop", "fit_catalogue_looks", "look_key", "train_look_model"]
+
+#: Side of the synthetic scene a training crop is cut from, in pixels.
+SCENE = 160
+#: A render with fewer object pixels than this is not used.
+_MIN_PIXELS = 30
+
+Render = tuple[NDArray[np.uint8], NDArray[np.bool_]]
+
+
+def _directions(rng: np.random.Generator, n: int) -> list[tuple[float, float]]:
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return [(float(np.degrees(np.arctan2(y, x))), float(np.degrees(np.arcsin(np.clip(z, -1, 1)))))
+            for x, y, z in v]
+
+
+def _paste(scene: NDArray[np.uint8], colour: NDArray[np.uint8], mask: NDArray[np.bool_],
+           x: int, y: int) -> NDArray[np.bool_]:
+    """Paste ``colour`` where ``mask`` at ``(x, y)`` (clipped); the scene's pixels it covered."""
+    h, w = mask.shape
+    height, width = scene.shape[:2]
+    x0, y0, x1, y1 = max(x, 0), max(y, 0), min(x + w, width), min(y + h, height)
+    covered = np.zeros((height, width), bool)
+    if x1 <= x0 or y1 <= y0:
+        return covered
+    part = mask[y0 - y:y1 - y, x0 - x:x1 - x]
+    scene[y0:y1, x0:x1][part] = colour[y0 - y:y1 - y, x0 - x:x1 - x][part]
+    covered[y0:y1, x0:x1] = part
+    return covered
+
+
+def _resized(render: Render, side: int) -> Render:
+    colour, mask = render
+    return (np.asarray(cv2.resize(colour, (side, side), interpolation=cv2.INTER_AREA), np.uint8),
+            cv2.resize(mask.astype(np.uint8), (side, side), interpolation=cv2.INTER_NEAREST) > 0)
+
+
+def _background(rng: np.random.Generator, pool: Callable[[], Render]) -> NDArray[np.uint8]:
+    grid = rng.integers(0, 256, size=(int(rng.integers(2, 6)), int(rng.integers(2, 6)), 3)).astype(np.uint8)
+    field = cv2.resize(grid, (SCENE, SCENE), interpolation=cv2.INTER_CUBIC).astype(np.float32)
+    field += rng.normal(0.0, rng.uniform(0, 12), size=field.shape)
+    scene = np.clip(field, 0, 255).astype(np.uint8)
+    for _ in range(int(rng.integers(1, 5))):
+        side = int(SCENE * rng.uniform(0.4, 1.1))
+        colour, mask = _resized(pool(), side)
+        x, y = rng.integers(-side // 2, SCENE - side // 2, size=2)
+        _paste(scene, colour, mask, int(x), int(y))
+    return scene
+
+
+def _cast(rng: np.random.Generator, colour: NDArray[np.uint8], spread: float) -> NDArray[np.uint8]:
+    c = colour.astype(np.float32) / 255.0
+    c = c * rng.uniform(0.55, 1.45) * rng.normal(1.0, spread, size=3)
+    grey = c.mean(axis=-1, keepdims=True)
+    c = grey + (c - grey) * rng.uniform(0.6, 1.3)
+    c = np.clip(c, 0.0, 1.0) ** rng.uniform(0.7, 1.4)
+    return np.clip(c * 255.0, 0, 255).astype(np.uint8)
+
+
+def clutter_crop(rng: np.random.Generator, render: Render, pool: Callable[[], Render],
+                 colour_cast: float) -> NDArray[np.uint8] | None:
+    """One training crop of ``render`` (an object's colour and mask) in synthetic clutter
+    whose other objects ``pool`` draws (see the module doc); None when too little of the
+    object stays visible."""
+    colour, mask = render
+    side = mask.shape[0]
+    turn = cv2.getRotationMatrix2D(((side - 1) / 2, (side - 1) / 2), float(rng.uniform(0, 360)), 1.0)
+    turned = np.asarray(cv2.warpAffine(colour, turn, (side, side), flags=cv2.INTER_LINEAR), np.uint8)
+    colour = _cast(rng, turned, colour_cast)
+    mask = cv2.warpAffine(mask.astype(np.uint8), turn, (side, side), flags=cv2.INTER_NEAREST) > 0
+    ys, xs = np.nonzero(mask)
+    if len(ys) < _MIN_PIXELS:
+        return None
+    colour = colour[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    mask = mask[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    scale = rng.uniform(0.45, 0.8) * SCENE / max(mask.shape)
+    w, h = max(int(mask.shape[1] * scale), 8), max(int(mask.shape[0] * scale), 8)
+    colour = np.asarray(cv2.resize(colour, (w, h), interpolation=cv2.INTER_AREA), np.uint8)
+    mask = cv2.resize(mask.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
+    scene = _background(rng, pool)
+    x, y = (SCENE - w) // 2 + int(rng.integers(-10, 11)), (SCENE - h) // 2 + int(rng.integers(-10, 11))
+    visible = _paste(scene, colour, mask, x, y)
+    if rng.random() < 0.6:  # an occluder over part of it
+        size = int(max(w, h) * rng.uniform(0.5, 1.2))
+        occluder, shape = _resized(pool(), size)
+        ox = x + int(rng.uniform(-0.9, 0.9) * w) - size // 2 + w // 2
+        oy = y + int(rng.uniform(-0.9, 0.9) * h) - size // 2 + h // 2
+        visible &= ~_paste(scene, occluder, shape, ox, oy)
+    if visible.sum() < 0.4 * mask.sum():
+        return None
+    blurred = cv2.GaussianBlur(scene, (0, 0), rng.uniform(0.3, 1.5)) if rng.random() < 0.7 else scene
+    photo = np.clip(blurred + rng.normal(0.0, rng.uniform(0, 6), scene.shape), 0, 255).astype(np.uint8)
+    ys, xs = np.nonzero(visible)
+    crop = photo[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+    return crop if min(crop.shape[:2]) >= 6 else None
+
+
+def train_look_model(
+    meshes: Callable[[str], NormalisedMesh], coloured: Sequence[str], others: Sequence[str],
+    config: LookConfig = LookConfig(),  # noqa: B008 - frozen, shared on purpose
+    progress: Callable[[int, int], None] | None = None,
+) -> LookModel | None:
+    """The look model of the ``coloured`` objects (None with fewer than two), their
+    clutter drawn from them and the ``others`` (meshes without colour); ``meshes`` gives
+    an object's normalised mesh. ``progress(done, total)`` after each object rendered and
+    each one's crops."""
+    if len(coloured) < 2:
+        return None
+    rng = np.random.default_rng(config.seed)
+    renderer = Renderer(RenderConfig(image_size=config.image_size))
+    names = list(coloured) + list(others)
+    total, done = len(names) + len(coloured), 0
+    renders: dict[str, list[Render]] = {}
+    for name in names:
+        mesh = meshes(name)
+        views = [renderer.render(mesh, azimuth, elevation)
+                 for azimuth, elevation in _directions(rng, config.views)]
+        kept = [(v.color, v.mask) for v in views if v.mask.sum() >= _MIN_PIXELS]
+        if kept:
+            renders[name] = kept
+        done += 1
+        if progress:
+            progress(done, total)
+    drawable = list(renders)
+
+    def pool() -> Render:
+        views = renders[drawable[int(rng.integers(len(drawable)))]]
+        return views[int(rng.integers(len(views)))]
+
+    trained = [name for name in coloured if name in renders]
+    looks: list[NDArray[np.float32]] = []
+    labels: list[int] = []
+    for label, name in enumerate(trained):
+        own, made, tries = renders[name], 0, 0
+        while made < config.samples and tries < 20 * config.samples:
+            tries += 1
+            crop = clutter_crop(rng, own[int(rng.integers(len(own)))], pool, config.colour_cast)
+            if crop is not None:
+                looks.append(look_features(crop))
+                labels.append(label)
+                made += 1
+        done += 1
+        if progress:
+            progress(done, total)
+    present = sorted(set(labels))
+    if len(present) < 2:
+        return None
+    kept_names = tuple(trained[i] for i in present)
+    remap = {old: new for new, old in enumerate(present)}
+    return fit_look_model(np.stack(looks), np.array([remap[i] for i in labels]), kept_names, config.shrinkage)
+
+
+def look_key(hashes: Mapping[str, str], config: LookConfig = LookConfig()) -> str:  # noqa: B008 - frozen
+    """What a look model of the objects ``hashes`` (name → content hash) with ``config``
+    is fitted for: the coloured ones are its classes, all are its clutter."""
+    digest = hashlib.sha256(config.key().encode())
+    for name, content_hash in sorted(hashes.items()):
+        digest.update(f"\n{name}\t{content_hash}".encode())
+    return digest.hexdigest()
+
+
+def fit_catalogue_looks(
+    meshes: Callable[[str], NormalisedMesh], names: Sequence[str], coloured: set[str],
+    progress: Callable[[int, int], None] | None = None,
+) -> LookModel | None:
+    """:func:`train_look_model` of a catalogue's objects ``names`` (``coloured``: those
+    whose meshes have colour), in name order: the same objects give the same model,
+    however they are split into files."""
+    ordered = sorted(names)
+    return train_look_model(meshes, [n for n in ordered if n in coloured],
+                            [n for n in ordered if n not in coloured], progress=progress)
