@@ -321,6 +321,11 @@ def info(
                      "their files again to add them" if without else "")
                   + (f"; {partial} objects lack those of some views (queries render them): ingest "
                      "their files again to add them" if partial else ""))
+    if data.rows.get("sift_features", 0):
+        look = data.look
+        out.print("  look model: " + ("none: `viewdb ingest` fits it (with two coloured objects or more)"
+                                      if look is None else f"{look['objects']} coloured objects"
+                                      + (", shared by every shard" if look["shared"] else "")))
     for tier, t in data.tiers.items():
         out.print(f"  {tier} tier: {t['gap']:g}° grid, {t['views']} views in {t['groups']} R-tree "
                   f"entries ({t['rtree_bytes'] / 1e3:.0f} kB of R-tree pages)")

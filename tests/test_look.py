@@ -15,6 +15,7 @@ import viewdb
 from viewdb.catalogue.look import LOOK_DIMS, LookModel, fit_look_model, look_features
 from viewdb.catalogue.look_training import clutter_crop
 from viewdb.storage.store import Store
+from viewdb_cli.main import main
 
 from .conftest import sample
 
@@ -138,6 +139,20 @@ def test_an_ingest_fits_the_model_of_its_coloured_objects(looked_db):
             crop = np.rot90(view.color[ys.min():ys.max() + 1, xs.min():xs.max() + 1])
             distances = model.distances(look_features(crop))
             assert min(distances, key=distances.get) == name
+
+
+def test_info_tells_whether_the_file_has_a_look_model(looked_db, tmp_path, capsys):
+    path, _ = looked_db
+    with viewdb.open(path, read_only=True) as db:
+        objects = len(db._catalogue.look_model().objects)
+        assert db.info().to_dict()["look_model"] == {"objects": objects, "shared": False}
+    assert main(["info", "--db", str(path)]) == 0
+    assert f"look model: {objects} coloured objects" in capsys.readouterr().out
+    with viewdb.open(tmp_path / "grey.db", gap=90, image_size=64) as db:
+        db.ingest([sample("cone"), sample("sphere")])
+        assert db.info().look is None
+    assert main(["info", "--db", str(tmp_path / "grey.db")]) == 0
+    assert "look model: none" in capsys.readouterr().out
 
 
 def test_a_stale_or_damaged_model_is_not_trusted(looked_db, tmp_path):

@@ -104,6 +104,7 @@ def test_ingest_into_new_shards_places_each_object_and_keeps_the_manifest(tmp_pa
             with viewdb.open(path, read_only=True) as shard:
                 key, model = shard._catalogue.shard_look()
                 assert key == db._catalogue.look_key() and shard._catalogue.look_model() is None
+                assert shard.info().look == {"objects": len(single_model.objects), "shared": True}
                 assert model.distances(probe) == pytest.approx(single_model.distances(probe))
 
     # through the CLI: re-running is a no-op, a new object lands in its shard

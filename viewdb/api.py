@@ -75,6 +75,9 @@ class DatabaseInfo:
     rows: dict[str, int]
     #: Per tier (``full``, ``sparse``): its grid gap, views, groups and R-tree bytes.
     tiers: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: The valid look model's objects and whether it serves a sharded catalogue
+    #: (``{"objects": n, "shared": bool}``), or None.
+    look: dict[str, Any] | None = None
 
     @property
     def bytes_per_view(self) -> float:
@@ -104,7 +107,7 @@ class DatabaseInfo:
             "skim_sigma": self.config.skim.sigma,
             "perspective": {"distances": list(self.config.perspective.distances),
                             "gap": self.config.perspective_gap},
-            "rows": self.rows, "objects": [o.to_dict() for o in self.objects],
+            "rows": self.rows, "look_model": self.look, "objects": [o.to_dict() for o in self.objects],
         }
 
 
@@ -528,7 +531,14 @@ class ViewDB:
                        **self._store.tier_sizes().get(tier, {"views": 0, "groups": 0, "rtree_bytes": 0})}
                 for tier in TIERS
             },
+            look=self._look_info(),
         )
+
+    def _look_info(self) -> dict[str, Any] | None:
+        found = self._catalogue.shard_look()
+        if found is None:
+            return None
+        return {"objects": len(found[1].objects), "shared": found[0] != self._catalogue.look_key()}
 
 
 #: The defaults of :meth:`ViewDB.query`'s keywords (those ``QueryOptions`` holds among them).
