@@ -9,11 +9,11 @@ and file size.
 
 **Photos** (a catalogue file ``DB``, opened read-only): the synthetic photos of
 ``benchmarks/photo_accuracy.py`` (:func:`viewdb.bench.photos.seed_photos`, same seeds, same
-photos), each segmented once into its 12 in-plane turned curves, as a query's search
-receives them. Each photo's stack is searched by ``server`` and by ``fast`` at each
-shortlist size, one right after the other in turn (the order rotating from photo to
-photo), through the file's server tier (``LocalServerTier.refine``, k = the query's pool
-of 5): the wall time of each search, and per shortlist size
+photos), each segmented once into its in-plane turned curves (the query's default
+``rotations``), as a query's search receives them. Each photo's stack is searched by
+``server`` and by ``fast`` at each shortlist size, one right after the other in turn
+(the order rotating from photo to photo), through the file's server tier
+(``LocalServerTier.refine``, k = the query's pool of 5): the wall time of each search, and per shortlist size
 
 * ``top-1 = server``: photos whose best object (and its distance) is the ``server`` one;
 * ``top-5 found``: of the ``server`` top 5 objects, the share in ``fast``'s top 5

@@ -99,6 +99,7 @@ class StoredCatalogue:
         self._colour_index: ColourIndex | None = None
         #: The look model read and its catalogue key (``False``: not read yet; None: none valid).
         self._look: tuple[str, LookModel] | None | bool = False
+        self._look_key: str | None = None
 
     @property
     def path(self) -> Path:
@@ -123,6 +124,7 @@ class StoredCatalogue:
         self._curves.clear()
         self._colour_index = None
         self._look = False
+        self._look_key = None
         self._meshes.pop(name, None)
         self._plans.pop(name, None)
         caches: list[OrderedDict[Any, Any]] = [self._regenerated, self._renders, *self._derived.values()]
@@ -153,12 +155,15 @@ class StoredCatalogue:
 
     def look_key(self) -> str:
         """What a look model of this file's objects is fitted for
-        (:func:`~viewdb.catalogue.look_training.look_key`)."""
-        return look_key(self._store.object_hashes())
+        (:func:`~viewdb.catalogue.look_training.look_key`; computed once)."""
+        if self._look_key is None:
+            self._look_key = look_key(self._store.object_hashes())
+        return self._look_key
 
     def forget_look(self) -> None:
         """Read the look model afresh next time (it was written again)."""
         self._look = False
+        self._look_key = None
 
     def look_model(self) -> LookModel | None:
         """The look model (:mod:`viewdb.catalogue.look`) stored by the last ingest, or None
