@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from viewdb.catalogue.look import LOOK_DIMS, LookModel, fit_look_model, look_features
-from viewdb.catalogue.look_training import clutter_crop
+from viewdb.catalogue.look_training import clutter_crop, relit
 from viewdb.storage.store import Store
 from viewdb_cli.main import main
 
@@ -110,6 +110,23 @@ def test_a_clutter_crop_holds_the_object_and_its_surroundings():
         assert crop.ndim == 3 and min(crop.shape[:2]) >= 6
         red = (crop[..., 0] > 100) & (crop[..., 2] < 120)
         assert red.mean() > 0.2  # the object fills much of its box, whatever the cast
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), slope=st.floats(0.0, 0.9))  # 0.9: no channel clips at 255
+def test_relighting_shades_a_plane_evenly_and_leaves_the_background(seed, slope):
+    rng = np.random.default_rng(seed)
+    colour = np.full((32, 32, 3), 40, np.uint8)
+    colour[8:24, 8:24] = (200, 150, 100)
+    mask = np.zeros((32, 32), bool)
+    mask[8:24, 8:24] = True
+    depth = np.where(mask, 2.0 + slope * np.arange(32)[None, :] / 16.0, 0.0)
+    out = relit(rng, colour, mask, depth, 1.0 / 16.0, 0.3)
+    np.testing.assert_array_equal(out[~mask], colour[~mask])
+    inner = out[10:22, 10:22].reshape(-1, 3).astype(float)  # away from the silhouette
+    assert np.ptp(inner, axis=0).max() <= 1  # one plane, one light: one shade
+    ratio = inner.mean(axis=0) / np.array([200, 150, 100])
+    assert np.ptp(ratio) < 0.02 and 0.1 < ratio[0] < 3.0  # the same factor on each channel
 
 
 @pytest.fixture(scope="module")

@@ -901,6 +901,8 @@ class LookConfig:
     image_size: int = 128
     #: Spread of each channel's gain (a camera's colour cast), as a share.
     colour_cast: float = 0.25
+    #: Share of the crops whose render is lit again from a random direction.
+    relight: float = 0.7
     #: Shrinkage of the within-object covariance (:func:`~viewdb.catalogue.look.fit_look_model`).
     shrinkage: float = 0.03
     seed: int = 0
@@ -909,15 +911,16 @@ class LookConfig:
         integer(self.views, "views", 1, 10_000)
         integer(self.samples, "samples", 1, 100_000)
         integer(self.image_size, "image_size", 32, 1024)
-        if not 0.0 <= self.colour_cast <= 1.0:
-            raise ValueError(f"colour_cast must be in [0, 1], got {self.colour_cast}")
+        for name in ("colour_cast", "relight"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         if not 0.0 <= self.shrinkage <= 1.0:
             raise ValueError(f"shrinkage must be in [0, 1], got {self.shrinkage}")
 
     def key(self) -> str:
         """What makes a model, beside the catalogue's objects."""
-        return (f"look1-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
-                f"-k{self.shrinkage}-r{self.seed}")
+        return (f"look2-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
+                f"-l{self.relight}-k{self.shrinkage}-r{self.seed}")
 
 
 @dataclass(frozen=True)
@@ -979,7 +982,7 @@ class RecognitionConfig:
     #: at quantile ``look_reference`` of the catalogue's coloured objects (an object whose
     #: mesh has no colour counts that reference: its render says nothing of the real
     #: print). Measured in docs/results/real-clutter.md#the-look. 0: looks not used.
-    look_weight: float = 0.1
+    look_weight: float = 0.2
     look_reference: float = 0.02
     #: An occluder's pixels inside the silhouette's convex hull make a completed query
     #: shape only when they are at least this share of the silhouette's area

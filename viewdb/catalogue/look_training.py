@@ -1,13 +1,16 @@
 """Fit the look model (:mod:`viewdb.catalogue.look`) from the catalogue's own renders.
 
 Each coloured object is rendered from :attr:`~viewdb.config.LookConfig.views` random
-directions. Each training crop (:func:`clutter_crop`) pastes one of them, turned in its
-plane, scaled and with its colours cast (a camera's gain per channel, brightness,
-saturation, gamma), into synthetic clutter: a smooth random colour field under one to
-four renders of any catalogue object, and, more often than not, another render over part
-of it. The crop is the box of what stays visible, blurred and noisy as a photo is, so
-the model learns what survives a cluttered box: the object's colours and texture, not
-its background's. Nothing is downloaded: the catalogue is the training set.
+directions. Each training crop (:func:`clutter_crop`) takes one of them, most often lit
+again from another direction with more or less ambient light (:func:`relit`: its
+colours divided by the render's head-light and shaded again, the surface's slopes read
+from its depth), and pastes it, turned in its plane, scaled and with its colours cast (a
+camera's gain per channel, brightness, saturation, gamma), into synthetic clutter: a
+smooth random colour field under one to four renders of any catalogue object, and, more
+often than not, another render over part of it. The crop is the box of what stays
+visible, blurred and noisy as a photo is, so the model learns what survives a cluttered
+box: the object's colours and texture, not its background's. Nothing is downloaded: the
+catalogue is the training set.
 
 Needs GL (pyrender) for the renders: an ingest fits the model; a query only reads it.
 """
@@ -26,7 +29,7 @@ from .look import LookModel, fit_look_model, look_features
 from .mesh import NormalisedMesh
 from .render import Renderer
 
-__all__ = ["clutter_crop", "fit_catalogue_looks", "look_key", "train_look_model"]
+__all__ = ["clutter_crop", "fit_catalogue_looks", "look_key", "relit", "train_look_model"]
 
 #: Side of the synthetic scene a training crop is cut from, in pixels.
 SCENE = 160
@@ -62,6 +65,26 @@ def _resized(render: Render, side: int) -> Render:
     colour, mask = render
     return (np.asarray(cv2.resize(colour, (side, side), interpolation=cv2.INTER_AREA), np.uint8),
             cv2.resize(mask.astype(np.uint8), (side, side), interpolation=cv2.INTER_NEAREST) > 0)
+
+
+def relit(rng: np.random.Generator, colour: NDArray[np.uint8], mask: NDArray[np.bool_],
+          depth: NDArray[np.floating], pixel_size: float, ambient: float) -> NDArray[np.uint8]:
+    """``colour`` (a render lit by a head-light with share ``ambient`` of ambient light)
+    lit instead from a random direction towards the camera, with a random ambient share:
+    the surface's normal is ``(∂depth/∂x, ∂depth/∂y, 1)`` up to scale (slopes across
+    the silhouette or a depth jump count as flat)."""
+    gy, gx = np.gradient(depth.astype(np.float64), pixel_size)
+    steep = ~mask | (np.hypot(gx, gy) > 8.0)
+    gx, gy = np.where(steep, 0.0, gx), np.where(steep, 0.0, gy)
+    length = np.sqrt(1.0 + gx * gx + gy * gy)
+    albedo = colour.astype(np.float64) / (ambient + (1.0 - ambient) / length)[..., None]
+    light = np.array([*rng.normal(0.0, 0.6, 2), 1.0])
+    light /= np.linalg.norm(light)
+    share = rng.uniform(0.15, 0.6)
+    shade = share + (1.0 - share) * np.clip((gx * light[0] + gy * light[1] + light[2]) / length, 0.0, 1.0)
+    out = np.clip(albedo * shade[..., None], 0, 255).astype(np.uint8)
+    out[~mask] = colour[~mask]
+    return out
 
 
 def _background(rng: np.random.Generator, pool: Callable[[], Render]) -> NDArray[np.uint8]:
@@ -136,17 +159,21 @@ def train_look_model(
     if len(coloured) < 2:
         return None
     rng = np.random.default_rng(config.seed)
-    renderer = Renderer(RenderConfig(image_size=config.image_size))
+    render_config = RenderConfig(image_size=config.image_size)
+    renderer = Renderer(render_config)
+    pixel_size = 2.0 * render_config.xmag / render_config.image_size
     names = list(coloured) + list(others)
     total, done = len(names) + len(coloured), 0
     renders: dict[str, list[Render]] = {}
+    depths: dict[str, list[NDArray[np.float32]]] = {}
     for name in names:
         mesh = meshes(name)
         views = [renderer.render(mesh, azimuth, elevation)
                  for azimuth, elevation in _directions(rng, config.views)]
-        kept = [(v.color, v.mask) for v in views if v.mask.sum() >= _MIN_PIXELS]
+        kept = [v for v in views if v.mask.sum() >= _MIN_PIXELS]
         if kept:
-            renders[name] = kept
+            renders[name] = [(v.color, v.mask) for v in kept]
+            depths[name] = [v.depth for v in kept]
         done += 1
         if progress:
             progress(done, total)
@@ -163,7 +190,11 @@ def train_look_model(
         own, made, tries = renders[name], 0, 0
         while made < config.samples and tries < 20 * config.samples:
             tries += 1
-            crop = clutter_crop(rng, own[int(rng.integers(len(own)))], pool, config.colour_cast)
+            at = int(rng.integers(len(own)))
+            colour, mask = own[at]
+            if rng.random() < config.relight:
+                colour = relit(rng, colour, mask, depths[name][at], pixel_size, render_config.ambient)
+            crop = clutter_crop(rng, (colour, mask), pool, config.colour_cast)
             if crop is not None:
                 looks.append(look_features(crop))
                 labels.append(label)
