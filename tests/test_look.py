@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 import viewdb
 from viewdb.catalogue.look import LOOK_DIMS, LookModel, fit_look_model, look_features
-from viewdb.catalogue.look_training import clutter_crop, relit
+from viewdb.catalogue.look_training import clutter_crop, relit, train_look_model
+from viewdb.config import LookConfig
 from viewdb.storage.store import Store
 from viewdb_cli.main import main
 
@@ -156,6 +157,20 @@ def test_an_ingest_fits_the_model_of_its_coloured_objects(looked_db):
             crop = np.rot90(view.color[ys.min():ys.max() + 1, xs.min():xs.max() + 1])
             distances = model.distances(look_features(crop))
             assert min(distances, key=distances.get) == name
+
+
+def test_a_large_catalogue_draws_its_clutter_from_a_sample_and_still_learns_every_object(looked_db):
+    path, _ = looked_db
+    with viewdb.open(path, read_only=True) as db:
+        catalogue = db._catalogue
+        coloured = sorted(catalogue.colour_index().objects)
+        others = sorted({o.name for o in db.objects()} - set(coloured))
+        ticks = []
+        config = LookConfig(views=6, samples=12, clutter_objects=2)
+        model = train_look_model(catalogue.mesh, coloured, others, config,
+                                 lambda done, total: ticks.append((done, total)))
+    assert model is not None and set(model.objects) == set(coloured)
+    assert ticks[-1] == (2 + len(coloured), 2 + len(coloured))  # two clutter objects rendered, then each object
 
 
 def test_info_tells_whether_the_file_has_a_look_model(looked_db, tmp_path, capsys):

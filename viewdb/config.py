@@ -903,6 +903,9 @@ class LookConfig:
     colour_cast: float = 0.25
     #: Share of the crops whose render is lit again from a random direction.
     relight: float = 0.7
+    #: Objects the clutter is drawn from, at most (a seeded sample of a larger catalogue),
+    #: so that the renders held in memory do not grow with it.
+    clutter_objects: int = 256
     #: Shrinkage of the within-object covariance (:func:`~viewdb.catalogue.look.fit_look_model`).
     shrinkage: float = 0.03
     seed: int = 0
@@ -910,6 +913,7 @@ class LookConfig:
     def __post_init__(self) -> None:
         integer(self.views, "views", 1, 10_000)
         integer(self.samples, "samples", 1, 100_000)
+        integer(self.clutter_objects, "clutter_objects", 1, 100_000)
         integer(self.image_size, "image_size", 32, 1024)
         for name in ("colour_cast", "relight"):
             if not 0.0 <= getattr(self, name) <= 1.0:
@@ -920,7 +924,7 @@ class LookConfig:
     def key(self) -> str:
         """What makes a model, beside the catalogue's objects."""
         return (f"look2-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
-                f"-l{self.relight}-k{self.shrinkage}-r{self.seed}")
+                f"-l{self.relight}-p{self.clutter_objects}-k{self.shrinkage}-r{self.seed}")
 
 
 @dataclass(frozen=True)

@@ -163,17 +163,30 @@ def train_look_model(
     renderer = Renderer(render_config)
     pixel_size = 2.0 * render_config.xmag / render_config.image_size
     names = list(coloured) + list(others)
-    total, done = len(names) + len(coloured), 0
-    renders: dict[str, list[Render]] = {}
-    depths: dict[str, list[NDArray[np.float32]]] = {}
-    for name in names:
+    # the clutter is drawn from at most ``clutter_objects`` objects, so that memory does not
+    # grow with the catalogue; a coloured object outside them is rendered for its own crops
+    held = set(names) if len(names) <= config.clutter_objects else set(
+        rng.choice(np.array(names), config.clutter_objects, replace=False).tolist())
+    total, done = len(held) + len(coloured), 0
+    colour_names = set(coloured)
+
+    def rendered(name: str) -> tuple[list[Render], list[NDArray[np.float32]]]:
         mesh = meshes(name)
         views = [renderer.render(mesh, azimuth, elevation)
                  for azimuth, elevation in _directions(rng, config.views)]
         kept = [v for v in views if v.mask.sum() >= _MIN_PIXELS]
-        if kept:
-            renders[name] = [(v.color, v.mask) for v in kept]
-            depths[name] = [v.depth for v in kept]
+        return [(v.color, v.mask) for v in kept], [v.depth for v in kept]
+
+    renders: dict[str, list[Render]] = {}
+    depths: dict[str, list[NDArray[np.float32]]] = {}
+    for name in names:
+        if name not in held:
+            continue
+        own, own_depths = rendered(name)
+        if own:
+            renders[name] = own
+            if name in colour_names:  # only a coloured object's own crops are relit
+                depths[name] = own_depths
         done += 1
         if progress:
             progress(done, total)
@@ -183,22 +196,19 @@ def train_look_model(
         views = renders[drawable[int(rng.integers(len(drawable)))]]
         return views[int(rng.integers(len(views)))]
 
-    trained = [name for name in coloured if name in renders]
+    trained: list[str] = []
     looks: list[NDArray[np.float32]] = []
     labels: list[int] = []
-    for label, name in enumerate(trained):
-        own, made, tries = renders[name], 0, 0
-        while made < config.samples and tries < 20 * config.samples:
-            tries += 1
-            at = int(rng.integers(len(own)))
-            colour, mask = own[at]
-            if rng.random() < config.relight:
-                colour = relit(rng, colour, mask, depths[name][at], pixel_size, render_config.ambient)
-            crop = clutter_crop(rng, (colour, mask), pool, config.colour_cast)
-            if crop is not None:
-                looks.append(look_features(crop))
-                labels.append(label)
-                made += 1
+    for name in coloured:
+        own, own_depths = ((renders.get(name, []), depths.get(name, [])) if name in held
+                           else rendered(name))
+        if own:
+            label = len(trained)
+            trained.append(name)
+            looks_made = _object_looks(rng, own, own_depths, pool, config, pixel_size,
+                                       render_config.ambient)
+            looks += looks_made
+            labels += [label] * len(looks_made)
         done += 1
         if progress:
             progress(done, total)
@@ -208,6 +218,25 @@ def train_look_model(
     kept_names = tuple(trained[i] for i in present)
     remap = {old: new for new, old in enumerate(present)}
     return fit_look_model(np.stack(looks), np.array([remap[i] for i in labels]), kept_names, config.shrinkage)
+
+
+def _object_looks(
+    rng: np.random.Generator, own: list[Render], own_depths: list[NDArray[np.float32]],
+    pool: Callable[[], Render], config: LookConfig, pixel_size: float, ambient: float,
+) -> list[NDArray[np.float32]]:
+    """The looks of up to ``config.samples`` clutter crops of one object's renders."""
+    looks: list[NDArray[np.float32]] = []
+    tries = 0
+    while len(looks) < config.samples and tries < 20 * config.samples:
+        tries += 1
+        at = int(rng.integers(len(own)))
+        colour, mask = own[at]
+        if rng.random() < config.relight:
+            colour = relit(rng, colour, mask, own_depths[at], pixel_size, ambient)
+        crop = clutter_crop(rng, (colour, mask), pool, config.colour_cast)
+        if crop is not None:
+            looks.append(look_features(crop))
+    return looks
 
 
 def look_key(hashes: Mapping[str, str], config: LookConfig = LookConfig()) -> str:  # noqa: B008 - frozen
