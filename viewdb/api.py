@@ -572,10 +572,7 @@ def fit_shared_looks(dbs: Sequence[ViewDB], progress: Callable[[int, int], None]
     if all(found is not None and found[0] == key for found in held_looks):
         return False
     model = fit_catalogue_looks(lambda name: owner[name].mesh(name), list(hashes), coloured, progress)
-    for db in dbs:
-        stored = None if model is None else StoredLook(key, db._catalogue.look_key(), model.to_bytes())
-        db._store.set_look_model(stored)
-        db._catalogue.forget_look()
+    _store_looks(dbs, key, None if model is None else model.to_bytes())
     return model is not None
 
 
@@ -585,10 +582,16 @@ def share_looks(source: ViewDB, parts: Sequence[ViewDB]) -> bool:
     found = source._catalogue.shard_look()
     if found is None or found[0] != source._catalogue.look_key():
         return False
-    for db in parts:
-        db._store.set_look_model(StoredLook(found[0], db._catalogue.look_key(), found[1].to_bytes()))
-        db._catalogue.forget_look()
+    _store_looks(parts, found[0], found[1].to_bytes())
     return True
+
+
+def _store_looks(dbs: Sequence[ViewDB], key: str, model: bytes | None) -> None:
+    """Store ``model`` (None: remove it) in each of ``dbs`` as the look model of the
+    catalogue ``key``, stamped with each file's own objects."""
+    for db in dbs:
+        db._store.set_look_model(None if model is None else StoredLook(key, db._catalogue.look_key(), model))
+        db._catalogue.forget_look()
 
 
 def _query_options(options: QueryOptions | None, keywords: dict[str, Any]) -> QueryOptions:

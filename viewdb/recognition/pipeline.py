@@ -310,8 +310,8 @@ def _colour_matches(
     """The cut-out's colour signature, the colour channel's objects for it
     (:attr:`~viewdb.config.RecognitionConfig.colour_pool`; none when the catalogue has
     no coloured object, or the server predates the channel) and each coloured object's
-    look distance to the pixels of ``box`` (default: the cut-out's box; none without a
-    look model, :mod:`viewdb.catalogue.look`)."""
+    look distance to the pixels of ``box`` (none without a box or a look model,
+    :mod:`viewdb.catalogue.look`)."""
     query = core_signature(shape.view.color, shape.view.mask, options.recognition.colour_core)
     matches, exchange = server.colour_ranking(query, options.recognition.colour_pool)
     traffic.exchanged(exchange)
@@ -324,12 +324,9 @@ def _colour_matches(
 
 
 def _box_pixels(view: QueryView, box: tuple[int, int, int, int] | None) -> NDArray[np.uint8] | None:
-    """The photo's pixels in ``box`` (default: the mask's box), or None when under 2 × 2."""
+    """The photo's pixels in ``box``, or None without one or when under 2 × 2."""
     if box is None:
-        ys, xs = np.nonzero(view.mask)
-        if not len(ys):
-            return None
-        box = (int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
+        return None
     height, width = view.color.shape[:2]
     x1, y1 = max(box[0], 0), max(box[1], 0)
     x2, y2 = min(box[2], width), min(box[3], height)
@@ -566,8 +563,9 @@ def run_regions(
         t0 = time.perf_counter()
         shape = region_shape(loaded, region, samples, options)
         prompted = region.prompt is not None
-        busy = prompted and surround_spread(loaded.rgb, region.box) >= options.recognition.busy_surround
-        box = _prompt_box(region.prompt)
+        cut_box = region.box
+        busy = prompted and surround_spread(loaded.rgb, cut_box) >= options.recognition.busy_surround
+        box = _prompt_box(region.prompt) or cut_box  # a point's or every object's look: its cut-out's
         matches, timing = _recognise(shape, options, server, client, traffic, prompted, busy, box)
         timing["segment"] = (time.perf_counter() - t0) * 1e3 - timing["total"]  # its curves
         timing["total"] += timing["segment"]
