@@ -97,7 +97,7 @@ def test_sigint_mid_ingest_exits_130_and_leaves_whole_objects(tmp_path, jobs):
     assert outcome is not None, "three ingests were over before they could be interrupted"
     returncode, err = outcome
     assert returncode == 130, err
-    assert err.strip().splitlines()[-1] == "viewdb: interrupted"
+    assert err.strip().splitlines()[-1] == "viewdb: interrupted", err
     assert "Traceback" not in err
     with viewdb.open(db, create=False) as vdb:
         objects = vdb.objects()

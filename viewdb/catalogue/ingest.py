@@ -457,10 +457,13 @@ class _Run:
                     exc = fut.exception()
                     self.finish(futures[fut], exc if exc is not None else fut.result())
         except BaseException:
-            workers = list((getattr(pool, "_processes", None) or {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for proc in workers:
+            # the workers first: the pool's manager thread then finds them gone and ends,
+            # so the join below is short. A manager thread left running (``wait=False``)
+            # could read pipes that the exit handlers are closing, and print a stray
+            # "Bad file descriptor" traceback after "interrupted".
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
                 proc.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
         if self.done_views != self.total_views:  # files that failed part-way
