@@ -49,22 +49,35 @@ def _stack_brute(curves, arrays, k, band, objects=None):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(0, 127))
-def test_the_embedding_ignores_turns_and_mirrors(seed, shift):
+@given(st.integers(0, 2**32 - 1), st.integers(0, 127), st.sampled_from([0, 16, 32]))
+def test_the_embedding_ignores_turns_and_mirrors(seed, shift, quantiles):
     rng = np.random.default_rng(seed)
     curve = 1 + 0.3 * rng.standard_normal(128)
-    e = embed_curves(curve, 16)
-    assert e.shape == (1, 16) and e.dtype == np.float32
-    np.testing.assert_allclose(embed_curves(np.roll(curve, shift), 16), e, rtol=1e-4, atol=1e-6)
-    np.testing.assert_allclose(embed_curves(mirror_curve(curve), 16), e, rtol=1e-4, atol=1e-6)
+    e = embed_curves(curve, 16, quantiles)
+    assert e.shape == (1, 16 + quantiles) and e.dtype == np.float32
+    np.testing.assert_allclose(embed_curves(np.roll(curve, shift), 16, quantiles), e, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(embed_curves(mirror_curve(curve), 16, quantiles), e, rtol=1e-4, atol=1e-6)
     # but it is not blind: another curve embeds elsewhere
     other = 1 + 0.3 * rng.standard_normal(128)
-    assert np.abs(embed_curves(other, 16) - e).max() > 1e-3
+    assert np.abs(embed_curves(other, 16, quantiles) - e).max() > 1e-3
 
 
-def test_the_embedding_refuses_coefficients_past_nyquist():
+def test_the_sorted_values_tell_apart_curves_whose_magnitudes_agree():
+    """Detail past the kept coefficients widens the curve's range: the magnitudes cannot
+    see it, the sorted values can."""
+    t = np.arange(128) / 128
+    plain = 1 + 0.2 * np.cos(2 * np.pi * 3 * t)
+    wiggly = plain + 0.1 * np.cos(2 * np.pi * 40 * t)
+    np.testing.assert_allclose(embed_curves(wiggly, 16), embed_curves(plain, 16), atol=1e-6)
+    apart = embed_curves(wiggly, 16, 16) - embed_curves(plain, 16, 16)
+    assert np.abs(apart[0, :16]).max() < 1e-6 and np.abs(apart[0, 16:]).max() > 0.01
+
+
+def test_the_embedding_refuses_coefficients_past_nyquist_and_too_many_sorted_values():
     with pytest.raises(ValueError, match="at least 33 samples"):
         embed_curves(np.ones(32), 16)
+    with pytest.raises(ValueError, match="64 sorted values need curves of at least 64 samples"):
+        embed_curves(np.ones(40), 8, 64)
 
 
 # ---------------------------------------------------------------- the search, on arrays
@@ -124,14 +137,15 @@ def test_fast_is_the_brute_force_over_its_shortlist(seed, k, shortlist, band):
 def test_the_shortlist_ranks_objects_by_their_nearest_view_in_the_embedding(exact_share):
     rng = np.random.default_rng(5)
     arrays = _random_tier(rng, 10, 4)
-    index = build_fast_index(arrays, FastConfig(coefficients=8, exact_share=exact_share, views_per_object=1))
+    config = FastConfig(coefficients=8, exact_share=exact_share, views_per_object=1)
+    index = build_fast_index(arrays, config)
     index.cache.clear()  # the exact ranking embeds the views again
     q = arrays.curves[17][None, :]
     for size in (3, 10):
         listed, asked = shortlist_objects(q, index, size, arrays)
         if size == 10:  # 10 views name fewer than 10 objects: asked again (a share of 1), or ranked exactly
             assert (asked > 10) == (exact_share == 1.0) and (asked == 0) == (exact_share == 0.0)
-        e, every = embed_curves(q, 8), embed_curves(arrays._curves, 8)
+        e, every = (embed_curves(c, 8, config.quantiles) for c in (q, arrays._curves))
         nearest = [np.min(((every[arrays.row_owner == o] - e) ** 2).sum(axis=1)) for o in range(10)]
         # a small catalogue's HNSW search is exact
         assert listed.tolist() == np.argsort(nearest, kind="stable").tolist()[:size]
@@ -240,6 +254,7 @@ def test_an_ingest_writes_the_index_file_and_a_fresh_process_maps_it(tiered_db):
     assert map_ann_file(path, "other", "full", _rows(tiered_db)) is None
     assert map_ann_file(path, _key(tiered_db), "full", _rows(tiered_db) + 1) is None
     assert map_ann_file(path, _key(tiered_db, FastConfig(coefficients=12)), "full", _rows(tiered_db)) is None
+    assert map_ann_file(path, _key(tiered_db, FastConfig(quantiles=0)), "full", _rows(tiered_db)) is None
 
 
 @pytest.mark.parametrize("damage", ["truncated", "foreign", "empty", "garbled"])

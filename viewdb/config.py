@@ -839,6 +839,8 @@ class FastConfig:
 
     #: DFT magnitudes kept per curve (coefficients 1..m; :mod:`viewdb.search.embedding`).
     coefficients: int = 16
+    #: The curve's sorted values kept beside them, at evenly spaced ranks (0: none).
+    quantiles: int = 16
     #: The HNSW graph's edges per node (USearch's ``connectivity``).
     connectivity: int = 16
     #: Candidates kept while a node is inserted (USearch's ``expansion_add``): 32 built
@@ -869,6 +871,8 @@ class FastConfig:
     def __post_init__(self) -> None:
         if not 1 <= self.coefficients <= 64:
             raise ValueError(f"coefficients must be in [1, 64], got {self.coefficients}")
+        if not 0 <= self.quantiles <= 128:
+            raise ValueError(f"quantiles must be in [0, 128], got {self.quantiles}")
         if not 2 <= self.connectivity <= 256:
             raise ValueError(f"connectivity must be in [2, 256], got {self.connectivity}")
         if not 0.0 <= self.exact_share <= 1.0:
@@ -883,7 +887,7 @@ class FastConfig:
 
     def index_key(self) -> str:
         """What makes an index file: a file made with other settings is not used."""
-        return f"dft{self.coefficients}-m{self.connectivity}-ef{self.expansion_add}"
+        return f"dft{self.coefficients}-q{self.quantiles}-m{self.connectivity}-ef{self.expansion_add}"
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,17 @@ most that between the two curves' coefficients at the best turn (the triangle in
 per coefficient), i.e. what a turn-free Fourier distance would be; it is not a bound of DTW,
 which is why the ``fast`` plan uses it only to shortlist objects and computes every distance
 it reports exactly.
+
+Beside them, the curve's *sorted values* at ``quantiles`` evenly spaced ranks: how far the
+outline lies from the centre, whatever the order, which no turn or mirror changes either.
+The DFT magnitudes say how the curve varies; the sorted values say over what range, which
+the magnitudes leave out (two outlines with the same wiggles at different widths). Each
+part is weighted so that its squared distance is a mean square per curve sample: the
+one-sided magnitudes count twice (Parseval), the ``m`` sorted values ``1 / m`` each, so the
+sorted values are scaled by ``1 / sqrt(2 m)``. On the 240 synthetic photos of the 230-object
+file, the ``server`` plan's first object was among the embedding's 20 nearest objects for
+99.6 % of them against 97.9 % with the magnitudes alone, and its top 5 for 84 % against 74 %
+(docs/fast-plan.md).
 """
 
 from __future__ import annotations
@@ -24,11 +35,13 @@ from numpy.typing import NDArray
 __all__ = ["embed_curves"]
 
 
-def embed_curves(curves: NDArray[np.floating], coefficients: int) -> NDArray[np.float32]:
-    """The embeddings ``(V, coefficients)`` (float32) of curves ``(V, N)`` (a single curve
-    ``(N,)`` gives ``(1, coefficients)``): the magnitudes of DFT coefficients ``1 ..
-    coefficients`` over ``N`` (module doc). Raises ValueError for fewer samples than
-    ``2 * coefficients + 1`` (coefficients past the Nyquist frequency do not exist)."""
+def embed_curves(curves: NDArray[np.floating], coefficients: int, quantiles: int = 0) -> NDArray[np.float32]:
+    """The embeddings ``(V, coefficients + quantiles)`` (float32) of curves ``(V, N)`` (a
+    single curve ``(N,)`` gives one row): the magnitudes of DFT coefficients ``1 ..
+    coefficients`` over ``N``, then the sorted values at ``quantiles`` evenly spaced ranks
+    scaled by ``1 / sqrt(2 quantiles)`` (module doc). Raises ValueError for fewer samples
+    than ``2 * coefficients + 1`` (coefficients past the Nyquist frequency do not exist) or
+    than ``quantiles``."""
     x = np.asarray(curves, dtype=np.float64)
     if x.ndim == 1:
         x = x[None, :]
@@ -38,5 +51,11 @@ def embed_curves(curves: NDArray[np.floating], coefficients: int) -> NDArray[np.
     if not 1 <= coefficients or n < 2 * coefficients + 1:
         raise ValueError(f"{coefficients} coefficients need curves of at least {2 * coefficients + 1} "
                          f"samples, got {n}")
-    spectrum = np.fft.rfft(x, axis=1)[:, 1 : coefficients + 1]
-    return np.ascontiguousarray(np.abs(spectrum) / n, dtype=np.float32)
+    if not 0 <= quantiles <= n:
+        raise ValueError(f"{quantiles} sorted values need curves of at least {quantiles} samples, got {n}")
+    magnitudes = np.abs(np.fft.rfft(x, axis=1)[:, 1 : coefficients + 1]) / n
+    if not quantiles:
+        return np.ascontiguousarray(magnitudes, dtype=np.float32)
+    ranks = np.round(np.linspace(0, n - 1, quantiles)).astype(np.int64)
+    spread = np.sort(x, axis=1)[:, ranks] / np.sqrt(2.0 * quantiles)
+    return np.ascontiguousarray(np.concatenate([magnitudes, spread], axis=1), dtype=np.float32)

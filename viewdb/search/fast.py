@@ -8,6 +8,9 @@ over them.
 2. Those objects alone are searched exactly (:func:`~viewdb.search.knn.knn_stack` over a
    :class:`~viewdb.search.subset.SubsetSource`): the answer is exactly the brute force
    over the shortlisted objects, each with its best view and its exact DTW distance.
+   The search starts with a radius: the first k objects' nearest views, measured exactly
+   (:func:`view_distances`), bound their distances and so the k-th (as a CS1 client's
+   bounds do, :func:`~viewdb.search.knn.knn`), and groups past it are never refined.
 
 So every distance reported is a true one, and only the shortlist is approximate: when the
 exact answer's k objects are all shortlisted the answer *is* the exact one, and a
@@ -25,8 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..catalogue.features import mirror_curve
 from ..config import FastConfig, SearchConfig
 from .ann import ViewIndex
+from .bounds import dtw
 from .embedding import embed_curves
 from .knn import Neighbour, SearchStats, TierSource, knn_stack
 from .subset import SubsetSource, groups_by_object, runs_by_owner
@@ -55,7 +60,7 @@ class FastIndex:
         """Every view's embedding (rows of ``source``), the rows ordered by object and where
         each object's run starts in that order (``n_objects + 1`` entries)."""
         if "vectors" not in self.cache:
-            self.cache["vectors"] = embed_all(source, self.config.coefficients)
+            self.cache["vectors"] = embed_all(source, self.config)
         if "order" not in self.cache:
             self.cache["order"], self.cache["starts"] = runs_by_owner(self.row_owner, source.n_objects)
         return self.cache["vectors"], self.cache["order"], self.cache["starts"]
@@ -72,20 +77,20 @@ class FastIndex:
 _EMBED_BLOCK = 65536
 
 
-def embed_all(source: TierSource, coefficients: int) -> NDArray[np.float32]:
-    """The embedding of every view of ``source``, in row order (every group read)."""
+def embed_all(source: TierSource, config: FastConfig) -> NDArray[np.float32]:
+    """The embedding (``config``'s) of every view of ``source``, in row order (every group read)."""
     curves = source.rows(np.arange(source.n_groups, dtype=np.int64))[0]
     rows = len(source.row_owner)
-    vectors = np.empty((rows, coefficients), dtype=np.float32)
+    vectors = np.empty((rows, config.coefficients + config.quantiles), dtype=np.float32)
     for start in range(0, rows, _EMBED_BLOCK):
         block = curves[start : start + _EMBED_BLOCK]
-        vectors[start : start + len(block)] = embed_curves(block, coefficients)
+        vectors[start : start + len(block)] = embed_curves(block, config.coefficients, config.quantiles)
     return vectors
 
 
 def build_fast_index(source: TierSource, config: FastConfig) -> FastIndex:
     """The ``fast`` index of every view of ``source`` (its rows, every group read)."""
-    vectors = embed_all(source, config.coefficients)
+    vectors = embed_all(source, config)
     index = ViewIndex.build(vectors, config.connectivity, config.expansion_add, config.build_threads)
     built = FastIndex.of(index, source, config)
     built.cache["vectors"] = vectors
@@ -118,21 +123,31 @@ def shortlist_objects(
     ranked exactly). The index is asked again, for twice as many, until its views name
     ``size`` objects; past :attr:`~viewdb.config.FastConfig.exact_share` of its views
     (a shortlist of most objects), every view is compared instead (:func:`rank_exactly`)."""
+    objects, _, count = _shortlist(curves, index, size, source)
+    return objects, count
+
+
+def _shortlist(
+    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource,
+) -> tuple[NDArray[np.int64], NDArray[np.int64] | None, int]:
+    """:func:`shortlist_objects`, with each shortlisted object's nearest view (its row;
+    None when ranked exactly)."""
     config = index.config
-    q = merged_queries(embed_curves(curves, config.coefficients), config.merge_radius)
+    q = merged_queries(embed_curves(curves, config.coefficients, config.quantiles), config.merge_radius)
     size = min(size, source.n_objects)
     count = max(size * config.views_per_object, 1)
     while count <= max(config.exact_share * index.index.size, size * config.views_per_object):
         keys, distances = index.index.nearest(q, count, config.expansion_search)
         valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
-        owners = index.row_owner[keys[valid]]
         order = np.argsort(distances[valid], kind="stable")
-        _, first = np.unique(owners[order], return_index=True)
-        ranked = owners[order][np.sort(first)]
-        if len(ranked) >= size or count >= index.index.size:
-            return ranked[:size].astype(np.int64), count
+        rows = keys[valid][order]
+        _, first = np.unique(index.row_owner[rows], return_index=True)
+        nearest = rows[np.sort(first)]
+        if len(nearest) >= size or count >= index.index.size:
+            nearest = nearest[:size].astype(np.int64)
+            return index.row_owner[nearest].astype(np.int64), nearest, count
         count = 2 * count
-    return rank_exactly(q, index, source)[:size], 0
+    return rank_exactly(q, index, source)[:size], None, 0
 
 
 def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSource) -> NDArray[np.int64]:
@@ -163,11 +178,36 @@ def fast_knn(
         stats.extra.update(shortlisted=float(source.n_objects), fast_index=float(index is not None))
         return found, stats
     start = time.perf_counter()
-    objects, _ = shortlist_objects(stack, index, max(shortlist, k), source)
+    objects, nearest, _ = _shortlist(stack, index, max(shortlist, k), source)
     subset = SubsetSource(source, objects, index.by_object)
-    ann_ms = (time.perf_counter() - start) * 1e3
     listed = set(objects.tolist())
     bounds = {o: d for o, d in (known or {}).items() if o in listed}
+    if nearest is not None and len(nearest) >= k:
+        # the first k objects' nearest views, measured exactly: each bounds its object's
+        # distance, the largest the k-th, so the search starts with that radius (measuring
+        # every shortlisted object's view as well narrowed it no further on photos)
+        for o, d in zip(objects[:k].tolist(), view_distances(stack, source, nearest[:k], band), strict=True):
+            bounds[o] = min(d, bounds.get(o, math.inf))
+        upper = min(upper, max(bounds[o] for o in objects[:k].tolist()))
+    ann_ms = (time.perf_counter() - start) * 1e3
     found, stats = knn_stack(stack, subset, k, band, upper=upper, known=bounds, block=block)
     stats.extra.update(shortlisted=float(len(objects)), ann_ms=ann_ms, fast_index=1.0)
     return found, stats
+
+
+def view_distances(
+    stack: NDArray[np.float64], source: TierSource, rows: NDArray[np.int64], band: int,
+) -> list[float]:
+    """The exact distance of each view (a row of ``source``) to a stack of curves, as the
+    search measures it: the least DTW over the curves and the view's mirror."""
+    groups = np.searchsorted(source.group_start, rows, side="right") - 1
+    curves = source.rows(np.unique(groups))[0]
+    out = []
+    for row in rows.tolist():
+        view = np.asarray(curves[row], dtype=np.float64)
+        best = math.inf
+        for shown in (view, mirror_curve(view)):
+            for q in stack:
+                best = min(best, dtw(q, shown, band, best))
+        out.append(best)
+    return out
