@@ -426,7 +426,7 @@ def query(
                                   dir_okay=False)
     ] = None,
     k: Annotated[int, typer.Option("-k", help="How many objects.", min=1, max=100)] = 5,
-    plan: Annotated[str, typer.Option(help="server, cs1, cs2 or fast.")] = "server",
+    plan: Annotated[str, typer.Option(help="fast, server, cs1 or cs2.")] = viewdb_config.DEFAULT_PLAN,
     fast_shortlist: Annotated[int | None, typer.Option(
         help="With --plan fast: objects the approximate index shortlists, each searched exactly "
              "(default 20).", min=1, max=100000)] = None,

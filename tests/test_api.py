@@ -222,4 +222,4 @@ def test_query_refuses_keywords_that_say_otherwise_than_options(small_db, tmp_pa
         with pytest.raises(viewdb.ImageError):
             db.query(missing, options=options, k=3, rotations=4)
         with pytest.raises(viewdb.ImageError):
-            db.query(missing, options=options, plan="server")
+            db.query(missing, options=options, plan="fast")

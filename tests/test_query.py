@@ -78,7 +78,7 @@ def test_query_json_has_the_contract_shape(query_db, tmp_path, capsys):
     cv2.imwrite(str(path), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
     assert main(["query", str(path), "--db", str(query_db), "-k", "2", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["image"] == str(path) and data["plan"] == "server" and data["k"] == 2
+    assert data["image"] == str(path) and data["plan"] == "fast" and data["k"] == 2  # the default plan
     assert [r["rank"] for r in data["results"]] == [1, 2]
     r = data["results"][0]
     assert r["object"] == "mug" and isinstance(r["distance"], float)

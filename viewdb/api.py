@@ -28,6 +28,7 @@ from .catalogue.skimming import ViewClasses
 from .catalogue.symmetry import SymmetryType
 from .config import (
     DEFAULT_DEPTH_SCALE,
+    DEFAULT_PLAN,
     BuildConfig,
     ClientFileConfig,
     OverlayConfig,
@@ -252,7 +253,7 @@ class ViewDB:
         image: str | Path | NDArray[Any] | LoadedImage,
         *,
         k: int = 5,
-        plan: str = "server",
+        plan: str = DEFAULT_PLAN,
         client: ViewDB | None = None,
         server: ServerTier | None = None,
         mask: NDArray[Any] | str | Path | None = None,
@@ -282,10 +283,10 @@ class ViewDB:
 
         The object is segmented (alpha channel, ``mask``, ``label_map`` + ``label``, or
         automatically from the background); its silhouette, also turned in the image plane
-        by ``rotations`` evenly spaced angles, is searched by ``plan`` (``server``, ``cs1``,
-        ``cs2``, ``fast``; the client half runs on ``client``, default this file; ``fast``
-        searches exactly the ``fast_shortlist`` objects its approximate index finds,
-        default :attr:`~viewdb.config.RecognitionConfig.fast_shortlist`); a photo with colour
+        by ``rotations`` evenly spaced angles, is searched by ``plan`` (``fast``, the
+        default: exactly the ``fast_shortlist`` objects its approximate index finds, default
+        :attr:`~viewdb.config.RecognitionConfig.fast_shortlist`; ``server``, exact;
+        ``cs1``, ``cs2``: the client half runs on ``client``, default this file); a photo with colour
         re-ranks the plan's best objects by colour (``colour``), and all by how well each
         matched view fits the photo's shape (``verify``; ``colour=False, verify=False``
         ranks by outline alone, as the paper does); the best ``pose_top`` (default the top one; None: all k)

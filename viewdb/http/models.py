@@ -14,7 +14,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..catalogue.look import LOOK_DIMS
-from ..config import LIMITS
+from ..config import DEFAULT_PLAN, LIMITS
 from ..search.plans import MAX_BAND, MAX_CURVES, MAX_K
 
 #: A distance-curve sample: curves have mean 1, so no sample of an n-sample curve exceeds
@@ -256,7 +256,7 @@ class WebQueryFormModel(BaseModel):
 
     photo: bytes = Field(description="the photo (any format the query accepts: JPEG, PNG, WebP, ...)",
                          json_schema_extra={"format": "binary"})
-    plan: str = Field(default="server", description="server, cs1, cs2 or fast")
+    plan: str = Field(default=DEFAULT_PLAN, description="fast, server, cs1 or cs2")
     k: int = Field(default=5, ge=1, description="results wanted (at most the server's WebConfig.max_k)")
     pose_top: int | None = Field(default=1, ge=0, description="how many of the best results to pose, "
                                                               "as in the library (the page asks again "

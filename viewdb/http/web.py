@@ -61,7 +61,7 @@ from ..recognition.options import QueryOptions
 from ..recognition.overlay import OverlayPose, overlay_layer, resized_photo
 from ..recognition.regions import Prompts
 from ..recognition.verify import physical_view
-from ..search.plans import Candidate
+from ..search.plans import PLANS, Candidate
 from . import models
 
 __all__ = ["STATIC", "add_page", "web_router"]
@@ -73,7 +73,6 @@ Runner = Callable[[Callable[[ViewDB], T]], Awaitable[tuple[T, float]]]
 
 #: The page's files (package data).
 STATIC = Path(__file__).resolve().parent / "static"
-PLANS = ("server", "cs1", "cs2", "fast")
 
 #: The page loads nothing from elsewhere and runs no inline script.
 _PAGE_HEADERS = {
@@ -362,7 +361,7 @@ def _photo_routes(router: APIRouter, run: Runner[Any], config: WebConfig, errors
             upload = form.get("photo")
             if not isinstance(upload, UploadFile):
                 raise HTTPException(422, "no photo: send the image as the multipart form field 'photo'")
-            plan = str(form.get("plan") or "server")
+            plan = str(form.get("plan") or QUERY_DEFAULTS.plan)
             if plan not in PLANS:
                 raise HTTPException(422, f"plan must be server, cs1, cs2 or fast, got {plan[:40]!r}")
             k = _int_field(form, "k", min(QUERY_DEFAULTS.k, config.max_k), 1, config.max_k)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..config import RecognitionConfig
+from ..config import DEFAULT_PLAN, RecognitionConfig
 from ..errors import QueryError
 from ..pose.estimate import PoseConfig
 from ..pose.intrinsics import Intrinsics, parse_intrinsics
@@ -29,9 +29,9 @@ class QueryOptions:
 
     #: How many objects the answer has.
     k: int = 5
-    #: ``server``, ``cs1`` (exact, client-bounded), ``cs2`` (heuristic) or ``fast``
-    #: (approximate shortlist, exact distances; ``recognition.fast_shortlist``).
-    plan: str = "server"
+    #: ``fast`` (approximate shortlist, exact distances; ``recognition.fast_shortlist``),
+    #: ``server`` (exact), ``cs1`` (exact, client-bounded) or ``cs2`` (heuristic).
+    plan: str = DEFAULT_PLAN
     #: Sakoe–Chiba band of the DTW distance, in samples. 5 ranks the 240 synthetic photos
     #: as well in less time but puts a real photo's sugar box third
     #: (docs/results/synthetic-photos.md#the-dtw-band).
