@@ -1,6 +1,6 @@
 """Why photos are not recognised: every miss of the synthetic photo benchmark, classified.
 
-    python benchmarks/miss_analysis.py DB [--seeds 1-6] [--photos 40] [--plan server]
+    python benchmarks/miss_analysis.py DB [--seeds 1-6] [--photos 40] [--plan fast]
                                           [--rotations 8] [--pool 5] [--shortlist 10]
                                           [--min-iou 0.9] [--twin-threshold 0.03]
 
@@ -42,7 +42,7 @@ from viewdb.bench.config import MissConfig, TwinConfig
 from viewdb.bench.misses import CAUSES, Miss, cause_of, filled, iou, outline_rank
 from viewdb.bench.photos import PhotoSpec, decoded_photo, parse_seeds, photo_series, true_silhouette
 from viewdb.bench.twins import Twins
-from viewdb.config import RecognitionConfig
+from viewdb.config import DEFAULT_PLAN, RecognitionConfig
 from viewdb.recognition.options import QueryOptions
 from viewdb.recognition.pipeline import segment_photo, segment_query
 from viewdb.recognition.results import QueryMatch
@@ -153,7 +153,7 @@ def main() -> None:
     parser.add_argument("db")
     parser.add_argument("--seeds", default="1-6", help="photo seeds, e.g. 1-6 or 1,3 (default 1-6)")
     parser.add_argument("--photos", type=int, default=40, help="photos per seed")
-    parser.add_argument("--plan", default="server")
+    parser.add_argument("--plan", default=DEFAULT_PLAN)
     parser.add_argument("--rotations", type=int, default=viewdb.QueryOptions().rotations)
     parser.add_argument("--pool", type=int, default=RecognitionConfig().pool,
                         help="objects the plan finds for the colour and shape re-rankings")

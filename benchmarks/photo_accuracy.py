@@ -1,6 +1,6 @@
 """Recognition and pose accuracy on synthetic photographs, per plan.
 
-    python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans server,cs1,cs2]
+    python benchmarks/photo_accuracy.py DB [--photos 40] [--seed 1] [-k 5] [--plans fast,server,cs1,cs2]
                                            [--pose-photos 20] [--pnp] [--true-mask] [--outline]
                                            [--unverified] [--iou-rerank] [--rotations 8]
                                            [--shifts all|step=S|roll=DEG]
@@ -40,6 +40,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.photos import PhotoSpec, decoded_photo, photo_series, true_silhouette
+from viewdb.config import DEFAULT_PLAN
 from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.search.shifts import ShiftWindow
 
@@ -93,7 +94,7 @@ def main() -> None:
     parser.add_argument("--pose-photos", type=int, default=0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("-k", type=int, default=5)
-    parser.add_argument("--plans", default="server,cs1,cs2")
+    parser.add_argument("--plans", default=",".join(dict.fromkeys([DEFAULT_PLAN, "server", "cs1", "cs2"])))
     parser.add_argument("--rotations", type=int, default=viewdb.QueryOptions().rotations,
                         help="in-plane turns of the silhouette tried (1: upright only; the photos "
                              "are upright, as a camera that knows gravity would take them)")

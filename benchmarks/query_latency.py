@@ -1,7 +1,7 @@
 """Warm query latency and accuracy on the synthetic photos, per set of options, with each
 stage's share and the search against a brute-force scan of the same features.
 
-    python benchmarks/query_latency.py DB [--seeds 1-6] [--photos 40] [-k 5] [--plan server]
+    python benchmarks/query_latency.py DB [--seeds 1-6] [--photos 40] [-k 5] [--plan fast]
                                           [--configs no-pose,default,upright-no-pose,upright]
                                           [--brute 3]
 
@@ -43,7 +43,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.photos import seed_photos
-from viewdb.config import RecognitionConfig
+from viewdb.config import DEFAULT_PLAN, RecognitionConfig
 from viewdb.recognition.client_tier import ClientTier
 from viewdb.recognition.pipeline import segment_query
 from viewdb.recognition.retrieval import merge, recognise_curve
@@ -158,7 +158,7 @@ def main() -> None:
     parser.add_argument("--seeds", default="1-6")
     parser.add_argument("--photos", type=int, default=40, help="photos per seed")
     parser.add_argument("-k", type=int, default=5)
-    parser.add_argument("--plan", default="server")
+    parser.add_argument("--plan", default=DEFAULT_PLAN)
     parser.add_argument("--configs", default="no-pose,default,upright-no-pose,upright")
     parser.add_argument("--brute", type=int, default=3, help="photos also searched by brute force")
     args = parser.parse_args()

@@ -2,7 +2,7 @@
 cube and the phone box, against the whole catalogue.
 
     python benchmarks/real_photos.py [--db FILE | --gap 10 [--perspective-gap 10] [--subset N] [--jobs 2]]
-                                     [--out DIR] [-k 5] [--plan server] [--objects A,B] [--no-extras]
+                                     [--out DIR] [-k 5] [--plan fast] [--objects A,B] [--no-extras]
                                      [--overlays docs/results/real] [--rerank]
 
 The catalogue (``--db``, e.g. a copy of the 212-model 10° file with the real meshes
@@ -56,6 +56,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.groundtruth import TWINS, load_model, pose_errors
+from viewdb.config import DEFAULT_PLAN
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The shared data: ``../shared`` beside the checkout, or ``$VIEWDB_SHARED``.
@@ -257,7 +258,7 @@ def main() -> None:
     parser.add_argument("--overlays", type=Path, default=None,
                         help="where the overlays go (default OUT/overlays)")
     parser.add_argument("--subset", type=int, default=None, help="only the first N catalogue models")
-    parser.add_argument("--plan", default="server")
+    parser.add_argument("--plan", default=DEFAULT_PLAN)
     parser.add_argument("-k", type=int, default=5, help="results per object (default: the library's)")
     parser.add_argument("--objects", default=None, help="comma-separated YCB objects (default: all)")
     parser.add_argument("--no-extras", action="store_true", help="skip the ViSP and phone-box cases")

@@ -1,6 +1,6 @@
 """The whole query with today's 12 in-plane turns against one search over the shifts.
 
-    python benchmarks/shift_query.py DB [--photos 40] [--seed 1] [-k 5] [--plan server]
+    python benchmarks/shift_query.py DB [--photos 40] [--seed 1] [-k 5] [--plan fast]
                                        [--searches turns12,all,roll=0]
 
 Each synthetic photo (:mod:`viewdb.bench.photos`, same seed ⇒ same photos) is queried once
@@ -23,6 +23,7 @@ import numpy as np
 
 import viewdb
 from viewdb.bench.photos import draw_photo_spec, encode_jpeg, render_photo
+from viewdb.config import DEFAULT_PLAN
 from viewdb.search.shifts import ShiftWindow
 
 
@@ -45,7 +46,7 @@ def main() -> None:
     parser.add_argument("--photos", type=int, default=40)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("-k", type=int, default=5)
-    parser.add_argument("--plan", default="server")
+    parser.add_argument("--plan", default=DEFAULT_PLAN)
     parser.add_argument("--searches", default="turns12,all,roll=0")
     args = parser.parse_args()
     searches = args.searches.split(",")
