@@ -18,7 +18,7 @@ from viewdb.catalogue.features import mirror_curve
 from viewdb.config import FastConfig, RecognitionConfig
 from viewdb.search.bounds import dtw
 from viewdb.search.embedding import embed_curves
-from viewdb.search.fast import build_fast_index, fast_knn, merged_queries, shortlist_objects
+from viewdb.search.fast import build_fast_index, fast_knn, merged_queries, shortlist_objects, view_distances
 from viewdb.search.knn import TierArrays, brute_force_knn, knn_stack
 from viewdb.search.plans import PLANS, RefineRequest
 from viewdb.search.subset import SubsetSource
@@ -94,6 +94,21 @@ def _random_tier(rng, objects, views, n=32):
             c = np.roll(base, int(rng.integers(n))) + rng.normal(0, 0.05, n)
             curves.append(np.clip(c, 0.05, None) / np.clip(c, 0.05, None).mean())
     return TierArrays(names, owner, np.array(curves), group_views=4)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5))
+def test_a_seed_view_s_distance_is_the_one_the_exact_search_finds(seed, turns):
+    """The radius the search starts from is measured as the search measures: with one view
+    per object, each object's exact distance is its only view's."""
+    rng = np.random.default_rng(seed)
+    arrays = _random_tier(rng, 6, 1)
+    stack = np.stack([np.roll(arrays.curves[int(rng.integers(6))], int(rng.integers(32)))
+                      + rng.normal(0, 0.05, 32) for _ in range(turns)])
+    found, _ = knn_stack(stack, arrays, 6, 3)
+    measured = view_distances(stack, arrays, np.arange(6, dtype=np.int64), 3)
+    for nb in found:
+        assert measured[arrays.names.index(nb.object)] == pytest.approx(nb.distance, rel=1e-12)
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -200,8 +200,9 @@ def view_distances(
 ) -> list[float]:
     """The exact distance of each view (a row of ``source``) to a stack of curves, as the
     search measures it: the least DTW over the curves and the view's mirror."""
-    groups = np.searchsorted(source.group_start, rows, side="right") - 1
-    curves = source.rows(np.unique(groups))[0]
+    starts, ends = source.group_start, source.group_start + source.group_count
+    groups = [int(np.flatnonzero((starts <= row) & (row < ends))[0]) for row in rows.tolist()]
+    curves = source.rows(np.unique(np.array(groups, dtype=np.int64)))[0]
     out = []
     for row in rows.tolist():
         view = np.asarray(curves[row], dtype=np.float64)
