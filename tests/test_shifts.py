@@ -18,7 +18,7 @@ from viewdb.http import RefineRequest
 from viewdb.recognition.shapes import rotated_curves
 from viewdb.search.bounds import dtw, envelope, lb_keogh, paa_edges, paa_means
 from viewdb.search.grouping import indexed_coordinates
-from viewdb.search.knn import TierArrays, knn, knn_stack
+from viewdb.search.knn import TierArrays, deal_objects, knn, knn_stack
 from viewdb.search.multirefine import scan_stack
 from viewdb.search.shifts import CurveQuery, ShiftWindow, shift_turn, shifted, shifted_curves, turn_window
 
@@ -125,8 +125,9 @@ def test_a_search_split_over_threads_reports_what_one_search_reports(seed, k, r,
                                                                      bounded, slack):
     """The objects dealt to threads sharing their bounds: the same objects, distances,
     views, orientations and curves as one search, ties included (copies of views within
-    and across objects, symmetric views), bounded (a CS1 server) or not, and the brute
-    force's objects and distances."""
+    and across objects, symmetric views), bounded (a CS1 server) or not, the objects dealt
+    by a priority (a fast shortlist's order) or by their views, and the brute force's
+    objects and distances."""
     rng = np.random.default_rng(seed)
     n = 24
     tier = random_tier(rng, objects, 80, n, int(rng.integers(1, 9)))
@@ -142,7 +143,10 @@ def test_a_search_split_over_threads_reports_what_one_search_reports(seed, k, r,
         known = {tier.names.index(nb.object): nb.distance * (1 + slack * rng.random())
                  for nb in everything if rng.random() < 0.6}
         upper = everything[k - 1].distance * (1 + slack) if len(everything) >= k else math.inf
-    split, stats = knn_stack(stack, tier, k, r, block=block, threads=threads, upper=upper, known=known)
+    listed = rng.permutation(objects)[: int(rng.integers(0, objects + 1))]
+    priority = listed.astype(np.int64) if len(listed) else None
+    split, stats = knn_stack(stack, tier, k, r, block=block, threads=threads, upper=upper, known=known,
+                             priority=priority)
     assert split == one
     check_against_oracle(split, naive_knn_over_curves(stack, tier.curves, tier.owner, tier.names, k, r),
                          stack, tier, r)
@@ -476,3 +480,11 @@ def test_the_cli_passes_the_gravity_hint(tiered_db, tmp_path, capsys):
     capsys.readouterr()
     assert main(common + ["--roll", "90", "--upright"]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+def test_a_priority_deals_its_objects_to_the_threads_in_turn():
+    rng = np.random.default_rng(3)
+    tier = random_tier(rng, 6, 24, 16, 4)
+    parts = deal_objects(tier, 2, priority=np.array([5, 0, 3, 1], dtype=np.int64))
+    assert [int(parts[o]) for o in (5, 0, 3, 1)] == [0, 1, 1, 0]  # 0, 1, then back: 1, 0
+    assert sorted(np.bincount(parts, minlength=2).tolist()) == [3, 3]

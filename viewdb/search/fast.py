@@ -190,7 +190,7 @@ def fast_knn(
             bounds[o] = min(d, bounds.get(o, math.inf))
         upper = min(upper, max(bounds[o] for o in objects[:k].tolist()))
     ann_ms = (time.perf_counter() - start) * 1e3
-    found, stats = knn_stack(stack, subset, k, band, upper=upper, known=bounds, block=block)
+    found, stats = knn_stack(stack, subset, k, band, upper=upper, known=bounds, block=block, priority=objects)
     stats.extra.update(shortlisted=float(len(objects)), ann_ms=ann_ms, fast_index=1.0)
     return found, stats
 
