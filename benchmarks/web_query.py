@@ -1,7 +1,7 @@
 """A query through the web page's endpoint against the same query through the CLI's
 remote path, on a warm server on loopback.
 
-    python benchmarks/web_query.py [--db FULL.db] [--repeats 7] [--k 3] [--plans server,cs1]
+    python benchmarks/web_query.py [--db FULL.db] [--repeats 7] [--k 5] [--plans fast,server,cs1]
 
 Without ``--db`` the demo's database is built (every model in ``sample_models/``, 30°
 grid) in a temporary folder. The photo is the demo's (the mug off the grid, turned,
@@ -33,6 +33,7 @@ from pathlib import Path
 
 import viewdb
 from support.serving import ServerProcess, multipart, request
+from viewdb.recognition.options import QueryOptions
 from viewdb_cli.main import _demo_photo
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,8 +78,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--db", type=Path, help="a full database (default: the demo's, built here)")
     parser.add_argument("--repeats", type=int, default=7)
-    parser.add_argument("--k", type=int, default=3)
-    parser.add_argument("--plans", default="server,cs1")
+    # the page's defaults (the library's): its plan first, then the exact ones
+    parser.add_argument("--k", type=int, default=QueryOptions().k)
+    parser.add_argument("--plans", default=",".join(dict.fromkeys([QueryOptions().plan, "server", "cs1"])))
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="viewdb-web-bench-") as tmp:
         folder = Path(tmp)

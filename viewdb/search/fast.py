@@ -186,9 +186,10 @@ def fast_knn(
         # the first k objects' nearest views, measured exactly: each bounds its object's
         # distance, the largest the k-th, so the search starts with that radius (measuring
         # every shortlisted object's view as well narrowed it no further on photos)
-        for o, d in zip(objects[:k].tolist(), view_distances(stack, source, nearest[:k], band), strict=True):
+        firsts = objects[:k].tolist()
+        for o, d in zip(firsts, view_distances(stack, source, nearest[:k], band), strict=True):
             bounds[o] = min(d, bounds.get(o, math.inf))
-        upper = min(upper, max(bounds[o] for o in objects[:k].tolist()))
+        upper = min(upper, max(bounds[o] for o in firsts))
     ann_ms = (time.perf_counter() - start) * 1e3
     found, stats = knn_stack(stack, subset, k, band, upper=upper, known=bounds, block=block, priority=objects)
     stats.extra.update(shortlisted=float(len(objects)), ann_ms=ann_ms, fast_index=1.0)
