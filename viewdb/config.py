@@ -628,6 +628,13 @@ class SilhouetteConfig:
     start_steps: tuple[float, float, float] = (0.12, 3.0, 0.06)
     coarse_min_steps: tuple[float, float, float] = (0.02, 0.75, 0.01)
     fine_min_steps: tuple[float, float, float] = (0.004, 0.2, 0.002)
+    #: Weight of the texture score (:mod:`viewdb.pose.texture_fit`: how well a render of
+    #: the mesh's own colours explains the photo's gradients inside it, in [0, 1]) beside
+    #: the IoU when the refined hypotheses are ranked and the answer chosen; 0: IoU alone.
+    #: Used for meshes with colour of their own, in a query that has a photo.
+    texture_weight: float = 1.0
+    #: The texture score's window (pixels square) around the query's silhouette.
+    texture_size: int = 128
     #: Threads a fit's outline alignments and the refinements of its starts are spread
     #: over (each refinement is one compiled call without the GIL; at most the machine's
     #: CPUs): the same pose whatever the count. Default: the environment's
@@ -643,6 +650,8 @@ class SilhouetteConfig:
             raise ValueError("window sizes must be in [16, 1024]")
         if self.coarse_faces < 0:
             raise ValueError("coarse_faces must be at least 0")
+        if not (self.texture_weight >= 0.0 and 16 <= self.texture_size <= 1024):
+            raise ValueError("need texture_weight >= 0 and texture_size in [16, 1024]")
         if self.start_directions not in ("sphere", "candidates"):
             raise ValueError(
                 f"start_directions must be 'sphere' or 'candidates', got {self.start_directions!r}")

@@ -27,7 +27,7 @@ from ..typed import Intrinsics
 from .coverage import MeshTriangles, silhouette
 from .gl import pyrender_module
 from .mesh import NormalisedMesh
-from .render import render_depth, reraise_interrupt
+from .render import offscreen, pyrender_mesh, render_depth, reraise_interrupt
 
 __all__ = ["PinholeRenderer", "Window", "get_pinhole_renderer"]
 
@@ -93,6 +93,10 @@ class PinholeRenderer:
         #: at each level of detail asked for, the least recently used dropped first.
         self._triangles: dict[int, tuple[NormalisedMesh, dict[int | None, MeshTriangles]]] = {}
         self._triangles_lock = threading.Lock()
+        #: The scene :meth:`colour` renders (the mesh with its colours), its mesh and camera nodes.
+        self._colour_mesh: NormalisedMesh | None = None
+        self._colour_scene = None
+        self._colour_nodes: list = []
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -117,24 +121,36 @@ class PinholeRenderer:
         """Silhouette (bool) and depth (camera z, 0 off the object) of ``mesh`` at the
         OpenCV pose ``(rotation, translation)`` for a ``size × size`` image with
         ``intrinsics`` ``(fx, fy, cx, cy)`` (e.g. :meth:`Window.intrinsics`)."""
-        pyrender = pyrender_module()
         self._use_mesh(mesh)
-        fx, fy, cx, cy = (float(x) for x in intrinsics)
-        t = np.asarray(translation, dtype=np.float64).reshape(3)
-        # near and far planes around the object (radius 1 in model units)
-        znear = max(1e-3, float(t[2]) - 1.5) if t[2] > 1.6 else max(1e-3, float(t[2]) * 0.05)
-        zfar = float(t[2]) + 1.5
-        camera = pyrender.IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5, znear=znear, zfar=zfar)
         assert self._scene is not None
-        if self._camera_node is not None:
-            self._scene.remove_node(self._camera_node)
-        self._camera_node = self._scene.add(camera, pose=np.eye(4))
-        pose = np.eye(4)
-        pose[:3, :3] = GL_TO_CV @ np.asarray(rotation, dtype=np.float64)
-        pose[:3, 3] = GL_TO_CV @ t
-        self._scene.set_pose(self._mesh_node, pose)
+        self._camera_node = _place(self._scene, self._mesh_node, self._camera_node, rotation, translation,
+                                   intrinsics)
         depth = render_depth(self._scene, size, mesh.name)
         return depth > 0, depth
+
+    def colour(
+        self, mesh: NormalisedMesh, rotation: NDArray[np.floating], translation: NDArray[np.floating],
+        intrinsics: Intrinsics, size: int,
+    ) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
+        """The mesh's own colours (ambient light only: no shading) and its silhouette, as
+        :meth:`render` places it, RGB uint8 ``(size, size, 3)`` (black off the object)."""
+        pyrender = pyrender_module()
+        if self._colour_mesh is not mesh:
+            try:
+                scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
+                node = scene.add(pyrender_mesh(mesh))
+            except Exception as exc:
+                reraise_interrupt(exc)
+                raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
+            self._colour_scene, self._colour_nodes, self._colour_mesh = scene, [node, None], mesh
+        scene, nodes = self._colour_scene, self._colour_nodes
+        nodes[1] = _place(scene, nodes[0], nodes[1], rotation, translation, intrinsics)
+        try:
+            color, depth = offscreen(size).render(scene)
+        except Exception as exc:
+            reraise_interrupt(exc)
+            raise RenderError(f"rendering {mesh.name!r} failed: {exc}") from exc
+        return np.asarray(color[..., :3], dtype=np.uint8), np.asarray(depth) > 0
 
     def silhouette(
         self, mesh: NormalisedMesh, rotation: NDArray[np.floating], translation: NDArray[np.floating],
@@ -161,6 +177,27 @@ class PinholeRenderer:
                 full = levels[None]
                 levels[max_faces] = full.simplified(max_faces) if max_faces is not None else full
             return levels[max_faces]
+
+
+def _place(scene, mesh_node, camera_node, rotation: NDArray[np.floating],  # type: ignore[no-untyped-def]
+           translation: NDArray[np.floating], intrinsics: Intrinsics):
+    """Put ``scene``'s mesh at the OpenCV pose ``(rotation, translation)`` before a camera
+    with ``intrinsics``, the camera's near and far planes around the object (radius 1 in
+    model units); the camera node that replaces ``camera_node``."""
+    pyrender = pyrender_module()
+    fx, fy, cx, cy = (float(x) for x in intrinsics)
+    t = np.asarray(translation, dtype=np.float64).reshape(3)
+    znear = max(1e-3, float(t[2]) - 1.5) if t[2] > 1.6 else max(1e-3, float(t[2]) * 0.05)
+    zfar = float(t[2]) + 1.5
+    camera = pyrender.IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5, znear=znear, zfar=zfar)
+    if camera_node is not None:
+        scene.remove_node(camera_node)
+    camera_node = scene.add(camera, pose=np.eye(4))
+    pose = np.eye(4)
+    pose[:3, :3] = GL_TO_CV @ np.asarray(rotation, dtype=np.float64)
+    pose[:3, 3] = GL_TO_CV @ t
+    scene.set_pose(mesh_node, pose)
+    return camera_node
 
 
 @dataclass

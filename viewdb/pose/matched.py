@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import normalise_angle
-from ..catalogue.appearance import margin_pixels
+from ..catalogue.appearance import carries_colour, margin_pixels
 from ..catalogue.pinhole import get_pinhole_renderer
 from ..catalogue.reading import CandidatePose, CatalogueReader
 from ..config import MatchedPoseConfig, SilhouetteConfig
@@ -34,6 +34,7 @@ from .estimate import CandidateView, PoseConfig, PoseEstimate, QueryView, estima
 from .frames import GL_TO_CV, inplane_angle, rodrigues, rotation_to_view
 from .intrinsics import Intrinsics
 from .silhouette import QUICK, fibonacci_directions, search_silhouette_pose, to_mesh_units
+from .texture_fit import TextureScore
 
 __all__ = [
     "appearance_view", "grid_directions", "grid_silhouette", "in_mesh_units", "interpolate_shape",
@@ -174,7 +175,8 @@ def pose_silhouette(
     directions: Sequence[tuple[float, float]] | None = None,
 ) -> PoseEstimate:
     """Texture-less object, calibrated camera: the pinhole pose whose rendered silhouette
-    fits the query's best (:func:`viewdb.pose.silhouette.search_silhouette_pose`), started
+    fits the query's best (:func:`viewdb.pose.silhouette.search_silhouette_pose`; for a
+    mesh with colour of its own, with the photo inside it: :mod:`viewdb.pose.texture_fit`), started
     from the grid views ``directions`` (default: those nearest evenly spread viewing
     directions; their silhouettes from the stored appearance: :func:`grid_silhouette`)
     and from ``starts``; normalised units."""
@@ -184,6 +186,8 @@ def pose_silhouette(
     search = search or SilhouetteConfig()
     if directions is None:
         directions = grid_directions(catalogue.config.gap, search.directions)
+    texture = (TextureScore(mesh, query, intrinsics, search.texture_size)
+               if search.texture_weight > 0 and carries_colour(mesh) else None)
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
         pinhole.triangles(mesh),
@@ -191,6 +195,7 @@ def pose_silhouette(
         directions=directions,
         starts=starts, config=config, search=search,
         coarse_triangles=pinhole.triangles(mesh, search.coarse_faces or None),
+        texture=texture,
     )
     h, v, a = rotation_to_view(GL_TO_CV @ fit.rotation)
     width = query.mask.shape[1]

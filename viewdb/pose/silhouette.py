@@ -389,6 +389,7 @@ def search_silhouette_pose(
     config: PoseConfig | None = None,
     search: SilhouetteConfig | None = None,
     coarse_triangles: MeshTriangles | None = None,
+    texture: Callable[[NDArray[np.float64], NDArray[np.float64]], float] | None = None,
 ) -> SilhouetteFit:
     """The pinhole pose of a mesh whose silhouette is ``query`` (module doc).
 
@@ -400,7 +401,10 @@ def search_silhouette_pose(
     ``triangles``) serve the coarse refinement, e.g. a decimated mesh's
     (:attr:`~viewdb.config.SilhouetteConfig.coarse_faces`). The views' outlines are aligned
     and the starts refined on up to :attr:`~viewdb.config.SilhouetteConfig.threads`
-    threads; the answer does not depend on how many.
+    threads; the answer does not depend on how many. ``texture(R, t)`` (e.g. a
+    :class:`~viewdb.pose.texture_fit.TextureScore`, in ``[0, 1]``) scores how well a pose
+    explains the photo inside the object: the refined hypotheses are then ranked, and the
+    answer chosen, by IoU + :attr:`~viewdb.config.SilhouetteConfig.texture_weight` × it.
 
     Raises
     ------
@@ -447,20 +451,27 @@ def search_silhouette_pose(
     coarse = _Objective(coarse_triangles or triangles, mask, ignore, window, k)
     found_coarse = _search_all(coarse, [(rot, t) for rot, t, _ in chosen], search.coarse_min_steps,
                                search.start_steps, search.max_evaluations, search.threads)
-    refined = [(iou, r2, t2, origin)
+    weight = search.texture_weight if texture is not None else 0.0
+
+    def score(iou: float, rot: NDArray[np.float64], t: NDArray[np.float64]) -> float:
+        return iou + weight * texture(rot, t) if weight and texture is not None else iou
+
+    refined = [(score(iou, r2, t2), iou, r2, t2, origin)
                for (r2, t2, iou), (_, _, origin) in zip(found_coarse, chosen, strict=True)]
     refined.sort(key=lambda x: -x[0])
     if search.fine_starts == 0:
-        iou, rot, t, origin = refined[0]
+        _, iou, rot, t, origin = refined[0]
         return SilhouetteFit(rot, t, iou, origin, coarse.evaluations + len(found))
     fine = _Objective(triangles, mask, ignore, Window.around(mask, search.fine_size), k)
-    best: SilhouetteFit | None = None
-    starts_fine = [(rot, t) for _, rot, t, _ in refined[:search.fine_starts]]
+    best: tuple[float, SilhouetteFit] | None = None
+    starts_fine = [(rot, t) for _, _, rot, t, _ in refined[:search.fine_starts]]
     found_fine = _search_all(fine, starts_fine, search.fine_min_steps, search.coarse_min_steps,
                              search.max_evaluations, search.threads)
     for (r2, t2, iou), (*_, origin) in zip(found_fine, refined[:search.fine_starts], strict=True):
-        if best is None or iou > best.iou:
-            best = SilhouetteFit(r2, t2, iou, origin, 0)
+        total = score(iou, r2, t2)
+        if best is None or total > best[0]:
+            best = (total, SilhouetteFit(r2, t2, iou, origin, 0))
     assert best is not None
-    return SilhouetteFit(best.rotation, best.translation, best.iou, best.start,
+    best_fit = best[1]
+    return SilhouetteFit(best_fit.rotation, best_fit.translation, best_fit.iou, best_fit.start,
                          coarse.evaluations + fine.evaluations + len(found))
