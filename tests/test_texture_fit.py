@@ -5,6 +5,7 @@ to tell apart poses whose silhouettes are the same (the faces of a dice)."""
 from __future__ import annotations
 
 import itertools
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from tests.conftest import sample
 from viewdb.catalogue.mesh import load_mesh
 from viewdb.catalogue.pinhole import get_pinhole_renderer
 from viewdb.config import PoseConfig, SilhouetteConfig
+from viewdb.errors import PoseError, RenderError
 from viewdb.pose.frames import GL_TO_CV, rotation_angle, view_rotation
 from viewdb.pose.matched import pose_silhouette
 from viewdb.pose.texture_fit import TextureScore
@@ -87,6 +89,35 @@ def test_pixels_that_may_hide_the_object_are_left_out():
     photo, mask = _photo(mesh, rotation, translation)
     hidden = np.ones(mask.shape, bool)
     assert TextureScore(mesh, QueryView(photo, mask, ignore=hidden), INTRINSICS, 128)(rotation, translation) == 0.0
+
+
+def test_an_empty_query_is_refused_and_a_mesh_that_cannot_be_rendered_scores_nothing(monkeypatch):
+    mesh = load_mesh(sample("cube_dice"))
+    rotation, translation = _pose(*POSES[0])
+    photo, mask = _photo(mesh, rotation, translation)
+    with pytest.raises(PoseError, match="empty"):
+        TextureScore(mesh, QueryView(photo, np.zeros_like(mask)), INTRINSICS, 128)
+    score = TextureScore(mesh, QueryView(photo, mask), INTRINSICS, 128)
+    assert score(rotation, translation) > 0.9
+
+    def no_gl(*args, **kwargs):
+        raise RenderError("cannot create an offscreen renderer: no EGL display")
+
+    monkeypatch.setattr(get_pinhole_renderer(), "colour", no_gl)
+    assert score(rotation, translation) == 0.0
+    assert score.unavailable
+
+
+def test_threads_score_alike():
+    """Each thread renders in its own GL context, with its own scene."""
+    mesh = load_mesh(sample("cube_dice"))
+    rotation, translation = _pose(*POSES[2])
+    photo, mask = _photo(mesh, rotation, translation)
+    score = TextureScore(mesh, QueryView(photo, mask), INTRINSICS, 128)
+    poses = [(rotation @ turn, translation) for turn in _cube_turns()[:6]]
+    alone = [score(*pose) for pose in poses]
+    with ThreadPoolExecutor(2) as pool:
+        assert list(pool.map(lambda pose: score(*pose), poses)) == alone
 
 
 @pytest.fixture(scope="module")

@@ -93,10 +93,9 @@ class PinholeRenderer:
         #: at each level of detail asked for, the least recently used dropped first.
         self._triangles: dict[int, tuple[NormalisedMesh, dict[int | None, MeshTriangles]]] = {}
         self._triangles_lock = threading.Lock()
-        #: The scene :meth:`colour` renders (the mesh with its colours), its mesh and camera nodes.
-        self._colour_mesh: NormalisedMesh | None = None
-        self._colour_scene = None
-        self._colour_nodes: list = []
+        #: Per thread (GL buffers belong to the thread's context), the scene :meth:`colour`
+        #: renders: ``mesh``, ``scene`` and its ``nodes`` (the mesh's and the camera's).
+        self._colour = threading.local()
 
     def _use_mesh(self, mesh: NormalisedMesh) -> None:
         if self._mesh is mesh:
@@ -135,15 +134,16 @@ class PinholeRenderer:
         """The mesh's own colours (ambient light only: no shading) and its silhouette, as
         :meth:`render` places it, RGB uint8 ``(size, size, 3)`` (black off the object)."""
         pyrender = pyrender_module()
-        if self._colour_mesh is not mesh:
+        mine = self._colour
+        if getattr(mine, "mesh", None) is not mesh:
             try:
                 scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[1.0, 1.0, 1.0])
                 node = scene.add(pyrender_mesh(mesh))
             except Exception as exc:
                 reraise_interrupt(exc)
                 raise RenderError(f"cannot build a render scene for {mesh.name!r}: {exc}") from exc
-            self._colour_scene, self._colour_nodes, self._colour_mesh = scene, [node, None], mesh
-        scene, nodes = self._colour_scene, self._colour_nodes
+            mine.scene, mine.nodes, mine.mesh = scene, [node, None], mesh
+        scene, nodes = mine.scene, mine.nodes
         nodes[1] = _place(scene, nodes[0], nodes[1], rotation, translation, intrinsics)
         try:
             color, depth = offscreen(size).render(scene)

@@ -186,8 +186,8 @@ def pose_silhouette(
     search = search or SilhouetteConfig()
     if directions is None:
         directions = grid_directions(catalogue.config.gap, search.directions)
-    texture = (TextureScore(mesh, query, intrinsics, search.texture_size)
-               if search.texture_weight > 0 and carries_colour(mesh) else None)
+    scored = search.texture_weight > 0 and np.asarray(query.mask).any() and carries_colour(mesh)
+    texture = TextureScore(mesh, query, intrinsics, search.texture_size) if scored else None
     fit = search_silhouette_pose(
         query.mask, intrinsics, lambda h, v: grid_silhouette(catalogue, name, h, v),
         pinhole.triangles(mesh),

@@ -17,7 +17,8 @@ between the render's grey gradient and the photo's is averaged, weighted by the
 render's gradient magnitude (a pixel where the photo is flat agrees 0). It compares
 where brightness changes and in which direction, not the colours themselves, so a
 camera's colour response and the scene's lighting matter little. A mesh without colour
-of its own renders flat, and is not scored.
+of its own renders flat, and is not scored; nor is any pose where the mesh cannot be
+rendered (no GL: the IoU alone decides).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from numpy.typing import NDArray
 
 from ..catalogue.mesh import NormalisedMesh
 from ..catalogue.pinhole import Window, get_pinhole_renderer
+from ..errors import PoseError, RenderError
 from ..typed import Intrinsics
 from .views import QueryView
 
@@ -53,7 +55,11 @@ class TextureScore:
 
     def __init__(self, mesh: NormalisedMesh, query: QueryView, intrinsics: Intrinsics, size: int) -> None:
         self.mesh = mesh
+        #: Set when the mesh cannot be rendered: every pose then scores 0.
+        self.unavailable = False
         mask = np.asarray(query.mask, dtype=bool)
+        if not mask.any():
+            raise PoseError("the query mask is empty: no object to score a pose against")
         self.window = Window.around(mask, size)
         fx, fy, cx, cy = (float(x) for x in intrinsics)
         self.camera = self.window.intrinsics(fx, fy, cx, cy)
@@ -66,10 +72,15 @@ class TextureScore:
             self.hidden = np.zeros((size, size), dtype=bool)
 
     def __call__(self, rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> float:
-        if not float(np.asarray(translation).reshape(3)[2]) > 1e-6:
+        if self.unavailable or not float(np.asarray(translation).reshape(3)[2]) > 1e-6:
             return 0.0
-        rgb, covered = get_pinhole_renderer().colour(self.mesh, rotation, translation, self.camera,
-                                                    self.window.size)
+        try:
+            rgb, covered = get_pinhole_renderer().colour(self.mesh, rotation, translation, self.camera,
+                                                        self.window.size)
+        except RenderError:
+            # no GL here (the silhouette fit itself needs none): every pose scores 0, the IoU decides
+            self.unavailable = True
+            return 0.0
         inner = cv2.erode(covered.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool) & ~self.hidden
         if np.count_nonzero(inner) < MIN_PIXELS:
             return 0.0
