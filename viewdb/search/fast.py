@@ -30,8 +30,9 @@ from numpy.typing import NDArray
 
 from ..catalogue.features import mirror_curve
 from ..config import FastConfig, SearchConfig
+from ..jit import njit
 from .ann import ViewIndex
-from .bounds import dtw
+from .bounds import dtw_kernel
 from .embedding import embed_curves
 from .knn import Neighbour, SearchStats, TierSource, knn_stack
 from .subset import SubsetSource, groups_by_object, runs_by_owner
@@ -201,15 +202,34 @@ def view_distances(
 ) -> list[float]:
     """The exact distance of each view (a row of ``source``) to a stack of curves, as the
     search measures it: the least DTW over the curves and the view's mirror."""
-    starts, ends = source.group_start, source.group_start + source.group_count
-    groups = [int(np.flatnonzero((starts <= row) & (row < ends))[0]) for row in rows.tolist()]
+    starts, counts = source.group_start, source.group_count
+    groups = [_group_of(starts, counts, row) for row in rows.tolist()]
     curves = source.rows(np.unique(np.array(groups, dtype=np.int64)))[0]
-    out = []
-    for row in rows.tolist():
-        view = np.asarray(curves[row], dtype=np.float64)
+    views = np.ascontiguousarray(np.asarray(curves[rows], dtype=np.float64))
+    shown = np.ascontiguousarray(np.stack([views, mirror_curve(views)], axis=1))
+    queries = np.ascontiguousarray(stack, dtype=np.float64)
+    out = np.empty(len(rows))
+    _least_dtw(queries, shown, min(int(band), queries.shape[1] - 1), out)
+    return out.tolist()
+
+
+def _group_of(starts: NDArray[np.integer], counts: NDArray[np.integer], row: int) -> int:
+    """The group that holds ``row``: found by bisection where the groups lie in row order
+    (a tier file's do), else by a scan."""
+    g = int(np.searchsorted(starts, row, side="right")) - 1
+    if 0 <= g < len(starts) and starts[g] <= row < starts[g] + counts[g]:
+        return g
+    return int(np.flatnonzero((starts <= row) & (row < starts + counts))[0])
+
+
+@njit(cache=True, nogil=True)
+def _least_dtw(queries, shown, band, out):  # pragma: no cover - compiled
+    """``out[i]``: the least DTW distance between any of ``queries`` ``(T, N)`` and any
+    curve of ``shown[i]`` ``(2, N)`` (a view and its mirror), each search bounded by the
+    best so far (:func:`~viewdb.search.bounds.dtw_kernel`)."""
+    for i in range(shown.shape[0]):
         best = math.inf
-        for shown in (view, mirror_curve(view)):
-            for q in stack:
-                best = min(best, dtw(q, shown, band, best))
-        out.append(best)
-    return out
+        for m in range(shown.shape[1]):
+            for t in range(queries.shape[0]):
+                best = min(best, dtw_kernel(queries[t], shown[i, m], band, best))
+        out[i] = best
