@@ -318,3 +318,18 @@ def test_a_stale_index_is_ignored_read_only_and_rebuilt_by_a_writer(tiered_db, t
         fast = vdb.recognise(queries[0], 2, plan="fast", fast_shortlist=7)
         assert fast.server_stats["fast_index"] == 1.0
     assert map_ann_file(ann_file_path(db, "full"), _key(db), "full", _rows(db)) is not None
+
+
+@given(st.lists(st.integers(1, 5), min_size=1, max_size=12), st.randoms(use_true_random=False))
+def test_the_group_of_a_row_is_found_whatever_the_groups_order(counts, rnd):
+    """Groups laid out in row order are bisected, others scanned: the same group either way."""
+    from viewdb.search.fast import _group_of
+
+    counts_a = np.array(counts, dtype=np.int64)
+    starts_a = np.concatenate([[0], np.cumsum(counts_a)[:-1]]).astype(np.int64)
+    order = list(range(len(counts)))
+    rnd.shuffle(order)
+    for starts, sizes in ((starts_a, counts_a), (starts_a[order], counts_a[order])):
+        for row in range(int(counts_a.sum())):
+            g = _group_of(starts, sizes, row)
+            assert starts[g] <= row < starts[g] + sizes[g]
