@@ -41,7 +41,7 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TypeVar
 
 import numpy as np
@@ -451,10 +451,10 @@ def search_silhouette_pose(
     coarse = _Objective(coarse_triangles or triangles, mask, ignore, window, k)
     found_coarse = _search_all(coarse, [(rot, t) for rot, t, _ in chosen], search.coarse_min_steps,
                                search.start_steps, search.max_evaluations, search.threads)
-    weight = search.texture_weight if texture is not None else 0.0
+    inside = texture if search.texture_weight > 0 else None
 
     def score(iou: float, rot: NDArray[np.float64], t: NDArray[np.float64]) -> float:
-        return iou + weight * texture(rot, t) if weight and texture is not None else iou
+        return iou if inside is None else iou + search.texture_weight * inside(rot, t)
 
     refined = [(score(iou, r2, t2), iou, r2, t2, origin)
                for (r2, t2, iou), (_, _, origin) in zip(found_coarse, chosen, strict=True)]
@@ -463,15 +463,10 @@ def search_silhouette_pose(
         _, iou, rot, t, origin = refined[0]
         return SilhouetteFit(rot, t, iou, origin, coarse.evaluations + len(found))
     fine = _Objective(triangles, mask, ignore, Window.around(mask, search.fine_size), k)
-    best: tuple[float, SilhouetteFit] | None = None
     starts_fine = [(rot, t) for _, _, rot, t, _ in refined[:search.fine_starts]]
     found_fine = _search_all(fine, starts_fine, search.fine_min_steps, search.coarse_min_steps,
                              search.max_evaluations, search.threads)
-    for (r2, t2, iou), (*_, origin) in zip(found_fine, refined[:search.fine_starts], strict=True):
-        total = score(iou, r2, t2)
-        if best is None or total > best[0]:
-            best = (total, SilhouetteFit(r2, t2, iou, origin, 0))
-    assert best is not None
-    best_fit = best[1]
-    return SilhouetteFit(best_fit.rotation, best_fit.translation, best_fit.iou, best_fit.start,
-                         coarse.evaluations + fine.evaluations + len(found))
+    fits = [(score(iou, r2, t2), SilhouetteFit(r2, t2, iou, origin, 0))
+            for (r2, t2, iou), (*_, origin) in zip(found_fine, refined[:search.fine_starts], strict=True)]
+    best = max(fits, key=lambda fit: fit[0])[1]  # the first of equals, as the coarse order has it
+    return replace(best, renders=coarse.evaluations + fine.evaluations + len(found))
