@@ -167,6 +167,34 @@ def test_the_shortlist_ranks_objects_by_their_nearest_view_in_the_embedding(exac
         assert listed[0] == arrays.owner[17]
 
 
+def _crowded_tier(rng):
+    """Object 0: 30 views of nearly one curve; objects 1-9: 4 views each of others."""
+    crowd = _random_tier(rng, 1, 30)
+    crowd_curves = crowd.curves[0] + rng.normal(0, 0.002, (30, 32))
+    rest = _random_tier(rng, 9, 4)
+    owner = np.r_[np.zeros(30, dtype=np.int64), rest.owner + 1]
+    return TierArrays([f"o{i}" for i in range(10)], owner, np.vstack([crowd_curves, rest.curves]), group_views=4)
+
+
+@pytest.mark.parametrize("least", [1, 2])
+def test_views_that_crowd_into_few_objects_shortlist_those_without_ranking_every_view(least):
+    """The index is asked for at most ``exact_share`` of its views; when the nearest
+    views name fewer objects than asked for, those objects are the shortlist (every view
+    is not embedded), unless they are fewer than ``least``."""
+    arrays = _crowded_tier(np.random.default_rng(11))
+    config = FastConfig(coefficients=8, exact_share=0.3, views_per_object=1)  # at most 19 of 66 views
+    index = build_fast_index(arrays, config)
+    index.cache.clear()
+    listed, asked = shortlist_objects(arrays.curves[3][None, :], index, 5, arrays, least)
+    if least == 1:
+        assert listed.tolist() == [0] and asked == 19 and "vectors" not in index.cache
+    else:
+        assert len(listed) == 5 and listed[0] == 0 and asked == 0 and "vectors" in index.cache
+    found, stats = fast_knn(arrays.curves[3][None, :], arrays, index, least, 3, 5)
+    assert [nb.object for nb in found][:1] == ["o0"] and len(found) == least
+    assert stats.to_dict()["shortlisted"] == (1 if least == 1 else 5)
+
+
 def test_a_photos_turns_ask_the_index_once_and_other_outlines_apart():
     rng = np.random.default_rng(8)
     a, b = rng.random(16).astype(np.float32), rng.random(16).astype(np.float32) + 1
@@ -206,7 +234,9 @@ def test_the_fast_plan_reports_exact_distances_and_equals_server_with_every_obje
             for k, shortlist, band in ((1, 1, 6), (2, 3, 4), (3, 2, 6), (3, len(names), 5)):
                 fast = db.recognise(q, k, band=band, plan="fast", fast_shortlist=shortlist)
                 assert fast.server_stats["fast_index"] == 1.0
-                assert fast.server_stats["shortlisted"] == min(max(shortlist, k), len(names))
+                # fewer when the index's nearest views name fewer objects (never fewer than k)
+                assert k <= fast.server_stats["shortlisted"] <= min(max(shortlist, k), len(names))
+                assert len(fast.results) == k
                 everything = brute_force_knn(q, arrays, len(names), band)
                 exact = {nb.object: nb.distance for nb in everything}
                 for c in fast.results:  # a true distance: the object's best over all its views

@@ -874,9 +874,11 @@ class FastConfig:
     #: (0.009 apart at the median, 0.024 at most, on 80 synthetic photos) and their mean
     #: shortlists as well as each turn on its own (12 turns, at one twelfth of the asking).
     merge_radius: float = 0.03
-    #: A shortlist the index would need more than this share of its views for (most of a
-    #: small catalogue's objects) is ranked exactly instead: every view's embedding
-    #: compared, which then costs less than the graph search.
+    #: The most views the index is asked for, as a share of them: views that name fewer
+    #: objects than the shortlist's make the shortlist (:func:`~viewdb.search.fast.
+    #: shortlist_objects`). A catalogue too small to be asked for a shortlist's views
+    #: within it is ranked exactly: every view's embedding compared, which then costs less
+    #: than the graph search.
     exact_share: float = 0.02
     #: Objects shortlisted (the knob; :attr:`RecognitionConfig.fast_shortlist` is the
     #: query's default).

@@ -116,20 +116,24 @@ def merged_queries(vectors: NDArray[np.float32], radius: float) -> NDArray[np.fl
 
 
 def shortlist_objects(
-    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource,
+    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource, least: int = 1,
 ) -> tuple[NDArray[np.int64], int]:
     """The ``size`` objects (indices of ``source``, best first) whose nearest indexed view is
     nearest any of ``curves`` ``(T, N)`` in the embedding (the curves' embeddings merged,
     :func:`merged_queries`), and how many views the index was asked for per query (0:
     ranked exactly). The index is asked again, for twice as many, until its views name
-    ``size`` objects; past :attr:`~viewdb.config.FastConfig.exact_share` of its views
-    (a shortlist of most objects), every view is compared instead (:func:`rank_exactly`)."""
-    objects, _, count = _shortlist(curves, index, size, source)
+    ``size`` objects, up to :attr:`~viewdb.config.FastConfig.exact_share` of its views
+    (the last time for exactly that many). If those name fewer objects (the photo's
+    nearest views crowd into a few objects), the shortlist is the objects they name, if
+    at least ``least``. A catalogue too small to be asked for ``size`` ×
+    ``views_per_object`` views within that share, or views that name fewer than ``least``
+    objects, are ranked by every view instead (:func:`rank_exactly`)."""
+    objects, _, count = _shortlist(curves, index, size, source, least)
     return objects, count
 
 
 def _shortlist(
-    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource,
+    curves: NDArray[np.floating], index: FastIndex, size: int, source: TierSource, least: int,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64] | None, int]:
     """:func:`shortlist_objects`, with each shortlisted object's nearest view (its row;
     None when ranked exactly)."""
@@ -137,18 +141,23 @@ def _shortlist(
     q = merged_queries(embed_curves(curves, config.coefficients, config.quantiles), config.merge_radius)
     size = min(size, source.n_objects)
     count = max(size * config.views_per_object, 1)
-    while count <= max(config.exact_share * index.index.size, size * config.views_per_object):
+    most = min(int(config.exact_share * index.index.size), index.index.size)
+    if count > most:
+        return rank_exactly(q, index, source)[:size], None, 0
+    while True:
         keys, distances = index.index.nearest(q, count, config.expansion_search)
         valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
         order = np.argsort(distances[valid], kind="stable")
         rows = keys[valid][order]
         _, first = np.unique(index.row_owner[rows], return_index=True)
         nearest = rows[np.sort(first)]
-        if len(nearest) >= size or count >= index.index.size:
+        if len(nearest) >= size or (count >= most and len(nearest) >= min(least, size)):
+            # (ranking every view instead embeds the whole tier once: 1.6 s at 557,273 views)
             nearest = nearest[:size].astype(np.int64)
             return index.row_owner[nearest].astype(np.int64), nearest, count
-        count = 2 * count
-    return rank_exactly(q, index, source)[:size], None, 0
+        if count >= most:
+            return rank_exactly(q, index, source)[:size], None, 0
+        count = min(2 * count, most)
 
 
 def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSource) -> NDArray[np.int64]:
@@ -179,7 +188,7 @@ def fast_knn(
         stats.extra.update(shortlisted=float(source.n_objects), fast_index=float(index is not None))
         return found, stats
     start = time.perf_counter()
-    objects, nearest, _ = _shortlist(stack, index, max(shortlist, k), source)
+    objects, nearest, _ = _shortlist(stack, index, max(shortlist, k), source, k)
     subset = SubsetSource(source, objects, index.by_object)
     listed = set(objects.tolist())
     bounds = {o: d for o, d in (known or {}).items() if o in listed}
