@@ -112,14 +112,18 @@ def test_a_seed_view_s_distance_is_the_one_the_exact_search_finds(seed, turns):
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 9), st.integers(0, 4))
-def test_a_subset_source_searches_exactly_the_objects_it_holds(seed, k, picks, band):
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 9), st.integers(0, 4), st.sampled_from([1, 2]),
+       st.sampled_from([1e-4, 1.0]))
+def test_a_subset_source_searches_exactly_the_objects_it_holds(seed, k, picks, band, threads, radius):
+    """On one thread or two sharing the subset's group keys, from a radius that must widen
+    many times or not at all."""
     rng = np.random.default_rng(seed)
     arrays = _random_tier(rng, 9, 6)
     objects = sorted(set(rng.integers(0, 9, picks).tolist()))
     curves = np.stack([arrays.curves[rng.integers(len(arrays.curves))] + rng.normal(0, 0.05, 32)
                        for _ in range(2)])
-    found, _ = knn_stack(curves, SubsetSource(arrays, objects), k, band, block=1)
+    found, _ = knn_stack(curves, SubsetSource(arrays, objects), k, band, block=1, threads=threads,
+                         initial_radius=radius)
     only = np.isin(np.arange(9), objects)
     masked, _ = knn_stack(curves, arrays, k, band, block=1, only=only)
     _same(found, masked)

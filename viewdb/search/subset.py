@@ -62,13 +62,18 @@ class SubsetSource:
         g = self.groups
         self._boxes = (np.ascontiguousarray(lo[g]), np.ascontiguousarray(hi[g]),
                        np.ascontiguousarray(curve_lo[g]), np.ascontiguousarray(curve_hi[g]))
+        self._keyed: tuple[object, NDArray[np.float64], NDArray[np.float64]] | None = None
 
     def groups_within(
         self, query: QueryBoxes, radius: float, seen: NDArray[np.bool_]
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         if not self.n_groups:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
-        mind, keys = query.group_keys(*self._boxes)
+        if self._keyed is None or self._keyed[0] is not query:
+            # every group's bound and key, once per query: a search's threads and its
+            # widening radii browse the same groups (the callers hold the source's lock)
+            self._keyed = (query, *query.group_keys(*self._boxes))
+        _, mind, keys = self._keyed
         hits = np.flatnonzero((mind <= radius) & ~seen).astype(np.int64)
         return hits, keys[hits]
 
