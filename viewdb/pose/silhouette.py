@@ -38,9 +38,7 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import TypeVar
 
@@ -52,6 +50,7 @@ from ..catalogue.pinhole import Window
 from ..config import PoseConfig, SilhouetteConfig
 from ..errors import FeatureError, PoseError
 from ..jit import njit
+from ..pools import thread_pool
 from ..typed import Intrinsics
 from .frames import GL_TO_CV, view_rotation
 from .shape_pose import align_shape, outline_of
@@ -337,32 +336,9 @@ def _map(function: Callable[[_T], _R], items: Sequence[_T], threads: int) -> lis
     most the machine's CPUs)."""
     threads = min(threads, os.cpu_count() or 1, len(items))
     if threads > 1:
-        return list(_pool(threads).map(function, items))
+        # what a fit hands the pool reads nothing shared, no catalogue, and maps nothing again
+        return list(thread_pool("viewdb-fit", threads).map(function, items))
     return [function(item) for item in items]
-
-
-_POOLS: dict[int, ThreadPoolExecutor] = {}
-_POOLS_LOCK = threading.Lock()
-
-
-def _forget_pools() -> None:
-    """In a forked child: none of the parent's threads (nor its lock's holder) is there."""
-    global _POOLS_LOCK
-    _POOLS.clear()
-    _POOLS_LOCK = threading.Lock()
-
-
-os.register_at_fork(after_in_child=_forget_pools)
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    """This process's pool of ``threads`` threads for :func:`_map` (made once; what a fit
-    hands it reads nothing shared, no catalogue, so two queries may share it; nothing run
-    on it maps again, so it cannot wait on itself)."""
-    with _POOLS_LOCK:
-        if threads not in _POOLS:
-            _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="viewdb-fit")
-        return _POOLS[threads]
 
 
 @dataclass(frozen=True)

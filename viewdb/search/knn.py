@@ -51,7 +51,6 @@ import os
 import threading
 import time
 from collections.abc import Mapping
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -61,6 +60,7 @@ from numpy.typing import NDArray
 
 from ..catalogue.features import mirror_curve
 from ..config import SearchConfig
+from ..pools import thread_pool
 from .bounds import (
     _group_keys_kernel,
     dtw,
@@ -497,10 +497,10 @@ def _parallel(
     if left_out is not None:
         group_part = np.where(left_out, -1, group_part)
     lock = threading.Lock()  # the source (an R-tree, a read connection) is one thread's at a time
-    with ThreadPoolExecutor(threads, thread_name_prefix="viewdb-search") as pool:
-        runs = [pool.submit(search.run, query, step, initial_radius, group_part != t, lock)
-                for t, search in enumerate(searches)]
-        stats = [run.result()[1] for run in runs]
+    pool = thread_pool("viewdb-search", threads)  # a search's threads submit nothing
+    runs = [pool.submit(search.run, query, step, initial_radius, group_part != t, lock)
+            for t, search in enumerate(searches)]
+    stats = [run.result()[1] for run in runs]
     total = SearchStats(seconds=max(s.seconds for s in stats))
     for name in ("groups_visited", "points_visited", "lb_keogh", "dtw", "expansions"):
         setattr(total, name, sum(getattr(s, name) for s in stats))
