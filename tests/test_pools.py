@@ -4,6 +4,7 @@ made once, and a forked child's own."""
 import os
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -51,3 +52,38 @@ def test_searches_on_shared_threads_answer_as_the_brute_force_and_a_forked_child
         os._exit(0 if [nb.object for nb in again] == [nb.object for nb in found] else 1)
     _, status = os.waitpid(pid, 0)
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+
+
+class _FailingSource:
+    """A source whose rows of object 0 cannot be read; each other read takes a while and
+    is counted while it lasts."""
+
+    def __init__(self, inner):
+        self.inner, self.reading, self.last_read = inner, 0, 0.0
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def rows(self, groups):
+        if np.any(self.inner.group_owner[np.asarray(groups, dtype=np.int64)] == 0):
+            raise OSError("object 0's rows are unreadable")
+        self.reading += 1
+        time.sleep(0.02)
+        try:
+            return self.inner.rows(groups)
+        finally:
+            self.reading -= 1
+            self.last_read = time.perf_counter()
+
+
+def test_a_failing_part_of_a_search_fails_it_only_after_every_part_has_stopped():
+    """The caller may close the source once the search returns or raises: no part of it
+    may still be reading then."""
+    rng = np.random.default_rng(9)
+    arrays = _tier(rng, objects=4, views=40)
+    source = _FailingSource(arrays)
+    q = arrays.curves[45] + rng.normal(0, 0.05, 32)  # a view of object 1: the other part reads
+    with pytest.raises(OSError, match="unreadable"):
+        knn_stack(q[None, :], source, 4, 2, threads=2)  # every object found: object 0 is read
+    failed_at = time.perf_counter()
+    assert source.reading == 0 and 0.0 < source.last_read <= failed_at

@@ -51,6 +51,7 @@ import os
 import threading
 import time
 from collections.abc import Mapping
+from concurrent.futures import wait
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -500,6 +501,7 @@ def _parallel(
     pool = thread_pool("viewdb-search", threads)  # a search's threads submit nothing
     runs = [pool.submit(search.run, query, step, initial_radius, group_part != t, lock)
             for t, search in enumerate(searches)]
+    wait(runs)  # every part ends before the caller may close the source, even if one fails
     stats = [run.result()[1] for run in runs]
     total = SearchStats(seconds=max(s.seconds for s in stats))
     for name in ("groups_visited", "points_visited", "lb_keogh", "dtw", "expansions"):
