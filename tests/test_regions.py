@@ -323,6 +323,21 @@ def test_a_small_object_in_a_large_photo_is_answered_from_its_box():
     assert iou(cut.mask, truth) > 0.8
 
 
+def test_a_box_past_the_photo_s_edge_is_cut_where_the_photo_ends():
+    """An object the frame cuts, its box (a tracker's, say) reaching past the edge: the
+    part inside the photo is answered, as from the box cut at the edge."""
+    photo, _ = table_photo([], (640, 320), [])
+    truth = np.zeros(photo.shape[:2], np.uint8)
+    cv2.circle(truth, (8, 160), 40, 1, -1)
+    truth = truth.astype(bool)
+    photo[truth] = (200, 40, 40)
+    x1, y1, x2, y2 = true_box(truth)
+    beyond, = find_regions(load_image(photo), Prompts.of(boxes=[[-32, y1, x2, y2]]))
+    clipped, = find_regions(load_image(photo), Prompts.of(boxes=[[0, y1, x2, y2]]))
+    assert iou(beyond.mask, truth) > 0.8
+    assert np.array_equal(beyond.mask, clipped.mask)
+
+
 def test_a_uniform_box_holds_no_object():
     photo, _ = table_photo([], (640, 320), [])
     with pytest.raises(viewdb.ImageError, match="no object found: the box is uniform"):
@@ -382,7 +397,8 @@ def test_separated_masks_are_disjoint_and_cover_the_union(rects):
 # ---------------------------------------------------------------- errors
 @pytest.mark.parametrize("prompts, problem", [
     (Prompts(boxes=(Box(700, 10, 790, 100),)), "outside the 640x320 image"),
-    (Prompts(boxes=(Box(-5, 10, 100, 100),)), "outside"),
+    (Prompts(boxes=(Box(-100, 10, -5, 100),)), "outside"),
+    (Prompts(boxes=(Box(-100, 10, 2, 100),)), "2x90 pixels inside the image"),
     (Prompts(boxes=(Box(50, 10, 50, 100),)), "degenerate"),
     (Prompts(boxes=(Box(60, 10, 40, 100),)), "degenerate"),
     (Prompts(boxes=(Box(50, 10, 52, 100),)), "degenerate"),
@@ -460,7 +476,7 @@ def _mask_file(photo_path, mask):
 
 
 @pytest.mark.parametrize("args, problem", [
-    (["--box", "700,10,900,100"], "outside the 800x320 image"),
+    (["--box", "810,10,900,100"], "outside the 800x320 image"),
     (["--box", "50,10,50,100"], "degenerate"),
     (["--box", "5,5,40,30"], "no object found"),
     (["--point", "795,5"], "no object found"),

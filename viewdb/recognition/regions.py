@@ -235,7 +235,9 @@ class Region:
 
 # ---------------------------------------------------------------------- checks
 def check_prompts(image: LoadedImage, prompts: Prompts, cfg: SegmentationConfig) -> None:
-    """Refuse prompts outside the photo, degenerate boxes and too many prompts."""
+    """Refuse prompts outside the photo, degenerate boxes and too many prompts. A box that
+    reaches past the photo's edge (an object the frame cuts, a tracker's box) is cut
+    where the photo ends; only its part inside must be wide and high enough."""
     w, h = image.width, image.height
     name = image.path
     if len(prompts.prompts) > cfg.max_prompts:
@@ -243,10 +245,13 @@ def check_prompts(image: LoadedImage, prompts: Prompts, cfg: SegmentationConfig)
     for box in prompts.boxes:
         if not (box.x1 < box.x2 and box.y1 < box.y2):
             raise ImageError(f"{box} is degenerate: need x1 < x2 and y1 < y2", name)
-        if box.x1 < 0 or box.y1 < 0 or box.x2 > w or box.y2 > h:
+        inside_w = min(box.x2, w) - max(box.x1, 0)
+        inside_h = min(box.y2, h) - max(box.y1, 0)
+        if inside_w <= 0 or inside_h <= 0:
             raise ImageError(f"{box} lies outside the {w}x{h} image (x in [0, {w}], y in [0, {h}])", name)
-        if min(box.x2 - box.x1, box.y2 - box.y1) < cfg.min_box_side:
-            raise ImageError(f"{box} is degenerate: {box.x2 - box.x1:g}x{box.y2 - box.y1:g} pixels, "
+        if min(inside_w, inside_h) < cfg.min_box_side:
+            inside = "" if (inside_w, inside_h) == (box.x2 - box.x1, box.y2 - box.y1) else " inside the image"
+            raise ImageError(f"{box} is degenerate: {inside_w:g}x{inside_h:g} pixels{inside}, "
                              f"at least {cfg.min_box_side:g} needed on each side", name)
     for point in prompts.points:
         if not (0 <= point.x < w and 0 <= point.y < h):
