@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import viewdb
@@ -68,6 +68,55 @@ def test_a_core_signature_leaves_the_cut_outs_rim_out():
     whole, core = colour_signature(img, cut), core_signature(img, cut, 0.1)  # erodes 9 pixels
     assert colour_distance(core, truth) < 0.02 < colour_distance(whole, truth)
     assert colour_distance(core_signature(img, cut, 0.0), whole) == pytest.approx(0.0, abs=1e-6)
+
+
+def _whole_photo_signature(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """:func:`colour_signature`'s definition, read over the whole photo."""
+    from viewdb.catalogue.appearance import BINS, DARK_SUM, MIN_PIXELS, TOP
+
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    inner = inner if np.count_nonzero(inner) >= MIN_PIXELS else mask
+    x = rgb.astype(np.float32)
+    total = x.sum(axis=2)
+    lit = inner & (total >= DARK_SUM)
+    inner = lit if np.count_nonzero(lit) >= MIN_PIXELS else inner
+    chroma = np.ascontiguousarray(x[:, :, :2] / np.maximum(total, 1.0)[:, :, None])
+    hist = cv2.GaussianBlur(cv2.calcHist([chroma], [0, 1], inner.astype(np.uint8), [BINS, BINS], [0.0, TOP, 0.0, TOP]),
+                            (3, 3), 0)
+    return (hist / hist.sum()).astype(np.float32)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(-30, 230), st.integers(-30, 190), st.sampled_from([0.0, 0.1, 0.3]))
+def test_a_cut_out_s_colours_are_read_as_from_the_whole_photo(seed, cx, cy, share):
+    """Read from the mask's own box (a large photo costs the cut-out's size), a cut-out's
+    signature and core signature are those of the whole photo, at its edges too."""
+    from viewdb.recognition.colour import CORE_MIN_PIXELS
+
+    rng = np.random.default_rng(seed)
+    rgb = rng.integers(0, 256, (200, 220, 3), dtype=np.uint8)
+    drawn = np.zeros((200, 220), np.uint8)
+    cv2.ellipse(drawn, (cx, cy), (int(rng.integers(8, 40)), int(rng.integers(8, 40))), float(rng.uniform(0, 180)),
+                0, 360, 1, -1)
+    mask = drawn > 0
+    assume(mask.sum() >= 30)
+    np.testing.assert_array_equal(colour_signature(rgb, mask), _whole_photo_signature(rgb, mask))
+    radius = int(round(share * np.sqrt(mask.sum())))
+    core = mask
+    if radius > 0:
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        eroded = cv2.erode(mask.astype(np.uint8), disc).astype(bool)
+        core = eroded if eroded.sum() >= CORE_MIN_PIXELS else mask
+    np.testing.assert_array_equal(core_signature(rgb, mask, share), _whole_photo_signature(rgb, core))
+
+
+def test_a_large_photo_s_colour_is_told_from_a_share_of_its_pixels():
+    """A 12-megapixel photo is read at every 4th row and column: a grey one has no colour,
+    the same with a coloured object on 2 % of it has."""
+    grey = np.full((3000, 4000, 3), 128, np.uint8)
+    assert not has_colour(grey)
+    grey[1000:1245, 1000:1980] = (180, 60, 40)
+    assert has_colour(grey)
 
 
 def test_a_core_too_small_falls_back_to_the_whole_cut_out():

@@ -8,7 +8,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 import viewdb
@@ -348,6 +348,33 @@ def test_a_turned_silhouette_is_a_shift_of_the_upright_curve_at_its_predicted_st
         assert min(abs(best - window.centre), 128 - abs(best - window.centre)) <= 2
         assert shift_turn(bearings, window.centre) == pytest.approx(angle, abs=360 / 128 * 2)
         assert errors[window.centre] < 0.2 * np.median(errors)
+
+
+def _jagged_silhouette(rng):
+    """A cut-out's kind of silhouette: a noisy blob with a ragged edge, 20-120 px."""
+    h, w = (int(x) for x in rng.integers(20, 120, 2))
+    noise = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), rng.uniform(1, 4))
+    yy, xx = np.mgrid[:h, :w]
+    ellipse = ((yy - h / 2) / (h / 2)) ** 2 + ((xx - w / 2) / (w / 2)) ** 2
+    return (noise > np.median(noise) - 0.3 * (1 - ellipse)) & (ellipse < 1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.integers(0, 200), st.integers(1, 12))
+@example(seed=360, dx=0, dy=0, rotations=8)  # turned in a photo-sized canvas, one pixel fell apart
+@example(seed=78, dx=137, dy=61, rotations=8)
+def test_a_silhouette_s_turned_curves_do_not_depend_on_where_it_lies_in_the_photo(seed, dx, dy, rotations):
+    """The same silhouette at another place in a larger photo gives the same curves, bit
+    for bit: the turns are made of its own box."""
+    small = _jagged_silhouette(np.random.default_rng(seed))
+    assume(small.sum() >= 50)
+    photo = np.zeros((small.shape[0] + 250, small.shape[1] + 350), bool)
+    photo[dy:dy + small.shape[0], dx:dx + small.shape[1]] = small
+    alone = rotated_curves(small, 128, rotations)
+    placed = rotated_curves(photo, 128, rotations)
+    assert [a for a, _ in placed] == [a for a, _ in alone]
+    for (_, p), (_, a) in zip(placed, alone, strict=True):
+        np.testing.assert_array_equal(p, a)
 
 
 def test_turn_windows_cover_the_tolerance():

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,18 +59,46 @@ class Window:
 
     def crop(self, image: NDArray[np.generic]) -> NDArray[np.float32]:
         """``image`` (H, W) resampled onto this window (area average; 0 outside the photo)."""
+        part, window = self.part(image)
+        return window._resample(part)
+
+    def _blur_side(self) -> int:
+        """The box blur that makes the window's samples area averages (1: none)."""
+        return int(math.ceil(1.0 / self.factor)) | 1 if self.factor < 1.0 else 1
+
+    def _resample(self, image: NDArray[np.generic]) -> NDArray[np.float32]:
         import cv2
 
         f = self.factor
         # window pixel (i, j) centre = photo ((i + 0.5)/f - 0.5 + x0, ...)
         m = np.array([[f, 0.0, (0.5 - self.x0) * f - 0.5], [0.0, f, (0.5 - self.y0) * f - 0.5]])
         src = np.asarray(image, dtype=np.float32)
-        if f < 1.0:  # pre-blur so the nearest samples are area averages
-            k = int(math.ceil(1.0 / f)) | 1
+        k = self._blur_side()
+        if k > 1:  # pre-blur so the nearest samples are area averages
             src = np.asarray(cv2.blur(src, (k, k)), dtype=np.float32)
         out = cv2.warpAffine(src, m, (self.size, self.size), flags=cv2.INTER_LINEAR,
                              borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
         return np.asarray(out, dtype=np.float32)
+
+    def part(self, image: NDArray[Any]) -> tuple[NDArray[Any], Window]:
+        """The part of ``image`` this window samples, and this window in that part's
+        pixels: every pixel a window pixel's linear sample reads, and what the blur of
+        :meth:`crop` reads for them (the photo's own edges stay edges), so that
+        ``window.crop(part)`` is :meth:`crop` of the whole image. A large photo's window
+        then costs its own size, not the photo's, and so does preparing only the part
+        (its grey levels, say)."""
+        h, w = image.shape[:2]
+        f, margin = self.factor, self._blur_side() // 2 + 2
+        first_x, last_x = self.x0 + 0.5 / f - 0.5, self.x0 + (self.size - 0.5) / f - 0.5
+        first_y, last_y = self.y0 + 0.5 / f - 0.5, self.y0 + (self.size - 0.5) / f - 0.5
+        left = min(w, max(0, math.floor(first_x) - margin))
+        top = min(h, max(0, math.floor(first_y) - margin))
+        right = max(left, min(w, math.floor(last_x) + margin + 2))
+        bottom = max(top, min(h, math.floor(last_y) + margin + 2))
+        if right - left < 1 or bottom - top < 1:  # the window lies off the photo: one pixel to warp
+            left, top = min(left, w - 1), min(top, h - 1)
+            right, bottom = left + 1, top + 1
+        return image[top:bottom, left:right], Window(self.x0 - left, self.y0 - top, self.side, self.size)
 
     @staticmethod
     def around(mask: NDArray[np.bool_], size: int, margin: float = 0.35) -> Window:

@@ -161,9 +161,9 @@ class _Objective:
                  ignore: NDArray[np.bool_] | None, window: Window, k: NDArray[np.float64]) -> None:
         self.triangles, self.window, self.k = triangles, window, k
         self.cam = window.intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
-        q = np.clip(window.crop(query.astype(np.float32)), 0.0, 1.0)
+        q = np.clip(window.crop(query), 0.0, 1.0)
         if ignore is not None and ignore.any():
-            self.valid = window.crop(ignore.astype(np.float32)) < 0.5
+            self.valid = window.crop(ignore) < 0.5
         else:
             self.valid = np.ones(q.shape, bool)
         self.weights = np.ascontiguousarray(np.where(self.valid, q, 0.0), dtype=np.float64)

@@ -63,9 +63,9 @@ class TextureScore:
         self.window = Window.around(mask, size)
         fx, fy, cx, cy = (float(x) for x in intrinsics)
         self.camera = self.window.intrinsics(fx, fy, cx, cy)
-        color = np.asarray(query.color)
+        color, window = self.window.part(np.asarray(query.color))  # the window's part of the photo
         grey = color.astype(np.float32) if color.ndim == 2 else color.astype(np.float32).mean(axis=2)
-        self.gx, self.gy = _gradients(self.window.crop(grey))
+        self.gx, self.gy = _gradients(window.crop(grey))
         if query.ignore is not None and np.asarray(query.ignore).any():
             self.hidden = self.window.crop(np.asarray(query.ignore, np.float32)) > 0.5
         else:

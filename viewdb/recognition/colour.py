@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.appearance import BINS, carries_colour, colour_signature
+from ..catalogue.appearance import BINS, carries_colour, colour_signature, mask_surround
 
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "core_signature",
@@ -47,6 +47,8 @@ COLOUR_WEIGHT = 1.0
 #: :data:`CHROMA_MIN` away from neutral grey in the a*b* plane.
 COLOURED_SHARE = 0.01
 CHROMA_MIN = 12.0
+#: :func:`has_colour` reads about this many pixels of a larger photo, evenly spread.
+HAS_COLOUR_PIXELS = 1 << 20
 #: A cut-out's core must keep at least this many pixels, else its whole mask is used.
 CORE_MIN_PIXELS = 50
 
@@ -65,6 +67,7 @@ def core_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_], share: float
     :data:`CORE_MIN_PIXELS` pixels, or ``share`` is 0."""
     mask = np.asarray(mask, bool)
     radius = int(round(share * math.sqrt(np.count_nonzero(mask))))
+    rgb, mask = mask_surround(rgb, mask, radius + 2)  # what the erosions see, not the whole photo
     if radius > 0:
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         core = cv2.erode(mask.astype(np.uint8), disc).astype(bool)
@@ -77,7 +80,9 @@ def has_colour(rgb: NDArray[np.uint8]) -> bool:
     """Whether the image shows any colour (not greyscale or nearly so)."""
     if rgb.ndim != 3 or rgb.shape[2] < 3:
         return False
-    lab = cv2.cvtColor(np.ascontiguousarray(rgb[:, :, :3]), cv2.COLOR_RGB2LAB).astype(np.float32)
+    # a share of pixels: every step-th row and column of a large photo tells it as well
+    step = max(1, math.ceil(math.sqrt(rgb.shape[0] * rgb.shape[1] / HAS_COLOUR_PIXELS)))
+    lab = cv2.cvtColor(np.ascontiguousarray(rgb[::step, ::step, :3]), cv2.COLOR_RGB2LAB).astype(np.float32)
     chroma = np.hypot(lab[:, :, 1] - 128.0, lab[:, :, 2] - 128.0)
     return float(np.mean(chroma >= CHROMA_MIN)) >= COLOURED_SHARE
 

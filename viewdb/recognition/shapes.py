@@ -35,6 +35,9 @@ def rotated_curves(
     if rotations < 1:
         raise QueryError(f"rotations must be at least 1, got {rotations}")
     ys, xs = np.nonzero(mask)
+    if len(ys):  # the silhouette's box alone: its turns cost its size, not the photo's
+        mask = mask[ys.min():ys.max() + 1, xs.min():xs.max() + 1]
+        ys, xs = ys - ys.min(), xs - xs.min()
     cy, cx = float(ys.mean()), float(xs.mean())
     # pad to the diagonal so no turn clips the silhouette
     h, w = mask.shape
