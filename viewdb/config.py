@@ -419,11 +419,8 @@ class SegmentationConfig:
     box_margin: float = 0.3
     #: ... and at least this many pixels ...
     box_min_margin: int = 8
-    #: ... scaled to at most this many pixels on the longer side (GrabCut's time grows
-    #: with the pixels: the YCB-Video boxes, cut from the frames and from copies 4x as
-    #: large, keep their mean IoU, 0.929 and 0.934, at 320 as at 640, and the large
-    #: copies' boxes take 0.28 s of CPU each instead of 1.05) ...
-    box_work_side: int = 320
+    #: ... scaled to at most this many pixels on the longer side ...
+    box_work_side: int = 640
     #: ... for this many iterations, ...
     box_iterations: int = 5
     #: ... with the other prompts' boxes outside this one painted over from their
