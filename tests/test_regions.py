@@ -338,6 +338,31 @@ def test_a_box_past_the_photo_s_edge_is_cut_where_the_photo_ends():
     assert np.array_equal(beyond.mask, clipped.mask)
 
 
+def _reference_largest_filled(mask: np.ndarray) -> np.ndarray:
+    """The largest 8-connected region with its holes filled, by its definition over the
+    whole image (ties to the region first in scan order, as OpenCV labels them)."""
+    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return np.zeros(mask.shape, bool)
+    sizes = np.bincount(labels.ravel())[1:]
+    return binary_fill_holes(labels == 1 + int(np.argmax(sizes)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 6))
+def test_the_largest_region_filled_is_its_definition(seed, blobs):
+    from viewdb.recognition.segmentation import largest_filled
+
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((int(rng.integers(20, 90)), int(rng.integers(20, 90))), np.uint8)
+    for _ in range(blobs):
+        cv2.ellipse(mask, (int(rng.integers(-10, 100)), int(rng.integers(-10, 100))),
+                    (int(rng.integers(1, 25)), int(rng.integers(1, 25))), float(rng.uniform(0, 180)), 0, 360, 1, -1)
+        cv2.circle(mask, (int(rng.integers(0, 90)), int(rng.integers(0, 90))), int(rng.integers(1, 6)), 0, -1)
+    mask = mask > 0
+    np.testing.assert_array_equal(largest_filled(mask), _reference_largest_filled(mask))
+
+
 def test_a_uniform_box_holds_no_object():
     photo, _ = table_photo([], (640, 320), [])
     with pytest.raises(viewdb.ImageError, match="no object found: the box is uniform"):

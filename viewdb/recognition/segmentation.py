@@ -299,14 +299,18 @@ def label_mask(
 
 def largest_filled(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """The largest 8-connected region of ``mask`` with its holes filled."""
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     out = np.zeros(mask.shape, dtype=bool)
-    if n <= 1:
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not len(rows):
         return out
+    # the regions lie within the mask's box: a cut-out of a large photo costs its own size
+    top, left = int(rows[0]), int(cols[0])
+    part = mask[top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(part.astype(np.uint8), connectivity=8)
     k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     x, y, bw, bh = (int(v) for v in stats[k, :4])
     region = labels[y : y + bh, x : x + bw] == k
-    out[y : y + bh, x : x + bw] = ~_outside(region)  # the region and its holes
+    out[top + y : top + y + bh, left + x : left + x + bw] = ~_outside(region)  # the region and its holes
     return out
 
 
