@@ -67,7 +67,7 @@ class TextureScore:
         grey = color.astype(np.float32) if color.ndim == 2 else color.astype(np.float32).mean(axis=2)
         self.gx, self.gy = _gradients(window.crop(grey))
         if query.ignore is not None and np.asarray(query.ignore).any():
-            self.hidden = self.window.crop(np.asarray(query.ignore, np.float32)) > 0.5
+            self.hidden = self.window.crop(np.asarray(query.ignore)) > 0.5
         else:
             self.hidden = np.zeros((size, size), dtype=bool)
 
