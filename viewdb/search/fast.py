@@ -141,23 +141,22 @@ def _shortlist(
     q = merged_queries(embed_curves(curves, config.coefficients, config.quantiles), config.merge_radius)
     size = min(size, source.n_objects)
     count = max(size * config.views_per_object, 1)
-    most = min(int(config.exact_share * index.index.size), index.index.size)
-    if count > most:
-        return rank_exactly(q, index, source)[:size], None, 0
-    while True:
+    most = int(config.exact_share * index.index.size)  # exact_share is at most 1
+    while count <= most:
         keys, distances = index.index.nearest(q, count, config.expansion_search)
         valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
         order = np.argsort(distances[valid], kind="stable")
         rows = keys[valid][order]
         _, first = np.unique(index.row_owner[rows], return_index=True)
         nearest = rows[np.sort(first)]
-        if len(nearest) >= size or (count >= most and len(nearest) >= min(least, size)):
+        if len(nearest) >= size or count == most:
+            if len(nearest) < min(least, size):
+                break
             # (ranking every view instead embeds the whole tier once: 1.6 s at 557,273 views)
             nearest = nearest[:size].astype(np.int64)
             return index.row_owner[nearest].astype(np.int64), nearest, count
-        if count >= most:
-            return rank_exactly(q, index, source)[:size], None, 0
         count = min(2 * count, most)
+    return rank_exactly(q, index, source)[:size], None, 0
 
 
 def rank_exactly(queries: NDArray[np.float32], index: FastIndex, source: TierSource) -> NDArray[np.int64]:
