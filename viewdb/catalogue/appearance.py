@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from ..camera import camera_pose, normalise_angle
 from ..config import AppearanceConfig
 from ..interrupts import interrupts_held
+from .features import mask_box
 from .render import RenderedView
 
 __all__ = [
@@ -46,7 +47,6 @@ __all__ = [
     "colour_signature",
     "edge_interior",
     "internal_edges",
-    "mask_surround",
     "opposite_view",
     "turned_render",
     "turned_view",
@@ -80,7 +80,10 @@ def colour_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_]) -> NDArray
     The outline's pixels and too dark ones are left out when enough pixels remain. An
     empty mask gives an all-zero histogram (it shares no colour with anything).
     """
-    rgb, mask = mask_surround(rgb, mask, 2)  # what the erosion below sees, not the whole photo
+    mask = np.asarray(mask, bool)
+    box = mask_box(mask, 2)  # what the erosion below sees, not the whole photo
+    if box is not None:
+        rgb, mask = rgb[box], mask[box]
     inner = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     if np.count_nonzero(inner) < MIN_PIXELS:
         inner = np.asarray(mask, bool)
@@ -94,21 +97,6 @@ def colour_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_]) -> NDArray
     hist = cv2.GaussianBlur(hist, (3, 3), 0)
     mass = float(hist.sum())
     return (hist / mass if mass > 0 else hist).astype(np.float32)
-
-
-def mask_surround(
-    image: NDArray[Any], mask: NDArray[np.bool_], pad: int,
-) -> tuple[NDArray[Any], NDArray[np.bool_]]:
-    """``image`` and ``mask`` cut to the mask's bounding box grown by ``pad`` pixels (within
-    the image): a filter reaching ``pad`` pixels sees there what it sees on the whole
-    image. An empty mask is returned whole."""
-    mask = np.asarray(mask, bool)
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    if not len(rows):
-        return image, mask
-    ys = slice(max(0, int(rows[0]) - pad), int(rows[-1]) + pad + 1)
-    xs = slice(max(0, int(cols[0]) - pad), int(cols[-1]) + pad + 1)
-    return image[ys, xs], mask[ys, xs]
 
 
 def carries_colour(mesh: Any) -> bool:

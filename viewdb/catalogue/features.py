@@ -101,12 +101,24 @@ from numpy.typing import NDArray
 from ..errors import FeatureError
 
 __all__ = [
-    "MIN_AREA", "distance_curve", "fourier_point", "largest_contour", "mirror_curve", "sample_bearings",
+    "MIN_AREA", "distance_curve", "fourier_point", "largest_contour", "mask_box", "mirror_curve",
+    "sample_bearings",
 ]
 
 #: Smallest area (square pixels) the chosen contour must enclose.  Any region of at most
 #: three pixels encloses less (a lone pixel's diamond 0.5, a row of k pixels k - 1/2).
 MIN_AREA = 3.0
+
+
+def mask_box(mask: NDArray[np.bool_], pad: int = 0) -> tuple[slice, slice] | None:
+    """The rows and columns of ``mask``'s bounding box grown by ``pad`` pixels (within the
+    image), or None for an empty mask: a filter reaching ``pad`` pixels sees there what it
+    sees on the whole image, so a cut-out of a large photo costs its own size."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not len(rows):
+        return None
+    return (slice(max(0, int(rows[0]) - pad), int(rows[-1]) + pad + 1),
+            slice(max(0, int(cols[0]) - pad), int(cols[-1]) + pad + 1))
 
 
 def _half_pixel_lattice(mask: np.ndarray) -> tuple[NDArray[np.uint8], int, int]:

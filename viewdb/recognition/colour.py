@@ -34,7 +34,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..catalogue.appearance import BINS, carries_colour, colour_signature, mask_surround
+from ..catalogue.appearance import BINS, carries_colour, colour_signature
+from ..catalogue.features import mask_box
 
 __all__ = [
     "BINS", "COLOUR_WEIGHT", "carries_colour", "colour_distance", "colour_signature", "core_signature",
@@ -67,7 +68,9 @@ def core_signature(rgb: NDArray[np.uint8], mask: NDArray[np.bool_], share: float
     :data:`CORE_MIN_PIXELS` pixels, or ``share`` is 0."""
     mask = np.asarray(mask, bool)
     radius = int(round(share * math.sqrt(np.count_nonzero(mask))))
-    rgb, mask = mask_surround(rgb, mask, radius + 2)  # what the erosions see, not the whole photo
+    box = mask_box(mask, radius + 2)  # what the erosions see, not the whole photo
+    if box is not None:
+        rgb, mask = rgb[box], mask[box]
     if radius > 0:
         disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         core = cv2.erode(mask.astype(np.uint8), disc).astype(bool)

@@ -93,7 +93,7 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image, UnidentifiedImageError
 
-from ..catalogue.features import distance_curve
+from ..catalogue.features import distance_curve, mask_box
 from ..config import SegmentationConfig
 from ..errors import FeatureError, ImageError
 from ..paths import open_regular
@@ -300,13 +300,11 @@ def label_mask(
 def largest_filled(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     """The largest 8-connected region of ``mask`` with its holes filled."""
     out = np.zeros(mask.shape, dtype=bool)
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    if not len(rows):
+    box = mask_box(mask)  # the regions lie within it
+    if box is None:
         return out
-    # the regions lie within the mask's box: a cut-out of a large photo costs its own size
-    top, left = int(rows[0]), int(cols[0])
-    part = mask[top : int(rows[-1]) + 1, left : int(cols[-1]) + 1]
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(part.astype(np.uint8), connectivity=8)
+    top, left = box[0].start, box[1].start
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask[box].astype(np.uint8), connectivity=8)
     k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     x, y, bw, bh = (int(v) for v in stats[k, :4])
     region = labels[y : y + bh, x : x + bw] == k
