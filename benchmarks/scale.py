@@ -59,20 +59,25 @@ def perturbed(curve: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return (out / out.mean()).astype(np.float32)
 
 
-def build(path: Path, objects: int, views: int, bases: list[np.ndarray], seed: int) -> BuildConfig:
+def build(
+    path: Path, objects: int, views: int, bases: list[np.ndarray], seed: int, first: int = 0,
+) -> BuildConfig:
+    """Write ``objects`` synthetic objects, numbered from ``first``, into the catalogue at
+    ``path`` (created if new; an object of the same number is replaced)."""
     config = BuildConfig(gap=30, index=IndexConfig(client_gap=90)).resolved()
     rng = np.random.default_rng(seed)
     store = Store(path, initial=(config, "full"))
     grid = [(float(h), float(v)) for v in range(-60, 90, 30) for h in range(0, 360, 30)][:views]
     m = config.features.fourier_coefficients
     try:
-        for i in range(objects):
+        for i in range(first, first + objects):
             base = bases[i % len(bases)]
             vs = [SimpleNamespace(azimuth=h, elevation=v, curve=(c := perturbed(base[j % len(base)], rng)),
                                   fourier=fourier_point(c, m), sift=empty_features())
                   for j, (h, v) in enumerate(grid)]
-            desc = SimpleNamespace(name=f"obj{i:07d}", source="synthetic", content_hash=f"{i:064x}",
-                                   n_faces=1, n_vertices=3, centre=np.zeros(3), scale=1.0, glb=b"",
+            desc = SimpleNamespace(name=f"obj{i:07d}", source="synthetic",
+                                   content_hash=f"{seed:016x}{i:048x}", n_faces=1, n_vertices=3,
+                                   centre=np.zeros(3), scale=1.0, glb=b"",
                                    empty_views=[], seconds=0.0, views=vs)
             store.write_object(desc, config)
     finally:

@@ -296,8 +296,9 @@ def _rows(path):
 def test_an_ingest_writes_the_index_file_and_a_fresh_process_maps_it(tiered_db):
     path = ann_file_path(tiered_db, "full")
     assert path.exists()
-    index = map_ann_file(path, _key(tiered_db), "full", _rows(tiered_db))
-    assert index is not None and index.size == _rows(tiered_db)
+    found = map_ann_file(path, _key(tiered_db), "full", _rows(tiered_db))
+    assert found is not None and found[0].size == found[1].keys == _rows(tiered_db)
+    assert found[1].row_of_key() is None  # built anew: every key is its row
     # not for another tier, another key, another row count or other settings
     assert map_ann_file(path, _key(tiered_db), "sparse", _rows(tiered_db)) is None
     assert map_ann_file(path, "other", "full", _rows(tiered_db)) is None

@@ -849,7 +849,7 @@ class FastConfig:
     """The ``fast`` plan (:mod:`viewdb.search.fast`): a shortlist of objects from an
     approximate nearest-neighbour index over a turn-invariant embedding of every stored
     view, searched exactly. The first four settings make the index file (a file made with
-    others is rebuilt); the rest are query-time."""
+    others is rebuilt), the next two say how an ingest writes it; the rest are query-time."""
 
     #: DFT magnitudes kept per curve (coefficients 1..m; :mod:`viewdb.search.embedding`).
     coefficients: int = 16
@@ -863,6 +863,10 @@ class FastConfig:
     expansion_add: int = 32
     #: Threads that build the index at ingest (0: every core).
     build_threads: int = 0
+    #: An ingest grows the index in place (:mod:`viewdb.search.fast_update`) while the
+    #: views of objects since replaced or removed, still in its graph, are at most this
+    #: share of it; past it, the index is built anew.
+    dead_share: float = 0.1
     #: Candidates kept while the graph is searched (USearch's ``expansion_search``; at
     #: least the views asked for).
     expansion_search: int = 64
@@ -893,6 +897,8 @@ class FastConfig:
             raise ValueError(f"connectivity must be in [2, 256], got {self.connectivity}")
         if not 0.0 <= self.exact_share <= 1.0:
             raise ValueError(f"exact_share must be in [0, 1], got {self.exact_share}")
+        if not 0.0 <= self.dead_share < 1.0:
+            raise ValueError(f"dead_share must be in [0, 1), got {self.dead_share}")
         if not self.merge_radius >= 0:
             raise ValueError(f"merge_radius must be at least 0, got {self.merge_radius}")
         for name in ("expansion_add", "expansion_search", "views_per_object", "shortlist"):

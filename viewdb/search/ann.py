@@ -29,7 +29,8 @@ __all__ = ["ViewIndex"]
 
 
 class ViewIndex:
-    """An HNSW index of embeddings whose keys are row numbers ``0 .. size - 1``."""
+    """An HNSW index of embeddings under integer keys: ``0 .. size - 1`` as built (a
+    view's row), any unused key as added (:meth:`add`)."""
 
     def __init__(self, index: Any, keep: Any = None) -> None:
         """``index``: a ``usearch.index.Index``; ``keep``: what its viewed buffer lives in
@@ -61,6 +62,31 @@ class ViewIndex:
         except (RuntimeError, ValueError) as exc:
             raise ValueError(f"not a USearch index: {exc}") from exc
         return cls(index, keep if keep is not None else buffer)
+
+    @classmethod
+    def load(cls, buffer: memoryview | bytes, expansion_add: int) -> ViewIndex:
+        """A copy in memory of the index serialised in ``buffer``, which :meth:`add` may grow
+        (adding with ``expansion_add`` candidates). Raises ValueError if the buffer does not
+        hold an index."""
+        index = usearch_index.Index(enable_key_lookups=False)
+        try:
+            index.load(bytearray(buffer))
+        except (RuntimeError, ValueError) as exc:
+            raise ValueError(f"not a USearch index: {exc}") from exc
+        index.expansion_add = int(expansion_add)
+        return cls(index)
+
+    def add(self, keys: NDArray[np.integer], vectors: NDArray[np.floating], threads: int = 0) -> None:
+        """Insert the rows of ``vectors`` ``(n, d)`` under ``keys`` (none in the index yet);
+        ``threads``: those that insert (0: every core). Raises ValueError for an index used in
+        place (:meth:`view`) or vectors of another width."""
+        if self._keep is not None:
+            raise ValueError("an index used in place cannot grow: load a copy")
+        x = np.ascontiguousarray(vectors, dtype=np.float32)
+        if x.ndim != 2 or x.shape[1] != self.ndim or len(x) != len(keys):
+            raise ValueError(f"{len(keys)} keys need ({len(keys)}, {self.ndim}) vectors, got {x.shape}")
+        if len(x):
+            self._index.add(np.asarray(keys, dtype=np.uint64), x, threads=threads)
 
     def to_bytes(self) -> bytes:
         """The index serialised (what :meth:`view` reads)."""

@@ -51,6 +51,9 @@ class FastIndex:
     row_owner: NDArray[np.int64]
     by_object: tuple[NDArray[np.int64], NDArray[np.int64]]
     config: FastConfig
+    #: each key's row, -1 for a key no row holds (an index grown in place,
+    #: :mod:`viewdb.search.fast_update`); None when every key is its row
+    row_of_key: NDArray[np.int64] | None = None
     #: every view's embedding, in row order, and the rows ordered by object (computed on
     #: first need: :func:`rank_exactly`), shared by the copies :meth:`dataclasses.replace` makes
     cache: dict[str, NDArray] = field(default_factory=dict, compare=False, repr=False)
@@ -67,11 +70,31 @@ class FastIndex:
         return self.cache["vectors"], self.cache["order"], self.cache["starts"]
 
     @classmethod
-    def of(cls, index: ViewIndex, source: TierSource, config: FastConfig) -> FastIndex:
-        """``index`` of the rows of ``source``."""
-        if index.size != len(source.row_owner):
-            raise ValueError(f"the index holds {index.size} views, the source {len(source.row_owner)}")
-        return cls(index, np.asarray(source.row_owner, dtype=np.int64), groups_by_object(source), config)
+    def of(
+        cls, index: ViewIndex, source: TierSource, config: FastConfig,
+        row_of_key: NDArray[np.int64] | None = None,
+    ) -> FastIndex:
+        """``index`` of the rows of ``source``, under keys that are the rows or, given
+        ``row_of_key``, the keys it maps to rows."""
+        keys = len(source.row_owner) if row_of_key is None else len(row_of_key)
+        if index.size != keys:
+            raise ValueError(f"the index holds {index.size} views, its keys name {keys}")
+        return cls(index, np.asarray(source.row_owner, dtype=np.int64), groups_by_object(source), config,
+                   row_of_key)
+
+    def nearest_rows(
+        self, vectors: NDArray[np.float32], count: int,
+    ) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+        """The index's nearest views to each of ``vectors`` as rows of the tier (-1 past the
+        end, for a dead key, or for a key out of range: a damaged file costs recall only),
+        and their squared distances (:meth:`~viewdb.search.ann.ViewIndex.nearest`)."""
+        keys, distances = self.index.nearest(vectors, count, self.config.expansion_search)
+        table = self.row_of_key
+        limit = len(self.row_owner) if table is None else len(table)
+        valid = (keys >= 0) & (keys < limit)
+        if table is not None:
+            keys = table[np.where(valid, keys, 0)]
+        return np.where(valid, keys, -1), distances
 
 
 #: Curves embedded at a time while an index is built (bounds the memory beside the tier's).
@@ -143,10 +166,10 @@ def _shortlist(
     count = max(size * config.views_per_object, 1)
     most = int(config.exact_share * index.index.size)  # exact_share is at most 1
     while count <= most:
-        keys, distances = index.index.nearest(q, count, config.expansion_search)
-        valid = (keys >= 0) & (keys < len(index.row_owner))  # a damaged file's keys cost recall only
+        found, distances = index.nearest_rows(q, count)
+        valid = found >= 0
         order = np.argsort(distances[valid], kind="stable")
-        rows = keys[valid][order]
+        rows = found[valid][order]
         _, first = np.unique(index.row_owner[rows], return_index=True)
         nearest = rows[np.sort(first)]
         if len(nearest) >= size or count == most:

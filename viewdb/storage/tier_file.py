@@ -185,18 +185,18 @@ def write_tier_file(
         raise
 
 
-def read_cache_header(f: BinaryIO, magic: bytes, key: str, tier: str) -> tuple[Any, int] | None:
+def read_cache_header(f: BinaryIO, magic: bytes, key: str | None, tier: str) -> tuple[Any, int] | None:
     """The JSON header of a cache file beside a database (a tier file, a ``fast``
     index), read from ``f`` at its start: ``magic``, a little-endian u32 length, the
     header; and where its payload starts (aligned to 64 bytes). None when the file is
-    not one, or was written for another ``key`` or ``tier``; ValueError when its header
-    is not JSON, AttributeError when it is not an object."""
+    not one, or was written for another ``tier`` or (unless ``key`` is None) ``key``;
+    ValueError when its header is not JSON, AttributeError when it is not an object."""
     head = f.read(len(magic) + _LENGTH.size)
     if len(head) < len(magic) + _LENGTH.size or head[: len(magic)] != magic:
         return None
     (length,) = _LENGTH.unpack(head[len(magic):])
     header = json.loads(f.read(length))
-    if header.get("key") != key or header.get("tier") != tier:
+    if (key is not None and header.get("key") != key) or header.get("tier") != tier:
         return None
     return header, -(-(len(magic) + _LENGTH.size + length) // _ALIGN) * _ALIGN
 
