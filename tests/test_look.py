@@ -1,6 +1,7 @@
 """The look model (viewdb.catalogue.look, viewdb.catalogue.look_training): features that no
 in-plane turn changes, a discriminant that ranks the right class, a model stored in the
-file and never trusted stale, and an ingest that fits it from the catalogue's renders."""
+file and never trusted stale, and an ingest that fits it from the catalogue's renders,
+making again only the looks of the objects that changed."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from hypothesis import strategies as st
 
 import viewdb
 from viewdb.catalogue.look import LOOK_DIMS, LookModel, fit_look_model, look_features
-from viewdb.catalogue.look_training import clutter_crop, relit, train_look_model
+from viewdb.catalogue.look_training import clutter_crop, fit_looks, refresh_looks, relit, train_look_model
 from viewdb.config import LookConfig
 from viewdb.storage.store import Store
 from viewdb_cli.main import main
@@ -222,3 +223,86 @@ def test_a_catalogue_with_one_coloured_object_has_no_model(tmp_path):
         db.ingest([sample("cube_dice"), sample("cone")])
         assert db._catalogue.look_model() is None
         assert db._store.look_model() is None
+
+
+def _samples(path):
+    store = Store(path, create=False)
+    try:
+        return store.look_samples(LookConfig().key()), store.look_model()
+    finally:
+        store.close()
+
+
+def _same_looks(a, b):
+    assert set(a) == set(b)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_an_ingest_makes_again_only_the_looks_of_objects_that_changed(looked_db, tmp_path):
+    path, _ = looked_db
+    copy = tmp_path / "copy.db"
+    copy.write_bytes(path.read_bytes())
+    first, model = _samples(copy)
+    with viewdb.open(copy, read_only=True) as db:
+        coloured = set(db._catalogue.colour_index().objects)
+    assert set(first) == coloured and all(v.shape == (LookConfig().samples, LOOK_DIMS) for v in first.values())
+    # the stored model is the one the stored looks give
+    probe = np.random.default_rng(1).random(LOOK_DIMS).astype(np.float32)
+    assert LookModel.from_bytes(model.model).distances(probe) == pytest.approx(fit_looks(first).distances(probe))
+
+    ticks: list = []
+    with viewdb.open(copy) as db:  # an object without colour: fitted again, no look made
+        db.ingest([sample("sphere")], look_progress=lambda done, total: ticks.append((done, total)))
+    after_grey, grey_model = _samples(copy)
+    assert not ticks and grey_model.key != model.key
+    _same_looks(after_grey, first)
+
+    with viewdb.open(copy) as db:  # a coloured object: its looks alone, over a small clutter
+        db.ingest([sample("arrow")], look_progress=lambda done, total: ticks.append((done, total)))
+    after_arrow, _ = _samples(copy)
+    assert set(after_arrow) == coloured | {"arrow"}
+    _same_looks({n: after_arrow[n] for n in first}, first)
+    # the arrow's renders and crops, and the clutter: it and the other five objects (< 1 + 32)
+    assert ticks[-1] == (6 + 1, 6 + 1)
+
+    folder = tmp_path / "swap"  # the bottle replaced by the car's mesh: the bottle's looks made again
+    folder.mkdir()
+    (folder / "bottle.glb").write_bytes(sample("car").read_bytes())
+    with viewdb.open(copy) as db:
+        assert not db.ingest([folder / "bottle.glb"]).failed
+    replaced, replaced_model = _samples(copy)
+    assert not np.array_equal(replaced["bottle"], after_arrow["bottle"])
+    _same_looks({n: replaced[n] for n in after_arrow if n != "bottle"},
+                {n: after_arrow[n] for n in after_arrow if n != "bottle"})
+    assert LookModel.from_bytes(replaced_model.model).distances(probe) == pytest.approx(
+        fit_looks(replaced).distances(probe))
+
+
+def test_looks_are_made_for_the_objects_that_lack_them_over_a_clutter_of_a_few(looked_db):
+    """refresh_looks renders only the objects whose looks are missing and a sample of
+    update_clutter others once some are stored; every object when none is."""
+    path, _ = looked_db
+    with viewdb.open(path, read_only=True) as db:
+        catalogue = db._catalogue
+        coloured = set(catalogue.colour_index().objects)
+        names = sorted(o.name for o in db.objects())
+        asked: list[str] = []
+
+        def meshes(name):
+            asked.append(name)
+            return catalogue.mesh(name)
+
+        config = LookConfig(views=4, samples=5, update_clutter=1)
+        model, made = refresh_looks(meshes, names, coloured, {}, config)
+        assert set(made) == coloured and sorted(asked) == names and model is not None
+        missing = sorted(coloured)[0]
+        stored = {n: v for n, v in made.items() if n != missing}
+        asked.clear()
+        model, again = refresh_looks(meshes, names, coloured, stored, config)
+        assert set(again) == {missing}
+        assert missing in asked and len(set(asked)) == 2  # the missing object and one other
+        # its own seeded streams: made again alike
+        _same_looks(refresh_looks(meshes, names, coloured, stored, config)[1], again)
+        asked.clear()
+        assert refresh_looks(meshes, names, coloured, made, config)[1] == {} and not asked

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .catalogue.describe import ObjectDescription
 from .catalogue.ingest import IngestProgress, IngestReport, IngestTarget, Upgrade, checked_options, run_ingest
-from .catalogue.look_training import fit_catalogue_looks, look_key
+from .catalogue.look_training import look_key, refresh_looks
 from .catalogue.mesh import DEFAULT_MAX_FACES, NormalisedMesh, load_mesh
 from .catalogue.reading import CandidatePose, ObjectInfo, StoredView
 from .catalogue.render import RenderedView, get_renderer
@@ -31,6 +31,7 @@ from .config import (
     DEFAULT_PLAN,
     BuildConfig,
     ClientFileConfig,
+    LookConfig,
     OverlayConfig,
     RayIngestConfig,
     RecognitionConfig,
@@ -557,7 +558,9 @@ def _same(a: object, b: object) -> bool:
 def fit_shared_looks(dbs: Sequence[ViewDB], progress: Callable[[int, int], None] | None = None) -> bool:
     """Fit one look model over the objects of every file of ``dbs`` (one file, or the
     shards of one catalogue) and store it in each, unless each already holds the model of
-    these objects; writable full files only. Returns whether it fitted one."""
+    these objects; writable full files only. Each coloured object's looks are stored in
+    its file and made again only when it changed
+    (:func:`~viewdb.catalogue.look_training.refresh_looks`). Returns whether it fitted one."""
     if any(db.read_only or db.role != "full" for db in dbs):
         return False
     hashes: dict[str, str] = {}
@@ -572,7 +575,15 @@ def fit_shared_looks(dbs: Sequence[ViewDB], progress: Callable[[int, int], None]
     held_looks = [db._catalogue.shard_look() for db in dbs]
     if all(found is not None and found[0] == key for found in held_looks):
         return False
-    model = fit_catalogue_looks(lambda name: owner[name].mesh(name), list(hashes), coloured, progress)
+    look_settings = LookConfig().key()
+    stored: dict[str, NDArray[np.float32]] = {}
+    for db in dbs:
+        stored.update(db._store.look_samples(look_settings))
+    model, made = refresh_looks(lambda name: owner[name].mesh(name), list(hashes), coloured, stored,
+                                progress=progress)
+    for db in dbs:
+        own = {n: v for n, v in made.items() if owner[n] is db._catalogue}
+        db._store.set_look_samples(own, look_settings)
     _store_looks(dbs, key, None if model is None else model.to_bytes())
     return model is not None
 

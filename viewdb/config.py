@@ -932,6 +932,10 @@ class LookConfig:
     #: Objects the clutter is drawn from, at most (a seeded sample of a larger catalogue),
     #: so that the renders held in memory do not grow with it.
     clutter_objects: int = 256
+    #: Objects beside those whose looks are made that the clutter is drawn from when the
+    #: other coloured objects' looks are stored (an ingest that adds or replaces a few):
+    #: their renders, not the whole catalogue's, are what such a fit costs.
+    update_clutter: int = 32
     #: Shrinkage of the within-object covariance (:func:`~viewdb.catalogue.look.fit_look_model`).
     shrinkage: float = 0.03
     seed: int = 0
@@ -940,6 +944,7 @@ class LookConfig:
         integer(self.views, "views", 1, 10_000)
         integer(self.samples, "samples", 1, 100_000)
         integer(self.clutter_objects, "clutter_objects", 1, 100_000)
+        integer(self.update_clutter, "update_clutter", 1, 100_000)
         integer(self.image_size, "image_size", 32, 1024)
         for name in ("colour_cast", "relight"):
             if not 0.0 <= getattr(self, name) <= 1.0:
@@ -948,8 +953,10 @@ class LookConfig:
             raise ValueError(f"shrinkage must be in [0, 1], got {self.shrinkage}")
 
     def key(self) -> str:
-        """What makes a model, beside the catalogue's objects."""
-        return (f"look2-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
+        """What makes a model, beside the catalogue's objects (an object's looks are made
+        with it too; ``update_clutter``, how many objects their clutter is drawn from in an
+        update, is left out: looks made either way serve)."""
+        return (f"look3-v{self.views}-n{self.samples}-s{self.image_size}-c{self.colour_cast}"
                 f"-l{self.relight}-p{self.clutter_objects}-k{self.shrinkage}-r{self.seed}")
 
 

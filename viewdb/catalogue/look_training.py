@@ -12,6 +12,11 @@ visible, blurred and noisy as a photo is, so the model learns what survives a cl
 box: the object's colours and texture, not its background's. Nothing is downloaded: the
 catalogue is the training set.
 
+Each object's renders and crops draw on its own seeded random stream, and the looks of
+its crops (:func:`make_looks`) are kept in the file: a later fit makes only the looks of
+the objects added or replaced, over clutter drawn from those and a few others, and fits
+the discriminant from every object's looks (:func:`refresh_looks`, :func:`fit_looks`).
+
 Needs GL (pyrender) for the renders: an ingest fits the model; a query only reads it.
 """
 
@@ -25,11 +30,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import LookConfig, RenderConfig
-from .look import LookModel, fit_look_model, look_features
+from .look import LOOK_DIMS, LookModel, fit_look_model, look_features
 from .mesh import NormalisedMesh
 from .render import Renderer
 
-__all__ = ["clutter_crop", "fit_catalogue_looks", "look_key", "relit", "train_look_model"]
+__all__ = ["clutter_crop", "clutter_sample", "fit_looks", "look_key", "make_looks",
+           "refresh_looks", "relit", "train_look_model"]
 
 #: Side of the synthetic scene a training crop is cut from, in pixels.
 SCENE = 160
@@ -153,71 +159,99 @@ def train_look_model(
     progress: Callable[[int, int], None] | None = None,
 ) -> LookModel | None:
     """The look model of the ``coloured`` objects (None with fewer than two), their
-    clutter drawn from them and the ``others`` (meshes without colour); ``meshes`` gives
-    an object's normalised mesh. ``progress(done, total)`` after each object rendered and
+    clutter drawn from them and the ``others`` (meshes without colour), at most
+    ``config.clutter_objects`` of them (:func:`clutter_sample`); ``meshes`` gives an
+    object's normalised mesh. ``progress(done, total)`` after each object rendered and
     each one's crops."""
     if len(coloured) < 2:
         return None
+    clutter = clutter_sample([*coloured, *others], config.clutter_objects, config)
+    return fit_looks(make_looks(meshes, coloured, clutter, config, progress), config)
+
+
+def clutter_sample(names: Sequence[str], size: int, config: LookConfig) -> list[str]:
+    """``names`` in order, or a seeded sample of ``size`` of them when there are more:
+    the objects whose renders are the clutter, so that memory does not grow with the
+    catalogue."""
+    ordered = sorted(set(names))
+    if len(ordered) <= size:
+        return ordered
     rng = np.random.default_rng(config.seed)
+    return sorted(rng.choice(np.array(ordered), size, replace=False).tolist())
+
+
+def _stream(config: LookConfig, name: str, part: int) -> np.random.Generator:
+    """Object ``name``'s own seeded random stream for its renders (part 0) or its crops
+    (part 1): the same whatever else the catalogue holds."""
+    digest = hashlib.sha256(name.encode()).digest()
+    return np.random.default_rng([config.seed, int.from_bytes(digest[:8], "little"), part])
+
+
+def make_looks(
+    meshes: Callable[[str], NormalisedMesh], coloured: Sequence[str], clutter: Sequence[str],
+    config: LookConfig = LookConfig(),  # noqa: B008 - frozen, shared on purpose
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, NDArray[np.float32]]:
+    """The looks ``(n, d)`` of the training crops of each of the ``coloured`` objects (up
+    to ``config.samples``; none for an object without a usable render), each pasted into
+    clutter drawn from the renders of the ``clutter`` objects (module doc). Each object's
+    renders and crops draw on its own seeded stream. ``progress(done, total)`` after each
+    object rendered for the clutter and each one's crops."""
     render_config = RenderConfig(image_size=config.image_size)
     renderer = Renderer(render_config)
     pixel_size = 2.0 * render_config.xmag / render_config.image_size
-    names = list(coloured) + list(others)
-    # the clutter is drawn from at most ``clutter_objects`` objects, so that memory does not
-    # grow with the catalogue; a coloured object outside them is rendered for its own crops
-    held = set(names) if len(names) <= config.clutter_objects else set(
-        rng.choice(np.array(names), config.clutter_objects, replace=False).tolist())
-    total, done = len(held) + len(coloured), 0
-    colour_names = set(coloured)
+    total, done = len(clutter) + len(coloured), 0
+    wanted = set(coloured)
 
     def rendered(name: str) -> tuple[list[Render], list[NDArray[np.float32]]]:
         mesh = meshes(name)
         views = [renderer.render(mesh, azimuth, elevation)
-                 for azimuth, elevation in _directions(rng, config.views)]
+                 for azimuth, elevation in _directions(_stream(config, name, 0), config.views)]
         kept = [v for v in views if v.mask.sum() >= _MIN_PIXELS]
         return [(v.color, v.mask) for v in kept], [v.depth for v in kept]
 
     renders: dict[str, list[Render]] = {}
     depths: dict[str, list[NDArray[np.float32]]] = {}
-    for name in names:
-        if name not in held:
-            continue
+    for name in clutter:
         own, own_depths = rendered(name)
         if own:
             renders[name] = own
-            if name in colour_names:  # only a coloured object's own crops are relit
+            if name in wanted:  # only a coloured object's own crops are relit
                 depths[name] = own_depths
         done += 1
         if progress:
             progress(done, total)
-    drawable = list(renders)
-
-    def pool() -> Render:
-        views = renders[drawable[int(rng.integers(len(drawable)))]]
-        return views[int(rng.integers(len(views)))]
-
-    trained: list[str] = []
-    looks: list[NDArray[np.float32]] = []
-    labels: list[int] = []
+    drawable = sorted(renders)
+    looks: dict[str, NDArray[np.float32]] = {}
     for name in coloured:
-        own, own_depths = ((renders.get(name, []), depths.get(name, [])) if name in held
-                           else rendered(name))
-        if own:
-            label = len(trained)
-            trained.append(name)
-            looks_made = _object_looks(rng, own, own_depths, pool, config, pixel_size,
-                                       render_config.ambient)
-            looks += looks_made
-            labels += [label] * len(looks_made)
+        own, own_depths = (renders[name], depths[name]) if name in depths else rendered(name)
+        rng = _stream(config, name, 1)
+        pool_names = drawable or [name]
+
+        def pool(rng: np.random.Generator = rng, pool_names: list[str] = pool_names,
+                 own: list[Render] = own) -> Render:
+            views = renders.get(pool_names[int(rng.integers(len(pool_names)))], own)
+            return views[int(rng.integers(len(views)))]
+
+        made = (_object_looks(rng, own, own_depths, pool, config, pixel_size, render_config.ambient)
+                if own else [])
+        looks[name] = np.stack(made) if made else np.zeros((0, LOOK_DIMS), np.float32)
         done += 1
         if progress:
             progress(done, total)
-    present = sorted(set(labels))
-    if len(present) < 2:
+    return looks
+
+
+def fit_looks(looks: Mapping[str, NDArray[np.floating]],
+              config: LookConfig = LookConfig()) -> LookModel | None:  # noqa: B008 - frozen
+    """The look model of the objects with looks (:func:`make_looks`; by name), None with
+    fewer than two: the same looks give the same model."""
+    names = sorted(n for n, v in looks.items() if len(v))
+    if len(names) < 2:
         return None
-    kept_names = tuple(trained[i] for i in present)
-    remap = {old: new for new, old in enumerate(present)}
-    return fit_look_model(np.stack(looks), np.array([remap[i] for i in labels]), kept_names, config.shrinkage)
+    stacked = np.concatenate([np.asarray(looks[n], np.float32) for n in names])
+    labels = np.repeat(np.arange(len(names)), [len(looks[n]) for n in names])
+    return fit_look_model(stacked, labels, tuple(names), config.shrinkage)
 
 
 def _object_looks(
@@ -248,13 +282,31 @@ def look_key(hashes: Mapping[str, str], config: LookConfig = LookConfig()) -> st
     return digest.hexdigest()
 
 
-def fit_catalogue_looks(
+def refresh_looks(
     meshes: Callable[[str], NormalisedMesh], names: Sequence[str], coloured: set[str],
+    stored: Mapping[str, NDArray[np.floating]],
+    config: LookConfig = LookConfig(),  # noqa: B008 - frozen, shared on purpose
     progress: Callable[[int, int], None] | None = None,
-) -> LookModel | None:
-    """:func:`train_look_model` of a catalogue's objects ``names`` (``coloured``: those
-    whose meshes have colour), in name order: the same objects give the same model,
-    however they are split into files."""
+) -> tuple[LookModel | None, dict[str, NDArray[np.float32]]]:
+    """The look model of a catalogue's objects ``names`` (``coloured``: those whose meshes
+    have colour; None with fewer than two) and the looks made for it. A coloured object's
+    ``stored`` looks ``(n, LOOK_DIMS)`` are used as they are; the others' are made
+    (:func:`make_looks`): over the clutter of a whole fit (a sample of at most
+    ``config.clutter_objects`` of every object) when none is stored, else over the objects
+    made and ``config.update_clutter`` others. The same looks give the same model, however
+    the catalogue is split into files."""
     ordered = sorted(names)
-    return train_look_model(meshes, [n for n in ordered if n in coloured],
-                            [n for n in ordered if n not in coloured], progress=progress)
+    painted = [n for n in ordered if n in coloured]
+    kept = {n: np.asarray(stored[n], np.float32) for n in painted
+            if n in stored and np.ndim(stored[n]) == 2 and np.shape(stored[n])[1] == LOOK_DIMS}
+    missing = [n for n in painted if n not in kept]
+    made: dict[str, NDArray[np.float32]] = {}
+    if missing and len(painted) >= 2:
+        if kept:
+            rest = [n for n in ordered if n not in set(missing)]
+            others = clutter_sample(rest, config.update_clutter, config)
+            clutter = clutter_sample([*missing, *others], config.clutter_objects, config)
+        else:
+            clutter = clutter_sample(ordered, config.clutter_objects, config)
+        made = make_looks(meshes, missing, clutter, config, progress)
+    return fit_looks({**kept, **made}, config), made

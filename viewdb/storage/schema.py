@@ -32,6 +32,10 @@ rtree_meta      each tier's R-tree: dimension and header page
 curve_errors    per index group of a compact client file (revision 0006): each view's
                 quantisation error norms, float32 (n, 2): L2 and L-infinity of the
                 decoded curve minus the float32 curve it was made from, rounded up
+look_samples    per coloured object (revision 0010): the looks of its training crops for
+                the look model (:mod:`viewdb.catalogue.look_training`), float32 (n, d),
+                and the look settings they were made with; an ingest fits the model
+                again from them, making only the changed objects' anew
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ __all__ = [
     "curve_errors",
     "curves",
     "fourier_points",
+    "look_samples",
     "index_groups",
     "metadata",
     "objects",
@@ -72,7 +77,7 @@ __all__ = [
 ]
 
 #: The Alembic revision this code reads and writes (the head of ``migrations/versions``).
-SCHEMA_REVISION = "0009"
+SCHEMA_REVISION = "0010"
 
 metadata = MetaData()
 
@@ -251,4 +256,15 @@ tier_stamps = Table(
     Column("tier", String, primary_key=True),
     Column("generation", String, nullable=False),
     Column("key", String, nullable=False),
+)
+
+
+# revision 0010: each coloured object's look samples (viewdb.catalogue.look_training)
+look_samples = Table(
+    "look_samples",
+    metadata,
+    Column("object_id", Integer, ForeignKey("objects.id", ondelete="CASCADE"), primary_key=True),
+    #: the LookConfig.key() they were made with
+    Column("config", String, nullable=False),
+    Column("looks", LargeBinary, nullable=False),
 )

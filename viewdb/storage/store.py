@@ -11,7 +11,7 @@ import base64
 import itertools
 import json
 import sqlite3
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any, TypeVar
@@ -140,6 +140,35 @@ class Store(Database):
                 value = json.dumps({"key": look.key, "own": look.own,
                                     "model": base64.b64encode(look.model).decode("ascii")})
                 conn.execute(sa.insert(s.settings).values(key="look_model", value=value))
+
+    def look_samples(self, config_key: str) -> dict[str, NDArray[np.float32]]:
+        """``object name -> looks`` ``(n, d)`` stored for the look model's next fit
+        (revision 0010), those made with the look settings ``config_key`` alone; a
+        damaged one is left out (made again)."""
+        ls, o = s.look_samples, s.objects
+        with self.read() as conn:
+            rows = conn.execute(sa.select(o.c.name, ls.c.looks).join(o, o.c.id == ls.c.object_id)
+                                .where(ls.c.config == config_key)).all()
+        out: dict[str, NDArray[np.float32]] = {}
+        for name, blob in rows:
+            try:
+                out[name] = decode_array(blob, np.float32, (None, None))
+            except ValueError:
+                continue
+        return out
+
+    def set_look_samples(self, looks: Mapping[str, NDArray[np.floating]], config_key: str) -> None:
+        """Store each object's ``looks`` (by name; objects not in the file are skipped),
+        made with the look settings ``config_key``, replacing what it had."""
+        ls, o = s.look_samples, s.objects
+        with self.transaction() as conn:
+            ids = dict(conn.execute(sa.select(o.c.name, o.c.id).where(o.c.name.in_(list(looks)))).all())
+            for name, arr in looks.items():
+                if name not in ids:
+                    continue
+                conn.execute(sa.delete(ls).where(ls.c.object_id == ids[name]))
+                conn.execute(sa.insert(ls).values(object_id=ids[name], config=config_key,
+                                                  looks=encode_array(np.asarray(arr, np.float32))))
 
     def mark_generation(self) -> None:
         """Give a file written before index generations one
