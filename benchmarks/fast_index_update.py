@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -37,24 +36,13 @@ from fast_plan import agreement, search
 from scale import build, real_curves
 
 import viewdb
+from support.files import copy_catalogue
 from viewdb.config import FastConfig, RecognitionConfig
 from viewdb.storage.ann_file import ann_file_path, map_ann_file
-from viewdb.storage.tier_file import tier_file_path
 from viewdb.storage.tiers import TierReader
 
 #: the object the change writes again with other curves
 REPLACED = 3
-
-
-def copy_catalogue(src: Path, dst: Path, index: bool) -> Path:
-    """``src`` and its tier files copied to ``dst``; its ``fast`` index too if ``index``."""
-    shutil.copy(src, dst)
-    for tier in ("full", "sparse"):
-        if tier_file_path(src, tier).exists():
-            shutil.copy(tier_file_path(src, tier), tier_file_path(dst, tier))
-    if index:
-        shutil.copy(ann_file_path(src, "full"), ann_file_path(dst, "full"))
-    return dst
 
 
 def change(db: Path, args: argparse.Namespace, bases: list[np.ndarray]) -> float:
@@ -145,10 +133,10 @@ def main() -> None:
               f"one replaced", flush=True)
         rows = {}
         for how in ("built", "grown"):
-            db = copy_catalogue(full, Path(tmp) / f"{how}.viewdb", index=how == "grown")
+            db = copy_catalogue(full, Path(tmp) / f"{how}.viewdb", fast_index=how == "grown")
             took = change(db, args, bases)
             keys, dead = key_counts(db)
-            step = index_step(copy_catalogue(db, Path(tmp) / f"{how}-step.viewdb", index=False),
+            step = index_step(copy_catalogue(db, Path(tmp) / f"{how}-step.viewdb", fast_index=False),
                               stale if how == "grown" else None)
             rows[how] = (took, step, keys, dead, agreement_of(db, queries, args.k))
         base_ingest, base_step = rows["built"][0], rows["built"][1]

@@ -28,21 +28,8 @@ import time
 from pathlib import Path
 
 import viewdb
+from support.files import copy_catalogue
 from support.samples import sample
-from viewdb.storage.ann_file import ann_file_path
-from viewdb.storage.tier_file import tier_file_path
-
-
-def copy_catalogue(src: Path, dst: Path) -> None:
-    a, b = sqlite3.connect(src), sqlite3.connect(dst)
-    try:
-        a.backup(b)
-    finally:
-        a.close()
-        b.close()
-    for extra in (tier_file_path(src, "full"), tier_file_path(src, "sparse"), ann_file_path(src, "full")):
-        if extra.exists():
-            shutil.copy(extra, dst.with_name(dst.name + extra.name[len(src.name):]))
 
 
 def forget_looks(db: Path, only: str | None = None) -> None:
