@@ -38,7 +38,7 @@ from scale import build, real_curves
 import viewdb
 from support.files import copy_catalogue
 from viewdb.config import FastConfig, RecognitionConfig
-from viewdb.storage.ann_file import ann_file_path, map_ann_file
+from viewdb.storage.ann_file import ann_file_path, index_file_key, map_ann_file
 from viewdb.storage.tiers import TierReader
 
 #: the object the change writes again with other curves
@@ -81,7 +81,7 @@ def key_counts(db: Path) -> tuple[int, int]:
     try:
         with reader.snapshot():
             tier = reader.tier("full")
-            found = map_ann_file(ann_file_path(db, "full"), f"{tier.key} {FastConfig().index_key()}", "full",
+            found = map_ann_file(ann_file_path(db, "full"), index_file_key(tier.key, FastConfig()), "full",
                                  len(tier.row_owner))
     finally:
         reader.close()

@@ -22,7 +22,7 @@ from viewdb.search.fast import build_fast_index, fast_knn, merged_queries, short
 from viewdb.search.knn import TierArrays, brute_force_knn, knn_stack
 from viewdb.search.plans import PLANS, RefineRequest
 from viewdb.search.subset import SubsetSource
-from viewdb.storage.ann_file import ann_file_path, map_ann_file
+from viewdb.storage.ann_file import ann_file_path, index_file_key, map_ann_file
 from viewdb.storage.tier_file import tier_key
 
 
@@ -282,7 +282,7 @@ def _key(path, config=None):
     conn = sqlite3.connect(path)
     try:
         conn.execute("BEGIN")
-        return f"{tier_key(conn, 'full')} {config.index_key()}"
+        return index_file_key(tier_key(conn, "full"), config)
     finally:
         conn.close()
 

@@ -18,7 +18,7 @@ from viewdb.config import FastConfig
 from viewdb.search.embedding import embed_curves
 from viewdb.search.fast_update import KeyTable, group_digests, plan_update
 from viewdb.search.knn import brute_force_knn
-from viewdb.storage.ann_file import ann_file_path, map_ann_file
+from viewdb.storage.ann_file import ann_file_path, index_file_key, map_ann_file
 from viewdb.storage.tiers import TierReader
 
 groups = st.lists(st.tuples(st.integers(0, 5), st.integers(1, 4)), max_size=12)
@@ -103,7 +103,7 @@ def _check_keys(db, config):
             hit = distances[:, 0] < 1e-9
             assert hit.mean() > 0.95
             np.testing.assert_allclose(vectors[rows[hit, 0]], vectors[hit], atol=1e-5)
-            return map_ann_file(ann_file_path(db, "full"), f"{source.key} {config.index_key()}", "full",
+            return map_ann_file(ann_file_path(db, "full"), index_file_key(source.key, config), "full",
                                 len(source.row_owner))[1]
     finally:
         reader.close()

@@ -163,10 +163,7 @@ def train_look_model(
     ``config.clutter_objects`` of them (:func:`clutter_sample`); ``meshes`` gives an
     object's normalised mesh. ``progress(done, total)`` after each object rendered and
     each one's crops."""
-    if len(coloured) < 2:
-        return None
-    clutter = clutter_sample([*coloured, *others], config.clutter_objects, config)
-    return fit_looks(make_looks(meshes, coloured, clutter, config, progress), config)
+    return refresh_looks(meshes, [*coloured, *others], set(coloured), {}, config, progress)[0]
 
 
 def clutter_sample(names: Sequence[str], size: int, config: LookConfig) -> list[str]:

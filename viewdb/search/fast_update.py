@@ -27,7 +27,7 @@ from .embedding import embed_curves
 from .fast import FastIndex
 from .knn import TierSource
 
-__all__ = ["KeyTable", "group_digests", "plan_update", "update_fast_index"]
+__all__ = ["KeyTable", "group_digests", "plan_update", "runs", "update_fast_index"]
 
 
 @dataclass(frozen=True)
@@ -60,12 +60,10 @@ class KeyTable:
 
     def row_of_key(self) -> NDArray[np.int64] | None:
         """Each key's row (-1 for a dead key); None when every key is its own row."""
-        starts = np.cumsum(self.counts) - self.counts
-        if self.keys == self.rows and np.array_equal(self.first, starts):
+        if self.keys == self.rows and np.array_equal(self.first, np.cumsum(self.counts) - self.counts):
             return None
         out = np.full(self.keys, -1, dtype=np.int64)
-        offsets = np.arange(self.rows, dtype=np.int64) - np.repeat(starts, self.counts)
-        out[np.repeat(self.first, self.counts) + offsets] = np.arange(self.rows, dtype=np.int64)
+        out[runs(self.first, self.counts)] = np.arange(self.rows, dtype=np.int64)
         return out
 
     def to_array(self) -> NDArray[np.int64]:
@@ -84,6 +82,13 @@ class KeyTable:
                            or np.any(first[order][1:] < ends[:-1])):
             raise ValueError("the key table's runs overlap or pass the index's keys")
         return cls(table[:, 0].copy().view(np.uint64), first, counts, int(keys))
+
+
+def runs(first: NDArray[np.integer], counts: NDArray[np.integer]) -> NDArray[np.int64]:
+    """The integers of the runs ``first[i] .. first[i] + counts[i] - 1``, run after run."""
+    first, counts = np.asarray(first, dtype=np.int64), np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    return np.repeat(first - (np.cumsum(counts) - counts), counts) + np.arange(total, dtype=np.int64)
 
 
 def group_digests(source: TierSource) -> NDArray[np.uint64]:
@@ -135,14 +140,9 @@ def update_fast_index(
     new, added = plan_update(table, digests, source.group_count)
     if added.all() or new.dead > config.dead_share * new.keys:
         return None
-    rows = np.concatenate([np.arange(s, s + c, dtype=np.int64)
-                           for s, c in zip(source.group_start[added], source.group_count[added], strict=True)]
-                          or [np.zeros(0, dtype=np.int64)])
-    keys = np.concatenate([np.arange(f, f + c, dtype=np.int64)
-                           for f, c in zip(new.first[added], new.counts[added], strict=True)]
-                          or [np.zeros(0, dtype=np.int64)])
+    rows = runs(source.group_start[added], new.counts[added])
     if len(rows):
         curves = source.rows(np.flatnonzero(added).astype(np.int64))[0]
-        old.add(keys, embed_curves(np.asarray(curves[rows]), config.coefficients, config.quantiles),
-                config.build_threads)
+        vectors = embed_curves(np.asarray(curves[rows]), config.coefficients, config.quantiles)
+        old.add(runs(new.first[added], new.counts[added]), vectors, config.build_threads)
     return FastIndex.of(old, source, config, new.row_of_key()), new

@@ -38,7 +38,7 @@ from ..search.fast_update import KeyTable, group_digests, update_fast_index
 from ..search.knn import TierSource
 from .tier_file import read_cache_header
 
-__all__ = ["ann_file_path", "map_ann_file", "open_fast_index", "write_ann_file"]
+__all__ = ["ann_file_path", "index_file_key", "map_ann_file", "open_fast_index", "write_ann_file"]
 
 MAGIC = b"VDBFAST2"
 _LENGTH = struct.Struct("<I")
@@ -50,6 +50,12 @@ def ann_file_path(db: str | Path, tier: str) -> Path:
     """Where the ``fast`` index of tier ``tier`` of database ``db`` lies."""
     db = Path(db)
     return db.with_name(f"{db.name}.fast-{tier}")
+
+
+def index_file_key(tier_key: str, config: FastConfig) -> str:
+    """The key an index file of the tier whose key is ``tier_key``, made with ``config``'s
+    settings, is written under (and used only under)."""
+    return f"{tier_key} {config.index_key()}"
 
 
 def _aligned(offset: int) -> int:
@@ -124,17 +130,17 @@ def map_ann_file(path: Path, key: str, tier: str, rows: int) -> tuple[ViewIndex,
     return (index, table) if index.size == table.keys else None
 
 
-def _grown(path: Path, tier: str, settings: str, source: TierSource, config: FastConfig,
+def _grown(path: Path, tier: str, source: TierSource, config: FastConfig,
            digests: NDArray[np.uint64]) -> tuple[FastIndex, KeyTable] | None:
     """The index of ``source`` grown from the (stale) one in the file at ``path``, if that
-    was written with the same ``settings`` (:meth:`~viewdb.config.FastConfig.index_key`)
+    was written with ``config``'s settings (:meth:`~viewdb.config.FastConfig.index_key`)
     and growing it is due (:func:`~viewdb.search.fast_update.update_fast_index`); else None."""
     read = _read(path, None, tier)
     if read is None:
         return None
     stored, table, mapped, at, size = read
     with mapped:
-        if not stored.endswith(f" {settings}"):
+        if not stored.endswith(index_file_key("", config)):  # another tier's key, the same settings
             return None
         try:
             old = ViewIndex.load(memoryview(mapped)[at : at + size], config.expansion_add)
@@ -153,7 +159,7 @@ def open_fast_index(
     ``tier_key``): mapped from its file if that is valid; else, if ``write``, grown from a
     stale file of the same settings where that is due, or built, and written (a folder
     that refuses the file leaves the index in memory); else None."""
-    key = f"{tier_key} {config.index_key()}"
+    key = index_file_key(tier_key, config)
     path = ann_file_path(db, tier)
     found = map_ann_file(path, key, tier, len(source.row_owner))
     if found is not None:
@@ -162,7 +168,7 @@ def open_fast_index(
     if not write:
         return None
     digests = group_digests(source)
-    grown = _grown(path, tier, config.index_key(), source, config, digests)
+    grown = _grown(path, tier, source, config, digests)
     if grown is None:
         built = build_fast_index(source, config)
         grown = built, KeyTable.fresh(digests, source.group_count)
