@@ -50,9 +50,14 @@ def screenshot_on_failure(driver, name: str) -> Iterator[None]:
 
 
 def wait(driver, condition, timeout: float = WAIT):
+    """Poll ``condition(driver)`` until it is true. An element the page redraws between
+    being found and being read (stale) or not drawn yet counts as not yet, not as a failure."""
+    from selenium.common.exceptions import NoSuchElementException, StaleElementReferenceException
     from selenium.webdriver.support.ui import WebDriverWait
 
-    return WebDriverWait(driver, timeout, poll_frequency=0.2).until(lambda d: condition(d))
+    return WebDriverWait(driver, timeout, poll_frequency=0.2,
+                         ignored_exceptions=(NoSuchElementException, StaleElementReferenceException)
+                         ).until(lambda d: condition(d))
 
 
 def js(driver, script: str, *args):
