@@ -203,3 +203,42 @@ def test_a_catalogue_without_colour_takes_the_outline_s_deeper_path(tmp_path):
         img[mask] = (200, 40, 30)  # a red part: a photo with colour
         answer = db.query(img, boxes=[_box(mask)], k=2, pose=False).objects[0].results
         assert all(m.shape_fit is not None for m in answer)
+
+
+@st.composite
+def _ranking_and_looks(draw):
+    """A colour ranking (nearest first, ties by name) and look distances for some of its
+    objects and for others the ranking left out."""
+    count = draw(st.integers(0, 12))
+    distances = sorted(draw(st.lists(st.floats(0.0, 1.0), min_size=count, max_size=count)))
+    matches = [ColourMatch(f"obj{i:02d}", d, 0.0, 0.0) for i, d in enumerate(distances)]
+    looked = [m.object for m in matches if draw(st.booleans())] + [f"other{i}" for i in range(draw(st.integers(0, 3)))]
+    looks = {name: draw(st.floats(0.0, 5.0)) for name in looked}
+    return matches, looks
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=_ranking_and_looks(), pool=st.integers(0, 14), weight=st.sampled_from([0.0, 0.2, 1.0]),
+       reference=st.sampled_from([0.0, 0.02, 0.5]))
+def test_the_channel_names_the_objects_whose_colour_and_look_are_least(data, pool, weight, reference):
+    """named_by_look keeps the colour_pool objects of the ranking with the least colour
+    distance + look_weight × (look distance − the look_reference quantile), in the
+    ranking's order: no object left out scores less than one kept."""
+    from viewdb.recognition.pipeline import named_by_look
+
+    matches, looks = data
+    recognition = RecognitionConfig(colour_pool=pool, look_weight=weight, look_reference=reference)
+    named = named_by_look(matches, looks, recognition)
+    base = float(np.quantile(list(looks.values()), reference)) if looks else 0.0
+
+    def score(m):
+        return m.distance + (weight * (looks.get(m.object, base) - base) if looks else 0.0)
+
+    assert len(named) == min(pool, len(matches))
+    assert named == [m for m in matches if m in named]  # a subset, in the ranking's order
+    left = [m for m in matches if m not in named]
+    for kept in named:
+        for out in left:
+            assert (score(kept), kept.object) <= (score(out), out.object)
+    if not looks or weight == 0:
+        assert named == matches[:pool]

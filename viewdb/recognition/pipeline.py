@@ -33,7 +33,7 @@ counting as what may hide it.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -62,8 +62,8 @@ from .shapes import completed_mask, pose_mask, rotated_curves
 from .verify import physical_view, rerank_by_fit
 
 __all__ = [
-    "QueryShape", "pool_size", "region_shape", "run_query", "run_regions", "segment_photo", "segment_query",
-    "shape_of",
+    "QueryShape", "look_terms", "named_by_look", "pool_size", "region_shape", "run_query", "run_regions",
+    "segment_photo", "segment_query", "shape_of",
 ]
 
 #: A pool entry: an object's best candidate and the in-plane angle of the curve that found it.
@@ -312,15 +312,47 @@ def _colour_matches(
     no coloured object, or the server predates the channel) and each coloured object's
     look distance to the pixels of ``box`` (none without a box or a look model,
     :mod:`viewdb.catalogue.look`)."""
-    query = core_signature(shape.view.color, shape.view.mask, options.recognition.colour_core)
-    matches, exchange = server.colour_ranking(query, options.recognition.colour_pool)
+    recognition = options.recognition
+    query = core_signature(shape.view.color, shape.view.mask, recognition.colour_core)
+    crop = _box_pixels(shape.view, box)
+    looking = recognition.look_weight > 0 and crop is not None
+    asked = recognition.colour_pool
+    if looking:
+        asked = max(asked, recognition.colour_candidates)
+    matches, exchange = server.colour_ranking(query, asked)
     traffic.exchanged(exchange)
     looks: dict[str, float] = {}
-    crop = _box_pixels(shape.view, box)
-    if matches and options.recognition.look_weight > 0 and crop is not None:
+    if matches and looking:
+        assert crop is not None
         looks, exchange = server.looks(look_features(crop))
         traffic.exchanged(exchange)
-    return query, matches, looks
+    return query, named_by_look(matches, looks, recognition), looks
+
+
+def look_terms(
+    looks: Mapping[str, float], names: Sequence[str], recognition: RecognitionConfig,
+) -> list[float]:
+    """What each of objects ``names`` adds to its colour-channel score for its look:
+    ``look_weight`` × (its look distance − the ``look_reference`` quantile of ``looks``);
+    an object without a look distance (a mesh without colour) adds 0, and so does every
+    object without ``looks``."""
+    if not looks:
+        return [0.0] * len(names)
+    reference = float(np.quantile(list(looks.values()), recognition.look_reference))
+    return [recognition.look_weight * (looks.get(name, reference) - reference) for name in names]
+
+
+def named_by_look(
+    matches: Sequence[ColourMatch], looks: Mapping[str, float], recognition: RecognitionConfig,
+) -> list[ColourMatch]:
+    """The colour channel's objects: the ``colour_pool`` of ``matches`` (a colour ranking,
+    nearest first) whose colour distance plus look term (:func:`look_terms`) is least,
+    ties by name, then ordered by colour distance as ``matches`` are. Both parts are
+    lower bounds of the object's score in :func:`_by_colour_channel`, whose outline
+    part is never negative, so these are the objects the score can rank best."""
+    terms = look_terms(looks, [m.object for m in matches], recognition)
+    best = sorted(range(len(matches)), key=lambda i: (matches[i].distance + terms[i], matches[i].object))
+    return [matches[i] for i in sorted(best[:recognition.colour_pool])]
 
 
 def _box_pixels(view: QueryView, box: tuple[int, int, int, int] | None) -> NDArray[np.uint8] | None:
@@ -366,10 +398,8 @@ def _by_colour_channel(
     weight = recognition.busy_outline_weight if busy else recognition.prompt_outline_weight
     scores = [counted[c.object] + weight * float(np.log(max(c.distance, nearest) / nearest))
               for c, _ in pooled]
-    if looks:
-        reference = float(np.quantile(list(looks.values()), recognition.look_reference))
-        scores = [score + recognition.look_weight * (looks.get(c.object, reference) - reference)
-                  for score, (c, _) in zip(scores, pooled, strict=True)]
+    terms = look_terms(looks or {}, [c.object for c, _ in pooled], recognition)
+    scores = [score + term for score, term in zip(scores, terms, strict=True)]
     order = sorted(range(len(pooled)), key=lambda i: (scores[i], pooled[i][0].object))
     by_object = {c.object: (shown[c.object], s) for (c, _), s in zip(pooled, scores, strict=True)}
     return [pooled[i] for i in order], by_object
