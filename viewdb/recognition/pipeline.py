@@ -308,9 +308,10 @@ def _colour_matches(
     box: tuple[int, int, int, int] | None = None,
 ) -> tuple[NDArray[np.float32], list[ColourMatch], dict[str, float]]:
     """The cut-out's colour signature, the colour channel's objects for it
-    (:attr:`~viewdb.config.RecognitionConfig.colour_pool`; none when the catalogue has
-    no coloured object, or the server predates the channel) and each coloured object's
-    look distance to the pixels of ``box`` (none without a box or a look model,
+    (:attr:`~viewdb.config.RecognitionConfig.colour_pool` of the ``colour_candidates``
+    nearest by colour, :func:`named_by_look`; none when the catalogue has no coloured
+    object, or the server predates the channel) and each coloured object's look distance
+    to the pixels of ``box`` (none without a box or a look model,
     :mod:`viewdb.catalogue.look`)."""
     recognition = options.recognition
     query = core_signature(shape.view.color, shape.view.mask, recognition.colour_core)
