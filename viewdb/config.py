@@ -1055,9 +1055,9 @@ class RecognitionConfig:
     fast_shortlist: int = FastConfig().shortlist
 
     def __post_init__(self) -> None:
-        for name, most in (("fast_shortlist", 100_000), ("cs2_shortlist", 100), ("colour_candidates", 100)):
-            if not 1 <= getattr(self, name) <= most:
-                raise ValueError(f"{name} must be in [1, {most}], got {getattr(self, name)}")
+        integer(self.fast_shortlist, "fast_shortlist", 1, 100_000)
+        integer(self.cs2_shortlist, "cs2_shortlist", 1, 100)
+        integer(self.colour_candidates, "colour_candidates", 1, 100)
         if self.cs2 not in CS2_SEARCHES:
             raise ValueError(f"cs2 must be one of {', '.join(CS2_SEARCHES)}, got {self.cs2!r}")
         if self.turn_search not in TURN_SEARCHES:

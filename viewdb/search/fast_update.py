@@ -119,9 +119,9 @@ def plan_update(
     added = np.zeros(len(counts), dtype=np.bool_)
     key = old.keys
     for g, (d, c) in enumerate(zip(np.asarray(digests).tolist(), counts.tolist(), strict=True)):
-        runs = free.get((d, c))
-        if runs:
-            first[g] = runs.pop()
+        unused = free.get((d, c))
+        if unused:
+            first[g] = unused.pop()
         else:
             first[g], added[g] = key, True
             key += c

@@ -120,16 +120,20 @@ _LOOK_SAMPLES_STAND_IN = (
     "CREATE TEMP TABLE IF NOT EXISTS look_samples (object_id INTEGER PRIMARY KEY, config TEXT NOT NULL,"
     " looks BLOB NOT NULL)"
 )
+#: The stand-ins each revision's tables need in a file from before it, in revision order.
+_ADDED_BY: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("0004", (_PERSPECTIVE_STAND_IN,)),
+    ("0005", _APPEARANCE_STAND_INS),
+    ("0006", (_CURVE_ERRORS_STAND_IN,)),
+    ("0007", ()),
+    ("0008", (_SCOPES_STAND_IN,)),
+    ("0009", (_STAMPS_STAND_IN,)),
+    ("0010", (_LOOK_SAMPLES_STAND_IN,)),
+)
+#: Per older revision a file may be read at, the stand-ins of every revision after it.
 READ_ONLY_COMPATIBLE: dict[str, tuple[str, ...]] = {
-    "0003": (_PERSPECTIVE_STAND_IN, *_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN,
-             _STAMPS_STAND_IN, _LOOK_SAMPLES_STAND_IN),
-    "0004": (*_APPEARANCE_STAND_INS, _CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN, _STAMPS_STAND_IN,
-             _LOOK_SAMPLES_STAND_IN),
-    "0005": (_CURVE_ERRORS_STAND_IN, _SCOPES_STAND_IN, _STAMPS_STAND_IN, _LOOK_SAMPLES_STAND_IN),
-    "0006": (_SCOPES_STAND_IN, _STAMPS_STAND_IN, _LOOK_SAMPLES_STAND_IN),
-    "0007": (_SCOPES_STAND_IN, _STAMPS_STAND_IN, _LOOK_SAMPLES_STAND_IN),
-    "0008": (_STAMPS_STAND_IN, _LOOK_SAMPLES_STAND_IN),
-    "0009": (_LOOK_SAMPLES_STAND_IN,),
+    older: tuple(sql for _, added in _ADDED_BY[i:] for sql in added)
+    for i, older in enumerate(("0003", *(revision for revision, _ in _ADDED_BY[:-1])))
 }
 
 
