@@ -315,16 +315,13 @@ def _colour_matches(
     :mod:`viewdb.catalogue.look`)."""
     recognition = options.recognition
     query = core_signature(shape.view.color, shape.view.mask, recognition.colour_core)
-    crop = _box_pixels(shape.view, box)
-    looking = recognition.look_weight > 0 and crop is not None
-    asked = recognition.colour_pool
-    if looking:
-        asked = max(asked, recognition.colour_candidates)
+    crop = _box_pixels(shape.view, box) if recognition.look_weight > 0 else None
+    asked = recognition.colour_pool if crop is None else max(recognition.colour_pool,
+                                                               recognition.colour_candidates)
     matches, exchange = server.colour_ranking(query, asked)
     traffic.exchanged(exchange)
     looks: dict[str, float] = {}
-    if matches and looking:
-        assert crop is not None
+    if matches and crop is not None:
         looks, exchange = server.looks(look_features(crop))
         traffic.exchanged(exchange)
     return query, named_by_look(matches, looks, recognition), looks
